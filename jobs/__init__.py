@@ -1,0 +1,1 @@
+"""Thin entry points composing pipeline stages: ingest, batch, report, reprocess, simulate, demo."""

@@ -1,0 +1,3 @@
+"""surveil: batch analytics for multi-sensor surveillance logs."""
+
+__version__ = "0.1.0"

@@ -1,0 +1,107 @@
+"""Canonical Arrow schemas of the warehouse tables, read from ``schemas/tables.toml``.
+
+The TOML file is the one declaration; this module turns it into ``pyarrow`` schemas
+and conforms tables to them (column order, types, the ``date`` partition column).
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass
+from functools import cache
+
+import polars as pl
+import pyarrow as pa
+import pyarrow.compute as pc
+
+from pipeline.resources import resource_path
+
+_ARROW_TYPES: dict[str, pa.DataType] = {
+    "int16": pa.int16(),
+    "int32": pa.int32(),
+    "int64": pa.int64(),
+    "float64": pa.float64(),
+    "string": pa.string(),
+    "bool": pa.bool_(),
+    "binary": pa.binary(),
+    "date32": pa.date32(),
+}
+
+
+@dataclass(frozen=True)
+class TableSpec:
+    name: str
+    kind: str  # raw | derived | ledger
+    doc: str
+    time_column: str
+    sort_by: tuple[str, ...]
+    schema: pa.Schema
+
+    @property
+    def partition_by(self) -> tuple[str, ...]:
+        return ("date",) if "date" in self.schema.names else ()
+
+
+@cache
+def table_specs() -> dict[str, TableSpec]:
+    raw = tomllib.loads((resource_path("schemas") / "tables.toml").read_text())
+    specs = {}
+    for name, t in raw["tables"].items():
+        fields = [
+            pa.field(col, _ARROW_TYPES[typ], nullable=nullable, metadata={"doc": doc})
+            for col, typ, nullable, doc in t["columns"]
+        ]
+        specs[name] = TableSpec(
+            name=name,
+            kind=t["kind"],
+            doc=t["doc"],
+            time_column=t["time_column"],
+            sort_by=tuple(t["sort_by"]),
+            schema=pa.schema(fields, metadata={"doc": t["doc"]}),
+        )
+    return specs
+
+
+def spec(name: str) -> TableSpec:
+    return table_specs()[name]
+
+
+def schema(name: str) -> pa.Schema:
+    return spec(name).schema
+
+
+def empty(name: str) -> pa.Table:
+    return schema(name).empty_table()
+
+
+def with_date(table: pa.Table, time_column: str) -> pa.Table:
+    """Add/replace the ``date`` partition column: UTC day of an int64-ns column."""
+    days = pc.cast(
+        pc.floor(pc.divide(pc.cast(table[time_column], pa.float64()), 86_400e9)), pa.int32()
+    )
+    date = pc.cast(days, pa.date32())
+    if "date" in table.column_names:
+        return table.set_column(table.column_names.index("date"), "date", date)
+    return table.append_column("date", date)
+
+
+def conform(name: str, data: pa.Table | pl.DataFrame) -> pa.Table:
+    """Cast ``data`` to table ``name``'s schema: select and order columns, add ``date``,
+    sort by the table's sort key. Missing nullable columns are filled with nulls;
+    a missing non-nullable column raises ``KeyError``."""
+    s = spec(name)
+    table = data.to_arrow() if isinstance(data, pl.DataFrame) else data
+    if "date" in s.schema.names:
+        table = with_date(table, s.time_column)
+    cols = []
+    for f in s.schema:
+        if f.name in table.column_names:
+            cols.append(table[f.name].cast(f.type))
+        elif f.nullable:
+            cols.append(pa.nulls(table.num_rows, f.type))
+        else:
+            raise KeyError(f"table {name}: missing required column {f.name!r}")
+    out = pa.Table.from_arrays(cols, schema=s.schema)
+    if out.num_rows and s.sort_by:
+        out = out.sort_by([(c, "ascending") for c in s.sort_by])
+    return out
