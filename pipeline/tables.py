@@ -75,11 +75,16 @@ def empty(name: str) -> pa.Table:
 
 
 def with_date(table: pa.Table, time_column: str) -> pa.Table:
-    """Add/replace the ``date`` partition column: UTC day of an int64-ns column."""
-    days = pc.cast(
-        pc.floor(pc.divide(pc.cast(table[time_column], pa.float64()), 86_400e9)), pa.int32()
-    )
-    date = pc.cast(days, pa.date32())
+    """Add/replace the ``date`` partition column: UTC day of an int64-ns column.
+
+    Exact integer floor division (a float64 cast rejects ns times above 2**53 and would
+    round times within ~256 ns of midnight into the wrong day)."""
+    ns_per_day = 86_400 * 10**9
+    t = pc.cast(table[time_column], pa.int64())
+    q = pc.divide(t, ns_per_day)  # integer division truncates toward zero
+    floor_fix = pc.and_(pc.less(t, 0), pc.not_equal(pc.multiply(q, ns_per_day), t))
+    days = pc.subtract(q, pc.cast(floor_fix, pa.int64()))
+    date = pc.cast(pc.cast(days, pa.int32()), pa.date32())
     if "date" in table.column_names:
         return table.set_column(table.column_names.index("date"), "date", date)
     return table.append_column("date", date)

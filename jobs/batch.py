@@ -1,0 +1,261 @@
+"""Batch job: association, fusion, identification and scoring for one time window.
+
+The window is cut into work units (one per hour, aligned); each unit reads its inputs
+from the warehouse by path, runs the pure stages of ``batch_window`` and writes its
+outputs as staged Parquet files under a deterministic name. Only when every unit of
+the window has succeeded does the driver commit, one atomic Delta overwrite per derived
+table whose predicate is the window; a failure or a crash before that leaves the
+previous data of the window untouched.
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+import shutil
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import polars as pl
+import pyarrow.parquet as pq
+
+from pipeline import tables
+from pipeline.align import align_reports
+from pipeline.associate.identity import identify
+from pipeline.associate.stitch import relabel, stitch_track_ids
+from pipeline.associate.track_to_track import associate_tracks
+from pipeline.config import Config
+from pipeline.executors import make_executor
+from pipeline.fuse import fuse
+from pipeline.geometry import add_geodetic, assign_sectors, cross_track
+from pipeline.score import score_tracks
+from pipeline.sync import epoch_grid, synchronise
+from pipeline.warehouse.delta import read_table, replace_rows, replace_window
+from pipeline.warehouse.views import rebuild_views_file
+
+log = logging.getLogger(__name__)
+
+NS = 1_000_000_000
+UNIT_S = 3600
+DERIVED_TABLES = ("associations", "system_tracks", "identifications", "track_errors")
+
+
+@dataclass(frozen=True)
+class BatchInputs:
+    radar_tracks: pl.DataFrame
+    ais_reports: pl.DataFrame
+    truth: pl.DataFrame | None
+
+
+@dataclass(frozen=True)
+class BatchUnit:
+    """One picklable work unit: a sub-window, read and written by path."""
+
+    warehouse: str
+    staging_dir: str
+    start_ns: int
+    end_ns: int
+    cfg: Config
+
+
+@dataclass
+class BatchSummary:
+    start_ns: int
+    end_ns: int
+    units_total: int = 0
+    failed_units: list[str] = field(default_factory=list)
+    rows: dict[str, int] = field(default_factory=dict)
+    rejects: int = 0
+    committed: bool = False
+
+    @property
+    def exit_code(self) -> int:
+        return 0 if self.committed and not self.failed_units else 1
+
+    def render(self) -> str:
+        lines = [
+            f"batch window [{_iso(self.start_ns)}, {_iso(self.end_ns)}): "
+            f"{self.units_total} unit(s), {len(self.failed_units)} failed, "
+            f"{'committed' if self.committed else 'NOT committed (previous data kept)'}"
+        ]
+        lines += [f"  {name:<16} {n:>9} rows" for name, n in self.rows.items()]
+        if self.rejects:
+            lines.append(f"  rejects (batch)  {self.rejects:>9} rows")
+        lines += [f"  failed: {u}" for u in self.failed_units]
+        return "\n".join(lines)
+
+
+def batch_window(
+    inputs: BatchInputs, *, start_ns: int, end_ns: int, cfg: Config
+) -> dict[str, pl.DataFrame]:
+    """Compose the pure batch stages for the epochs in [start_ns, end_ns).
+
+    Returns frames for ``associations``, ``system_tracks``, ``identifications``,
+    ``track_errors`` and batch ``rejects`` (reports from unknown sites).
+    """
+    aligned, unknown = align_reports(inputs.radar_tracks, cfg)
+    epochs = epoch_grid(start_ns, end_ns, cfg.sync.epoch_period_s)
+    synced = synchronise(aligned, epochs_ns=epochs, sync=cfg.sync)
+    id_base = (start_ns // NS) * 10_000
+    associated = associate_tracks(synced, cfg=cfg.association, id_base=id_base)
+    fused = fuse(associated)
+    fused = add_geodetic(fused, cfg.region)
+    fused = assign_sectors(fused, cfg.sectors, cfg.region)
+    fused = cross_track(fused, cfg.fairway_legs, cfg.region, cfg.max_cross_track_m)
+    identifications, fused = identify(fused, inputs.ais_reports, cfg=cfg.ais, region=cfg.region)
+    associated = assign_sectors(associated, cfg.sectors, cfg.region)
+    errors = score_tracks(
+        fused,
+        associated,
+        truth=inputs.truth,
+        ais_reports=inputs.ais_reports,
+        region=cfg.region,
+        sectors=cfg.sectors,
+    )
+    associations = associated.with_columns(
+        pl.col("P_xx").sqrt().alias("sigma_x_m"),
+        pl.col("P_yy").sqrt().alias("sigma_y_m"),
+        pl.col("P_xy").alias("cov_xy_m2"),
+    )
+    return {
+        "associations": associations,
+        "system_tracks": fused,
+        "identifications": identifications,
+        "track_errors": errors,
+        "rejects": _unknown_site_rejects(unknown, start_ns, end_ns),
+    }
+
+
+def _unknown_site_rejects(unknown: pl.DataFrame, start_ns: int, end_ns: int) -> pl.DataFrame:
+    """Reports from sites missing in the config: rejects rows (those logged in the window)."""
+    unknown = unknown.filter(pl.col("log_time_ns").is_between(start_ns, end_ns, closed="left"))
+    if unknown.height == 0:
+        return pl.DataFrame()
+    return unknown.select(
+        pl.col("log_time_ns"),
+        pl.col("source_file"),
+        pl.col("topic"),
+        pl.lit("batch").alias("stage"),
+        pl.lit("unknown_site").alias("reason_code"),
+        (pl.lit("radar site not in config: ") + pl.col("site_id")).alias("reason"),
+    )
+
+
+def read_inputs(warehouse: Path, cfg: Config, start_ns: int, end_ns: int) -> BatchInputs:
+    """Read a unit's inputs, with the margins the stages need before the window
+    (one scan for synchronisation, the AIS report age for identification)."""
+    # an epoch takes each radar's latest scan ending within one period before it, and a
+    # scan's reports start one period before its end: two periods of margin, plus slack
+    scan_margin_ns = int((2 * max(s.scan_period_s for s in cfg.radar_sites) + 1.0) * NS)
+    ais_margin_ns = int(cfg.ais.max_report_age_s * NS)
+    radar = read_table(warehouse, "radar_tracks", start_ns=start_ns - scan_margin_ns, end_ns=end_ns)
+    ais = read_table(warehouse, "ais_reports", start_ns=start_ns - ais_margin_ns, end_ns=end_ns)
+    truth = read_table(warehouse, "truth", start_ns=start_ns - 2 * NS, end_ns=end_ns + 2 * NS)
+    return BatchInputs(
+        radar_tracks=pl.from_arrow(radar),
+        ais_reports=pl.from_arrow(ais),
+        truth=pl.from_arrow(truth) if truth.num_rows else None,
+    )
+
+
+def run_unit(unit: BatchUnit) -> dict[str, str]:
+    """Worker: read, compute, stage. Returns {table: staged parquet path}."""
+    warehouse = Path(unit.warehouse)
+    inputs = read_inputs(warehouse, unit.cfg, unit.start_ns, unit.end_ns)
+    out = batch_window(inputs, start_ns=unit.start_ns, end_ns=unit.end_ns, cfg=unit.cfg)
+    manifest = {}
+    for name, frame in out.items():
+        if name == "rejects" and frame.height == 0:
+            continue
+        table = tables.conform(name, frame)
+        path = Path(unit.staging_dir) / name / f"{unit.start_ns}.parquet"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(".tmp")
+        pq.write_table(table, tmp)
+        tmp.replace(path)
+        manifest[name] = str(path)
+    return manifest
+
+
+def plan_units(
+    warehouse: Path, cfg: Config, start_ns: int, end_ns: int, staging_dir: Path
+) -> list[BatchUnit]:
+    """Cut [start_ns, end_ns) at UTC hour boundaries into work units."""
+    step = UNIT_S * NS
+    cuts = [start_ns, *range((start_ns // step + 1) * step, end_ns, step), end_ns]
+    return [
+        BatchUnit(str(warehouse), str(staging_dir), a, b, cfg)
+        for a, b in itertools.pairwise(cuts)
+        if b > a
+    ]
+
+
+def run_batch(
+    cfg: Config,
+    warehouse: Path,
+    *,
+    start_ns: int,
+    end_ns: int,
+    executor_kind: str | None = None,
+) -> BatchSummary:
+    """Run the batch for [start_ns, end_ns) and commit it atomically per table."""
+    if end_ns <= start_ns:
+        raise ValueError("--to must be after --from")
+    staging = warehouse / "_staging" / f"batch-{start_ns}-{end_ns}"
+    shutil.rmtree(staging, ignore_errors=True)
+    units = plan_units(warehouse, cfg, start_ns, end_ns, staging)
+    summary = BatchSummary(start_ns=start_ns, end_ns=end_ns, units_total=len(units))
+    ex = cfg.execution
+    executor = make_executor(
+        executor_kind or ex.executor, min(ex.max_workers, len(units)), ex.threads_per_worker
+    )
+    manifests = []
+    for result in executor.map_units(run_unit, units):
+        if result.ok:
+            manifests.append(result.value)
+        else:
+            label = f"[{_iso(result.unit.start_ns)}, {_iso(result.unit.end_ns)}): {result.error}"
+            summary.failed_units.append(label)
+            log.error("batch unit failed %s", label)
+    if summary.failed_units:
+        return summary
+    _commit(warehouse, manifests, summary)
+    shutil.rmtree(staging, ignore_errors=True)
+    rebuild_views_file(warehouse)
+    return summary
+
+
+def _commit(warehouse: Path, manifests: list[dict[str, str]], summary: BatchSummary) -> None:
+    """Stitch ids across unit seams, then one atomic overwrite per derived table whose
+    predicate is the window. Only the driver commits."""
+    manifests = sorted(manifests, key=lambda m: int(Path(next(iter(m.values()))).stem))
+    parts = {
+        name: [pl.read_parquet(m[name]) if name in m else None for m in manifests]
+        for name in (*DERIVED_TABLES, "rejects")
+    }
+    mapping = stitch_track_ids(
+        [p if p is not None else pl.DataFrame() for p in parts["associations"]]
+    )
+    for name in DERIVED_TABLES:
+        frames = [relabel(p, mapping) for p in parts[name] if p is not None]
+        table = tables.conform(name, pl.concat(frames) if frames else tables.empty(name))
+        replace_window(warehouse, name, table, start_ns=summary.start_ns, end_ns=summary.end_ns)
+        summary.rows[name] = table.num_rows
+    frames = [p for p in parts["rejects"] if p is not None]
+    rejects = tables.conform("rejects", pl.concat(frames) if frames else tables.empty("rejects"))
+    replace_rows(
+        warehouse,
+        "rejects",
+        rejects,
+        predicate_sql=(
+            f"stage = 'batch' AND log_time_ns >= {int(summary.start_ns)} "
+            f"AND log_time_ns < {int(summary.end_ns)}"
+        ),
+    )
+    summary.rejects = rejects.num_rows
+    summary.committed = True
+
+
+def _iso(t_ns: int) -> str:
+    return str(np.datetime64(int(t_ns), "ns").astype("datetime64[s]")) + "Z"

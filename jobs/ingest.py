@@ -1,0 +1,411 @@
+"""Ingest job: MCAP archive files -> raw Delta tables, rejects and the ingest ledger.
+
+One work unit per source file (:class:`IngestUnit`, small and picklable). A worker reads
+the file chunk by chunk, decodes every channel, and writes the file's rows per raw table
+to a staged Parquet file with a deterministic name (temp file + ``os.replace``); it
+returns a small :class:`FileManifest`. The DRIVER then commits, per file and in this
+order: ``replace_source_file`` on radar_tracks, ais_reports, ais_static, truth, rejects
+(also when the file has no rows for a table, so a changed file leaves no stale rows),
+and the ledger row LAST. A crash in between leaves a ledger without the new hash, so the
+next run redoes the file. ``<warehouse>/surveil.duckdb`` is rebuilt once at the end.
+
+Ledger: a file whose size and SHA-256 match its ledger row (status ok/partial) is skipped
+without any commit, unless ``force``. Status: ``ok``; ``partial`` (chunks lost, file cut
+off); ``quarantined`` (not MCAP, or nothing readable: one rejects row says why).
+
+Time window ``[start_ns, end_ns)``: rows are kept when the table's time column is inside
+(``time_ns``; ``log_time_ns`` for rejects) and the replace predicate is source_file AND
+window, so the file's rows outside the window stay. Messages are read with
+``WINDOW_READ_MARGIN_NS`` of log time on each side so that a report whose own time is in
+the window but was logged just outside it is not lost. File-level rejects (not_mcap,
+corrupt_chunk, truncated, unknown_schema) are clipped into the window. A windowed run
+neither skips by the ledger nor writes it: the ledger describes whole-file ingests.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import os
+import shutil
+import time
+from collections import Counter
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.compute as pc
+import pyarrow.parquet as pq
+
+from jobs.common import UsageError
+from pipeline.config import Config, ValidationConfig
+from pipeline.decode.registry import RAW_TABLES, FileDecoder, make_rejects
+from pipeline.executors import Executor, UnitResult, make_executor
+from pipeline.io.mcap_read import ReadStatus, read_mcap_batches
+from pipeline.tables import conform, empty, spec
+from pipeline.warehouse.delta import replace_source_file
+from pipeline.warehouse.ledger import file_fingerprint, is_unchanged, ledger_entry, write_entry
+from pipeline.warehouse.views import rebuild_views_file
+
+WINDOW_READ_MARGIN_NS = 60 * 10**9
+FILE_LEVEL_CODES = frozenset({"not_mcap", "corrupt_chunk", "truncated", "unknown_schema"})
+_MAGIC_SAMPLE = 64  # bytes of a not-MCAP file kept in its rejects row
+
+
+class IngestUsageError(UsageError):
+    """Bad input paths (missing path, directory without MCAP files) or window: exit 2."""
+
+
+@dataclass(frozen=True)
+class IngestUnit:
+    """One source file to ingest (picklable; carries paths, not data)."""
+
+    path: str
+    warehouse: str
+    staging_dir: str
+    validation: ValidationConfig
+    start_ns: int | None = None
+    end_ns: int | None = None
+    force: bool = False
+
+    @property
+    def windowed(self) -> bool:
+        return self.start_ns is not None
+
+
+@dataclass(frozen=True)
+class FileManifest:
+    """What a worker made of one file; ``staged`` maps table -> staged Parquet path."""
+
+    source_file: str
+    size_bytes: int
+    sha256: str
+    skipped: bool = False
+    status: str = "ok"
+    error: str | None = None
+    message_count: int = 0
+    rows: dict[str, int] = field(default_factory=dict)
+    rejects_by_reason: dict[str, int] = field(default_factory=dict)
+    not_stored: dict[str, int] = field(default_factory=dict)
+    start_time_ns: int | None = None
+    end_time_ns: int | None = None
+    staged: dict[str, str] = field(default_factory=dict)
+
+
+@dataclass
+class IngestSummary:
+    """Counts of one ingest run; ``exit_code`` 0 when every file is ok or skipped."""
+
+    files_total: int = 0
+    files_ok: int = 0
+    files_partial: int = 0
+    files_quarantined: int = 0
+    files_skipped: int = 0
+    messages_read: int = 0
+    rows: dict[str, int] = field(default_factory=lambda: dict.fromkeys(RAW_TABLES, 0))
+    rejects: dict[str, int] = field(default_factory=dict)
+    not_stored: dict[str, int] = field(default_factory=dict)
+    failed: list[tuple[str, str]] = field(default_factory=list)
+    window: tuple[int, int] | None = None
+
+    @property
+    def exit_code(self) -> int:
+        """0: all files ok or skipped; 1: some file partial/quarantined or a unit failed."""
+        bad = self.files_partial or self.files_quarantined or self.failed
+        return 1 if bad else 0
+
+    def add(self, m: FileManifest) -> None:
+        if m.skipped:
+            self.files_skipped += 1
+            return
+        self.files_ok += m.status == "ok"
+        self.files_partial += m.status == "partial"
+        self.files_quarantined += m.status == "quarantined"
+        self.messages_read += m.message_count
+        for k, v in m.rows.items():
+            self.rows[k] = self.rows.get(k, 0) + v
+        _merge(self.rejects, m.rejects_by_reason)
+        _merge(self.not_stored, m.not_stored)
+
+    def render(self) -> str:
+        """One screen of text for the CLI."""
+        lines = [
+            f"ingest: {self.files_total} files: {self.files_ok} ok, {self.files_partial} "
+            f"partial, {self.files_quarantined} quarantined, {self.files_skipped} skipped "
+            f"(unchanged), {len(self.failed)} failed; {self.messages_read} messages read"
+        ]
+        if self.window:
+            lines.append(f"window: [{self.window[0]}, {self.window[1]}) ns")
+        lines.append("rows:    " + _fmt(self.rows))
+        lines.append("rejects: " + (_fmt(self.rejects) or "none"))
+        if self.not_stored:
+            lines.append("AIS messages not stored (by type): " + _fmt(self.not_stored))
+        for path, err in self.failed[:10]:
+            lines.append(f"FAILED {path}: {err}")
+        if len(self.failed) > 10:
+            lines.append(f"... and {len(self.failed) - 10} more failed units")
+        lines.append(f"exit code {self.exit_code}")
+        return "\n".join(lines)
+
+
+def _merge(into: dict[str, int], counts: dict[str, int]) -> None:
+    for k, v in counts.items():
+        into[k] = into.get(k, 0) + v
+
+
+def _fmt(counts: dict[str, int]) -> str:
+    return ", ".join(f"{k} {v}" for k, v in sorted(counts.items()))
+
+
+# -- inputs ------------------------------------------------------------------------------
+
+
+def expand_paths(paths: Iterable[Path | str]) -> list[Path]:
+    """Absolute file paths: directories expand to their ``*.mcap`` files (recursive,
+    sorted); an explicit file is taken as given. Raises :class:`IngestUsageError` for a
+    missing path, a directory without MCAP files, or no paths at all."""
+    out: list[Path] = []
+    for raw in paths:
+        p = Path(raw).expanduser()
+        if not p.exists():
+            raise IngestUsageError(f"input path does not exist: {p}")
+        if p.is_dir():
+            found = sorted(q for q in p.rglob("*.mcap") if q.is_file())
+            if not found:
+                raise IngestUsageError(f"no *.mcap files under directory: {p}")
+            out.extend(found)
+        else:
+            out.append(p)
+    if not out:
+        raise IngestUsageError("no input paths given")
+    return list(dict.fromkeys(q.resolve() for q in out))
+
+
+# -- worker ------------------------------------------------------------------------------
+
+
+def ingest_file(unit: IngestUnit) -> FileManifest:
+    """Decode one file and stage its rows (runs in a worker; commits nothing)."""
+    path = Path(unit.path)
+    size, sha = file_fingerprint(path)
+    if not unit.force and not unit.windowed and is_unchanged(unit.warehouse, unit.path, size, sha):
+        return FileManifest(unit.path, size, sha, skipped=True)
+    lo, hi = _read_window(unit)
+    scan = read_mcap_batches(path, start_ns=lo, end_ns=hi)
+    decoder = FileDecoder(source_file=unit.path, validation=unit.validation)
+    for batch in scan:
+        decoder.feed(batch)
+    decoder.add_rejects(_status_rejects(unit, scan.status))
+    tables = decoder.finish()
+    if unit.windowed:
+        tables = {n: _in_window(n, t, unit.start_ns, unit.end_ns) for n, t in tables.items()}
+    return _manifest(unit, size, sha, scan.status, decoder, tables)
+
+
+def _read_window(unit: IngestUnit) -> tuple[int | None, int | None]:
+    if not unit.windowed:
+        return None, None
+    return unit.start_ns - WINDOW_READ_MARGIN_NS, unit.end_ns + WINDOW_READ_MARGIN_NS
+
+
+def _status_rejects(unit: IngestUnit, status: ReadStatus) -> pa.Table:
+    """One rejects row per problem the reader reported (not MCAP, lost chunk, cut-off)."""
+    if not status.problems:
+        return empty("rejects")
+    raw: list[bytes | None] = []
+    for p in status.problems:
+        if p.reason_code == "not_mcap":
+            with open(unit.path, "rb") as f:
+                raw.append(f.read(_MAGIC_SAMPLE))
+        else:
+            raw.append(None)
+    reasons = []
+    for p in status.problems:
+        lost = "" if p.messages_lost is None else f" ({p.messages_lost} messages lost)"
+        reasons.append(p.detail + lost)
+    return make_rejects(
+        [p.log_time_ns or 0 for p in status.problems],
+        source_file=unit.path,
+        topic=None,
+        reason_code=[p.reason_code for p in status.problems],
+        reason=reasons,
+        raw=raw,
+    )
+
+
+def _in_window(name: str, table: pa.Table, start_ns: int, end_ns: int) -> pa.Table:
+    """Rows of ``table`` whose time column is in ``[start_ns, end_ns)``; file-level
+    rejects are first clipped into the window so that they are kept."""
+    col = spec(name).time_column
+    if name == "rejects" and table.num_rows:
+        t = table[col].to_numpy(zero_copy_only=False)
+        file_level = np.isin(
+            table["reason_code"].to_numpy(zero_copy_only=False), list(FILE_LEVEL_CODES)
+        )
+        clipped = np.where(file_level, np.clip(t, start_ns, end_ns - 1), t)
+        table = conform(
+            name,
+            table.set_column(table.column_names.index(col), col, pa.array(clipped, pa.int64())),
+        )
+    t = table[col]
+    keep = pc.and_(pc.greater_equal(t, start_ns), pc.less(t, end_ns))
+    return table.filter(keep)
+
+
+def _manifest(
+    unit: IngestUnit,
+    size: int,
+    sha: str,
+    status: ReadStatus,
+    decoder: FileDecoder,
+    tables: dict[str, pa.Table],
+) -> FileManifest:
+    rejects = tables["rejects"]
+    reasons = Counter(rejects["reason_code"].to_pylist()) if rejects.num_rows else Counter()
+    return FileManifest(
+        source_file=unit.path,
+        size_bytes=size,
+        sha256=sha,
+        status=status.status,
+        error=status.error,
+        message_count=status.messages_read,
+        rows={n: t.num_rows for n, t in tables.items()},
+        rejects_by_reason=dict(reasons),
+        not_stored={f"ais_type_{k}": v for k, v in sorted(decoder.not_stored.items())},
+        start_time_ns=status.start_time_ns,
+        end_time_ns=status.end_time_ns,
+        staged=_stage(unit, tables),
+    )
+
+
+def _stage(unit: IngestUnit, tables: dict[str, pa.Table]) -> dict[str, str]:
+    """Write non-empty tables to ``<staging>/<hash of path>/<table>.parquet``."""
+    key = hashlib.sha256(unit.path.encode()).hexdigest()[:24]
+    folder = Path(unit.staging_dir) / key
+    folder.mkdir(parents=True, exist_ok=True)
+    staged = {}
+    for name, table in tables.items():
+        if not table.num_rows:
+            continue
+        target = folder / f"{name}.parquet"
+        tmp = folder / f".{name}.parquet.tmp-{os.getpid()}"
+        pq.write_table(table, tmp, compression="zstd")
+        os.replace(tmp, target)
+        staged[name] = str(target)
+    return staged
+
+
+# -- driver ------------------------------------------------------------------------------
+
+
+def commit_file(
+    warehouse: Path, m: FileManifest, *, start_ns: int | None = None, end_ns: int | None = None
+) -> None:
+    """Replace the file's rows in every raw table, then (whole-file runs) its ledger row."""
+    for name in RAW_TABLES:
+        staged = m.staged.get(name)
+        table = pq.read_table(staged) if staged else empty(name)
+        replace_source_file(
+            warehouse, name, table, source_file=m.source_file, start_ns=start_ns, end_ns=end_ns
+        )
+    if start_ns is None:
+        entry = ledger_entry(
+            m.source_file,
+            size_bytes=m.size_bytes,
+            sha256=m.sha256,
+            status=m.status,
+            error=m.error,
+            message_count=m.message_count,
+            rows={n: m.rows.get(n, 0) for n in RAW_TABLES if n != "rejects"},
+            rejects_count=m.rows.get("rejects", 0),
+            start_time_ns=m.start_time_ns,
+            end_time_ns=m.end_time_ns,
+        )
+        write_entry(warehouse, entry)
+
+
+def run_ingest(
+    paths: Sequence[Path | str],
+    cfg: Config,
+    warehouse: Path,
+    *,
+    start_ns: int | None = None,
+    end_ns: int | None = None,
+    force: bool = False,
+    executor: Executor | str | None = None,
+    on_result: Callable[[UnitResult], None] | None = None,
+) -> IngestSummary:
+    """Ingest MCAP files (directories expand to ``*.mcap``) into ``warehouse``.
+
+    ``[start_ns, end_ns)``: optional window, both bounds or neither (ns, UTC).
+    ``executor``: an :class:`Executor`, or a kind (``serial``/``process``/``ray``) sized
+    by ``cfg.execution``; ``None`` uses ``cfg.execution`` entirely. ``on_result`` is
+    called per finished unit (progress display). Raises :class:`IngestUsageError` for
+    bad paths or a bad window.
+    """
+    if (start_ns is None) != (end_ns is None):
+        raise IngestUsageError("give both start and end of the window, or neither")
+    if start_ns is not None and end_ns <= start_ns:  # type: ignore[operator]
+        raise IngestUsageError(f"empty window [{start_ns}, {end_ns})")
+    files = expand_paths(paths)
+    warehouse = Path(warehouse).resolve()
+    staging = warehouse / "_staging" / f"ingest-{os.getpid()}-{time.time_ns()}"
+    ex = _executor(executor, cfg, len(files))
+    units = [
+        IngestUnit(str(f), str(warehouse), str(staging), cfg.validation, start_ns, end_ns, force)
+        for f in files
+    ]
+    summary = IngestSummary(files_total=len(units))
+    if start_ns is not None:
+        summary.window = (start_ns, end_ns)  # type: ignore[assignment]
+    committed = False
+    try:
+        for res in ex.map_units(ingest_file, units):
+            committed |= _handle(warehouse, res, summary, start_ns, end_ns)
+            if on_result is not None:
+                on_result(res)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+        with contextlib.suppress(OSError):
+            (warehouse / "_staging").rmdir()
+    if committed:
+        rebuild_views_file(warehouse)
+    return summary
+
+
+def _executor(executor: Executor | str | None, cfg: Config, n_units: int) -> Executor:
+    if executor is not None and not isinstance(executor, str):
+        return executor
+    ex = cfg.execution
+    kind = executor or ex.executor
+    return make_executor(kind, min(ex.max_workers, n_units), ex.threads_per_worker)
+
+
+def _handle(
+    warehouse: Path,
+    res: UnitResult,
+    summary: IngestSummary,
+    start_ns: int | None,
+    end_ns: int | None,
+) -> bool:
+    """Commit one finished unit; returns True when something was committed."""
+    if not res.ok:
+        summary.failed.append((res.unit.path, res.error or "unknown error"))
+        return False
+    m: FileManifest = res.value
+    if m.skipped:
+        summary.add(m)
+        return False
+    try:
+        commit_file(warehouse, m, start_ns=start_ns, end_ns=end_ns)
+    except Exception as exc:  # the file stays re-runnable: its ledger row was not written
+        summary.failed.append((m.source_file, f"commit failed: {type(exc).__name__}: {exc}"))
+        return True
+    finally:
+        for p in m.staged.values():
+            with contextlib.suppress(OSError):
+                os.remove(p)
+    summary.add(m)
+    return True

@@ -1,0 +1,370 @@
+"""AIS ``!AIVDM``/``!AIVDO`` sentences -> ``ais_reports``, ``ais_static`` + rejects (pyais).
+
+Each MCAP message of the ``nmea0183`` channel is one raw sentence (an IEC 62320-1 tag
+block ``\\...\\`` in front is accepted and ignored; time is the MCAP log time). A Python
+step per sentence is unavoidable here: NMEA framing, fragment assembly and the 6-bit
+payload decode are inherently sequential, and pyais decodes one message per call. The
+rest (unit conversion, not-available codes) works on the decoded values as they are
+appended to column lists; no table is built row by row.
+
+What goes where (ITU-R M.1371 message ids):
+
+- position reports 1, 2, 3, 18, 19, 27 -> ``ais_reports``
+- static/voyage data 5, 19, 24 (each part of 24 is a row) -> ``ais_static``
+  (19 carries both and yields a row in each table)
+- every other valid type (4, 6-17, 20-23, 25, 26) is not stored and NOT rejected: it is
+  counted in ``AisDecoded.not_stored`` (message id -> count).
+
+Rejects (reason_code): ``bad_checksum`` (NMEA XOR checksum missing or wrong),
+``truncated_multipart`` (a fragment group that never completes: missing, out-of-order
+or interrupted fragments), ``unsupported_type`` (not an AIS sentence, or message id 0 /
+28-63), ``undecodable`` (malformed sentence, empty payload, payload too short),
+``no_position`` (latitude 91 / longitude 181: "not available"), ``out_of_range``
+(latitude beyond ±90 or longitude beyond ±180 other than those codes). ``raw`` holds the
+sentence(s), newline-joined for a group.
+
+Conversions to SI: SOG knots -> m/s (``× 1852/3600``; 102.3 kn, or 63 kn for type 27, is
+"not available" -> null); COG and heading degrees -> rad (COG ≥ 360, heading 511 or
+> 359 -> null); UTC second 60-63 -> null; dimensions and ship type 0 -> null; IMO 0 ->
+null; empty text -> null.
+
+Multi-part messages: fragments are matched by (sequential id, radio channel, fragment
+count) and must arrive in order; a group is abandoned after ``MAX_FRAGMENT_GAP`` other
+sentences. ``time_ns`` and ``log_time_ns`` are the log time of the LAST fragment. With
+``final=False`` a group still open at the end of the batch is not rejected: its
+sentences (and everything after the first of them) are returned uncounted as
+``carry`` so the caller can prepend them to the next batch of the same topic.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+from pyais.exceptions import UnknownMessageException
+from pyais.messages import MSG_CLASS, AISSentence, NMEASentenceFactory
+
+from pipeline.decode.registry import make_rejects
+from pipeline.tables import conform, empty, schema
+
+KNOT_MPS = 1852.0 / 3600.0
+DEG = math.pi / 180.0
+POSITION_TYPES = frozenset({1, 2, 3, 18, 19, 27})
+STATIC_TYPES = frozenset({5, 19, 24})
+CLASS_B_TYPES = frozenset({18, 19, 24})
+LAT_NA_DEG, LON_NA_DEG = 91.0, 181.0
+MAX_FRAGMENT_GAP = 8
+
+
+@dataclass(frozen=True)
+class AisDecoded:
+    """Rows per table, counts of valid-but-unstored message ids, and how many trailing
+    sentences were not consumed (``carry``, only when decoding with ``final=False``)."""
+
+    reports: pa.Table
+    static: pa.Table
+    rejects: pa.Table
+    not_stored: dict[int, int]
+    carry: int = 0
+
+
+@dataclass
+class _Group:
+    first: int
+    idx: list[int]
+
+
+def _append(cols: dict[str, list], row: dict) -> None:
+    for k, v in row.items():
+        cols.setdefault(k, []).append(v)
+
+
+def _text(s: object) -> str | None:
+    t = str(s).strip().rstrip("@").strip() if s is not None else ""
+    return t or None
+
+
+def _nonzero(v: Any) -> int | None:
+    return int(v) if v else None
+
+
+def _sog_mps(msg_type: int, speed: float | None) -> float | None:
+    if speed is None:
+        return None
+    na = 63.0 if msg_type == 27 else 102.3
+    return None if speed >= na - 1e-6 else speed * KNOT_MPS
+
+
+def _cog_rad(course: float | None) -> float | None:
+    if course is None or course >= 360.0 or course < 0.0:
+        return None  # 360 (3600 in 1/10 deg) and type 27's 511 mean "not available"
+    return course * DEG
+
+
+def _heading_rad(heading: int | None) -> float | None:
+    return None if heading is None or heading > 359 else heading * DEG
+
+
+def _position_row(msg_type: int, d: object) -> dict:
+    def get(k: str) -> Any:
+        return getattr(d, k, None)
+
+    second, status, accuracy = get("second"), get("status"), get("accuracy")
+    return {
+        "mmsi": int(get("mmsi")),
+        "msg_type": msg_type,
+        "ais_class": "B" if msg_type in CLASS_B_TYPES else "A",
+        "lat_deg": float(get("lat")),
+        "lon_deg": float(get("lon")),
+        "sog_mps": _sog_mps(msg_type, get("speed")),
+        "cog_rad": _cog_rad(get("course")),
+        "heading_rad": _heading_rad(get("heading")),
+        "nav_status": int(status) if status is not None and msg_type in (1, 2, 3, 27) else None,
+        "position_accuracy": None if accuracy is None else bool(accuracy),
+        "utc_second": None if second is None or second >= 60 else int(second),
+    }
+
+
+def _static_row(msg_type: int, d: object) -> dict:
+    def get(k: str) -> Any:
+        return getattr(d, k, None)
+
+    return {
+        "mmsi": int(get("mmsi")),
+        "msg_type": msg_type,
+        "ais_class": "B" if msg_type in CLASS_B_TYPES else "A",
+        "imo": _nonzero(get("imo")),
+        "callsign": _text(get("callsign")),
+        "shipname": _text(get("shipname")),
+        "ship_type": _nonzero(get("ship_type")),
+        "to_bow_m": _nonzero(get("to_bow")),
+        "to_stern_m": _nonzero(get("to_stern")),
+        "to_port_m": _nonzero(get("to_port")),
+        "to_starboard_m": _nonzero(get("to_starboard")),
+        "destination": _text(get("destination")),
+    }
+
+
+def _position_problem(lat: float | None, lon: float | None) -> tuple[str, str] | None:
+    if lat is None or lon is None:
+        return "undecodable", "payload too short for a position"
+    if lat == LAT_NA_DEG or lon == LON_NA_DEG:
+        return "no_position", f"position not available (lat {lat:g}, lon {lon:g})"
+    if abs(lat) > 90.0:
+        return "out_of_range", f"lat_deg={lat:g} outside [-90, 90]"
+    if abs(lon) > 180.0:
+        return "out_of_range", f"lon_deg={lon:g} outside [-180, 180]"
+    return None
+
+
+class _Decoder:
+    """One pass over a batch of sentences (see module docstring)."""
+
+    def __init__(self, sentences: list[bytes], final: bool):
+        self.sentences = sentences
+        self.final = final
+        self.parsed: list[AISSentence | None] = [None] * len(sentences)
+        self.units: list[list[int]] = []
+        self.rejects: list[tuple[list[int], str, str]] = []
+        self.open: dict[tuple, _Group] = {}
+
+    def run(self) -> int:
+        """Parse and group every sentence; returns the index where the carry starts."""
+        for i, raw in enumerate(self.sentences):
+            self._expire(i)
+            s = self._parse(i, raw)
+            if s is not None:
+                self._group(i, s)
+        n = len(self.sentences)
+        if self.final or not self.open:
+            for g in self.open.values():
+                self._reject_group(g, "group never completed")
+            self.open.clear()
+            return n
+        return min(g.first for g in self.open.values())
+
+    def _parse(self, i: int, raw: bytes) -> AISSentence | None:
+        try:
+            s = NMEASentenceFactory.produce(raw)
+        except UnknownMessageException:
+            self.rejects.append(([i], "unsupported_type", "not an AIS VDM/VDO sentence"))
+            return None
+        except Exception as exc:  # pyais raises several types for malformed input
+            self.rejects.append(([i], "undecodable", f"malformed sentence: {exc}"[:200]))
+            return None
+        if not isinstance(s, AISSentence):
+            self.rejects.append(([i], "unsupported_type", f"{s.TYPE} sentence, not AIS"))
+            return None
+        if not s.is_valid:
+            self.rejects.append(([i], "bad_checksum", f"NMEA checksum {s.checksum} is wrong"))
+            return None
+        self.parsed[i] = s
+        return s
+
+    def _group(self, i: int, s: AISSentence) -> None:
+        if s.frag_cnt == 1:
+            self.units.append([i])
+            return
+        key = (s.seq_id, s.channel, s.frag_cnt)
+        g = self.open.get(key)
+        if s.frag_num == 1:
+            if g is not None:
+                self._reject_group(g, "next group started before it completed")
+            g = self.open[key] = _Group(first=i, idx=[i])
+        elif g is not None and s.frag_num == len(g.idx) + 1:
+            g.idx.append(i)
+        else:
+            if g is not None:
+                self._reject_group(g, f"fragment {s.frag_num}/{s.frag_cnt} out of order")
+                del self.open[key]
+            self.rejects.append(
+                (
+                    [i],
+                    "truncated_multipart",
+                    f"fragment {s.frag_num}/{s.frag_cnt} without its preceding fragments",
+                )
+            )
+            return
+        if len(g.idx) == s.frag_cnt:
+            self.units.append(g.idx)
+            del self.open[key]
+
+    def _expire(self, i: int) -> None:
+        for key, g in list(self.open.items()):
+            if i - g.idx[-1] > MAX_FRAGMENT_GAP:
+                self._reject_group(g, f"no next fragment within {MAX_FRAGMENT_GAP} sentences")
+                del self.open[key]
+
+    def _reject_group(self, g: _Group, why: str) -> None:
+        s = self.parsed[g.idx[0]]
+        n = s.frag_cnt if s is not None else "?"
+        self.rejects.append(
+            (list(g.idx), "truncated_multipart", f"{len(g.idx)} of {n} fragments: {why}")
+        )
+
+
+def _assemble(parts: list[AISSentence]) -> AISSentence:
+    return parts[0] if len(parts) == 1 else AISSentence.assemble_from_iterable(parts)
+
+
+def decode_ais(
+    sentences: list[bytes],
+    log_time_ns: np.ndarray,
+    *,
+    source_file: str,
+    topic: str,
+    final: bool = True,
+) -> AisDecoded:
+    """Decode a batch of raw AIS sentences (see module docstring).
+
+    ``log_time_ns``: int64 MCAP log times of the sentences, ns.
+    """
+    times = np.asarray(log_time_ns, dtype=np.int64)
+    dec = _Decoder(list(sentences), final)
+    carry_at = dec.run()
+    reports: dict[str, list] = {}
+    static: dict[str, list] = {}
+    rejects = [r for r in dec.rejects if max(r[0]) < carry_at]
+    not_stored: Counter = Counter()
+    for idx in dec.units:
+        if max(idx) >= carry_at:
+            continue
+        out = _decode_unit([dec.parsed[j] for j in idx])  # type: ignore[misc]
+        if isinstance(out, int):
+            not_stored[out] += 1
+            continue
+        position, static_row, problem = out
+        if problem is not None:
+            rejects.append((idx, *problem))
+        prov = _provenance(idx, sentences, times)
+        if position is not None:
+            _append(reports, {**position, **prov})
+        if static_row is not None:
+            _append(static, {**static_row, **prov})
+    return AisDecoded(
+        reports=_table("ais_reports", reports, source_file, topic),
+        static=_table("ais_static", static, source_file, topic),
+        rejects=_rejects(rejects, sentences, times, source_file, topic),
+        not_stored=dict(not_stored),
+        carry=len(sentences) - carry_at,
+    )
+
+
+_Unit = tuple[dict | None, dict | None, tuple[str, str] | None]
+
+
+def _decode_unit(parts: list[AISSentence]) -> _Unit | int:
+    """Decode one complete message: ``(position row, static row, problem)``, or the
+    message id when it is a valid type we do not store."""
+    msg = _assemble(parts)
+    if not msg.payload:
+        return None, None, ("undecodable", "empty payload")
+    ais_id = msg.ais_id
+    if ais_id not in MSG_CLASS:
+        return None, None, ("unsupported_type", f"message id {ais_id} is not defined")
+    if ais_id not in POSITION_TYPES and ais_id not in STATIC_TYPES:
+        return ais_id
+    try:
+        d = msg.decode()
+    except Exception as exc:  # pyais: bad bit lengths, unknown part numbers, ...
+        return None, None, ("undecodable", f"type {ais_id}: {type(exc).__name__}: {exc}"[:200])
+    if getattr(d, "mmsi", None) is None:
+        return None, None, ("undecodable", f"type {ais_id}: payload too short")
+    position = problem = None
+    if ais_id in POSITION_TYPES:
+        problem = _position_problem(getattr(d, "lat", None), getattr(d, "lon", None))
+        if problem is None:
+            position = {**_position_row(ais_id, d), "radio_channel": msg.channel or None}
+    static_row = _static_row(ais_id, d) if ais_id in STATIC_TYPES else None
+    return position, static_row, problem
+
+
+def _provenance(idx: list[int], sentences: list[bytes], times: np.ndarray) -> dict:
+    """time_ns = log_time_ns = log time of the last fragment; nmea = the sentence(s)."""
+    t = int(times[max(idx)])
+    text = "\n".join(sentences[j].decode("ascii", "replace").strip() for j in idx)
+    return {"time_ns": t, "log_time_ns": t, "nmea": text}
+
+
+def _table(name: str, cols: dict[str, list], source_file: str, topic: str) -> pa.Table:
+    n = len(cols.get("mmsi", []))
+    if not n:
+        return empty(name)
+    types = {f.name: f.type for f in schema(name)}
+    arrays = {k: pa.array(v, type=types[k]) for k, v in cols.items()}
+    arrays["source_file"] = pa.array([source_file] * n, pa.string())
+    arrays["topic"] = pa.array([topic] * n, pa.string())
+    return conform(name, pa.table(arrays))
+
+
+def _rejects(
+    rejects: list[tuple[list[int], str, str]],
+    sentences: list[bytes],
+    times: np.ndarray,
+    source_file: str,
+    topic: str,
+) -> pa.Table:
+    last = np.asarray([max(idx) for idx, _, _ in rejects], dtype=np.int64)
+    return make_rejects(
+        times[last],
+        source_file=source_file,
+        topic=topic,
+        reason_code=[c for _, c, _ in rejects],
+        reason=[r for _, _, r in rejects],
+        raw=[b"\n".join(sentences[j].strip() for j in idx) for idx, _, _ in rejects],
+    )
+
+
+def decode_ais_sentences(
+    sentences: list[bytes], log_time_ns: np.ndarray, *, source_file: str, topic: str
+) -> tuple[pa.Table, pa.Table, pa.Table]:
+    """``(ais_reports, ais_static, rejects)`` of a complete batch of sentences.
+
+    Same as :func:`decode_ais` with ``final=True``, without the ``not_stored`` counts.
+    """
+    out = decode_ais(sentences, log_time_ns, source_file=source_file, topic=topic)
+    return out.reports, out.static, out.rejects

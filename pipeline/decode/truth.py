@@ -1,0 +1,57 @@
+"""Simulated ground truth (JSON, ``surveil.TruthState``) -> ``truth`` table + rejects.
+
+Parsed in bulk like the radar reports (``pipeline.decode.radar.parse_json_payloads``).
+Validation (reason_code ``out_of_range``): a missing required field, NaN/inf, latitude
+outside [-90, 90] deg, longitude outside [-180, 180] deg, speed < 0. ``mmsi`` may be null
+(the vessel carries no AIS). Units: deg, rad, m/s, ns.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import polars as pl
+import pyarrow as pa
+
+from pipeline.decode.radar import (
+    missing_reasons,
+    nonfinite_reasons,
+    outside,
+    parse_json_payloads,
+    rejects_for,
+    split_valid,
+    with_provenance,
+)
+from pipeline.tables import conform
+
+TRUTH_FIELDS: dict[str, pl.DataType] = {
+    "vessel_id": pl.Int64(),
+    "mmsi": pl.Int64(),
+    "time_ns": pl.Int64(),
+    "lat_deg": pl.Float64(),
+    "lon_deg": pl.Float64(),
+    "course_rad": pl.Float64(),
+    "speed_mps": pl.Float64(),
+}
+_REQUIRED = ["vessel_id", "time_ns", "lat_deg", "lon_deg", "course_rad", "speed_mps"]
+_NUMERIC = ["lat_deg", "lon_deg", "course_rad", "speed_mps"]
+
+
+def decode_truth_states(
+    payloads: list[bytes], log_time_ns: np.ndarray, *, source_file: str, topic: str
+) -> tuple[pa.Table, pa.Table]:
+    """``(truth rows, rejects rows)`` of a batch of truth-state payloads.
+
+    ``log_time_ns``: int64 MCAP log times of the payloads, ns.
+    """
+    parsed = parse_json_payloads(payloads, TRUTH_FIELDS)
+    reasons = [
+        *missing_reasons(_REQUIRED),
+        *nonfinite_reasons(_NUMERIC),
+        outside("lat_deg", -90.0, 90.0),
+        outside("lon_deg", -180.0, 180.0),
+        outside("speed_mps", 0.0, None),
+    ]
+    good, bad = split_valid(parsed.frame, reasons)
+    rows = with_provenance(good, log_time_ns, source_file=source_file, topic=topic)
+    rejects = rejects_for(parsed, bad, payloads, log_time_ns, source_file=source_file, topic=topic)
+    return conform("truth", rows.to_arrow()), rejects

@@ -1,0 +1,229 @@
+"""Delta Lake tables of the warehouse: snapshot reads and atomic predicate replaces.
+
+Every table lives at ``<warehouse>/tables/<name>`` (delta-rs, no server), partitioned by
+``date`` when its canonical schema has one (``schemas/tables.toml``) and written sorted by
+the table's sort key. A write is ONE Delta commit, ``write_deltalake(mode="overwrite",
+predicate=...)``: readers see the old rows or the new rows, never a mix, and Delta itself
+rejects a row that lies outside the predicate instead of writing it (measured in
+``research/architecture.md`` §2.3). An empty table with a predicate deletes the matching
+rows in one commit (checked on deltalake 1.6.6).
+
+Readers go through the Delta log (``DeltaTable.to_pyarrow_dataset()``): a glob over a
+table folder also sees the files that earlier commits replaced and double-counts.
+
+Times are int64 ns since the Unix epoch, UTC; windows are half-open ``[start_ns, end_ns)``.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import math
+from pathlib import Path
+
+import pyarrow as pa
+import pyarrow.compute as pc
+import pyarrow.dataset as pds
+from deltalake import DeltaTable, WriterProperties, write_deltalake
+
+from pipeline.tables import conform, empty, spec
+
+NS_PER_DAY = 86_400 * 10**9
+_EPOCH = dt.date(1970, 1, 1)
+
+
+def table_path(warehouse: Path, name: str) -> Path:
+    """Folder of table ``name``: ``<warehouse>/tables/<name>``."""
+    return Path(warehouse) / "tables" / name
+
+
+def table_exists(warehouse: Path, name: str) -> bool:
+    """True when ``name`` has at least one Delta commit."""
+    return DeltaTable.is_deltatable(str(table_path(warehouse, name)))
+
+
+def table_version(warehouse: Path, name: str) -> int | None:
+    """Current Delta version of ``name``, ``None`` when the table does not exist."""
+    if not table_exists(warehouse, name):
+        return None
+    return DeltaTable(str(table_path(warehouse, name))).version()
+
+
+def ns_to_date(t_ns: int) -> dt.date:
+    """UTC calendar day of an int64-ns time (same rule as ``pipeline.tables.with_date``)."""
+    return _EPOCH + dt.timedelta(days=t_ns // NS_PER_DAY)
+
+
+def sql_literal(value: object) -> str:
+    """Render ``value`` as a SQL literal for a Delta (DataFusion) predicate.
+
+    Strings are single-quoted with embedded quotes doubled (``it's`` -> ``'it''s'``);
+    dates become ``DATE 'YYYY-MM-DD'``; ints and finite floats are written in full;
+    ``None`` is ``NULL``. Anything else (NaN, bytes, objects) raises ``TypeError``, so no
+    value reaches a predicate unquoted.
+    """
+    if value is None:
+        return "NULL"
+    if isinstance(value, bool):
+        return "TRUE" if value else "FALSE"
+    if isinstance(value, int):
+        return str(value)
+    if isinstance(value, float):
+        if not math.isfinite(value):
+            raise TypeError(f"non-finite float has no SQL literal: {value!r}")
+        return repr(value)
+    if isinstance(value, dt.datetime):
+        raise TypeError("datetime literals are not used: compare int64 ns columns instead")
+    if isinstance(value, dt.date):
+        return f"DATE '{value.isoformat()}'"
+    if isinstance(value, str):
+        if "\x00" in value:
+            raise TypeError("NUL byte in SQL string literal")
+        return "'" + value.replace("'", "''") + "'"
+    raise TypeError(f"no SQL literal for {type(value).__name__}")
+
+
+def _check_window(start_ns: int, end_ns: int) -> None:
+    if end_ns <= start_ns:
+        raise ValueError(f"empty time window [{start_ns}, {end_ns})")
+
+
+def window_predicate(name: str, start_ns: int, end_ns: int) -> str:
+    """SQL predicate of ``[start_ns, end_ns)`` on ``name``'s time column, plus the ``date``
+    range (when partitioned) so that Delta leaves files of other days untouched."""
+    s = spec(name)
+    if not s.time_column:
+        raise ValueError(f"table {name} has no time column; it cannot be windowed")
+    _check_window(start_ns, end_ns)
+    col = s.time_column
+    parts = [f"{col} >= {sql_literal(int(start_ns))}", f"{col} < {sql_literal(int(end_ns))}"]
+    if "date" in s.partition_by:
+        parts.append(f"date >= {sql_literal(ns_to_date(int(start_ns)))}")
+        parts.append(f"date <= {sql_literal(ns_to_date(int(end_ns) - 1))}")
+    return " AND ".join(parts)
+
+
+def window_filter(name: str, start_ns: int | None, end_ns: int | None) -> pc.Expression | None:
+    """Arrow filter of a (possibly open) window on ``name``'s time column and ``date``."""
+    s = spec(name)
+    if start_ns is None and end_ns is None:
+        return None
+    if not s.time_column:
+        raise ValueError(f"table {name} has no time column; it cannot be windowed")
+    time_col, parts = pds.field(s.time_column), []
+    has_date = "date" in s.partition_by
+    if start_ns is not None:
+        parts.append(time_col >= int(start_ns))
+        if has_date:
+            parts.append(pds.field("date") >= pa.scalar(ns_to_date(int(start_ns)), pa.date32()))
+    if end_ns is not None:
+        parts.append(time_col < int(end_ns))
+        if has_date:
+            last_day = ns_to_date(int(end_ns) - 1)
+            parts.append(pds.field("date") <= pa.scalar(last_day, pa.date32()))
+    expr = parts[0]
+    for p in parts[1:]:
+        expr = expr & p
+    return expr
+
+
+def read_table(
+    warehouse: Path,
+    name: str,
+    *,
+    start_ns: int | None = None,
+    end_ns: int | None = None,
+    columns: list[str] | None = None,
+    predicate: pc.Expression | None = None,
+) -> pa.Table:
+    """Rows of the current snapshot of ``name`` with the time column in ``[start_ns, end_ns)``,
+    sorted by the table's sort key (when the selected columns include it).
+
+    The window also filters the ``date`` partition, so files of other days are pruned.
+    ``predicate`` is an extra Arrow filter. Returns an empty table with the canonical
+    schema (or the selected ``columns``) when the table does not exist yet.
+    """
+    target = spec(name).schema
+    if columns is not None:
+        target = pa.schema([target.field(c) for c in columns])
+    if not table_exists(warehouse, name):
+        return target.empty_table()
+    expr = window_filter(name, start_ns, end_ns)
+    if predicate is not None:
+        expr = predicate if expr is None else expr & predicate
+    dataset = DeltaTable(str(table_path(warehouse, name))).to_pyarrow_dataset()
+    table = dataset.to_table(columns=list(target.names), filter=expr).cast(target)
+    keys = spec(name).sort_by
+    if table.num_rows and keys and all(k in target.names for k in keys):
+        table = table.sort_by([(k, "ascending") for k in keys])  # files come in any order
+    return table
+
+
+def _writer_properties() -> WriterProperties:
+    return WriterProperties(compression="ZSTD", max_row_group_size=256 * 1024)
+
+
+def replace_rows(warehouse: Path, name: str, table: pa.Table, *, predicate_sql: str) -> None:
+    """Replace exactly the rows of ``name`` matching ``predicate_sql`` by ``table``, in ONE
+    atomic Delta commit (creates the table on the first write).
+
+    ``table`` is conformed to the canonical schema and sorted by the sort key first. A row
+    of ``table`` outside the predicate makes Delta reject the whole write (``DeltaError``);
+    nothing is committed then. An empty ``table`` deletes the matching rows.
+    """
+    data = conform(name, table)
+    s = spec(name)
+    write_deltalake(
+        str(table_path(warehouse, name)),
+        data,
+        mode="overwrite",
+        predicate=predicate_sql,
+        partition_by=list(s.partition_by) or None,
+        writer_properties=_writer_properties(),
+    )
+
+
+def replace_window(
+    warehouse: Path, name: str, table: pa.Table, *, start_ns: int, end_ns: int
+) -> None:
+    """Replace the rows of ``name`` whose time column is in ``[start_ns, end_ns)``."""
+    replace_rows(warehouse, name, table, predicate_sql=window_predicate(name, start_ns, end_ns))
+
+
+def source_file_predicate(
+    name: str, source_file: str, start_ns: int | None = None, end_ns: int | None = None
+) -> str:
+    """``source_file = '<path>'``, AND the time window when both bounds are given."""
+    pred = f"source_file = {sql_literal(source_file)}"
+    if start_ns is None and end_ns is None:
+        return pred
+    if start_ns is None or end_ns is None:
+        raise ValueError("give both start_ns and end_ns, or neither")
+    return f"{pred} AND {window_predicate(name, start_ns, end_ns)}"
+
+
+def replace_source_file(
+    warehouse: Path,
+    name: str,
+    table: pa.Table,
+    *,
+    source_file: str,
+    start_ns: int | None = None,
+    end_ns: int | None = None,
+) -> None:
+    """Replace every row of ``name`` that came from ``source_file`` (only those in
+    ``[start_ns, end_ns)`` when a window is given) by ``table``: one commit."""
+    pred = source_file_predicate(name, source_file, start_ns, end_ns)
+    replace_rows(warehouse, name, table, predicate_sql=pred)
+
+
+def table_files(warehouse: Path, name: str) -> list[str]:
+    """Absolute paths of the Parquet files of the current snapshot (empty if no table)."""
+    if not table_exists(warehouse, name):
+        return []
+    uris = DeltaTable(str(table_path(warehouse, name))).file_uris()
+    return [u.removeprefix("file://") for u in uris]
+
+
+def empty_table(name: str) -> pa.Table:
+    """Empty table with ``name``'s canonical schema."""
+    return empty(name)

@@ -1,0 +1,98 @@
+"""Ingest ledger: one row per archived source file (path, size, hash, counts, status).
+
+Re-ingesting a file whose size and SHA-256 match a ledger row with status ``ok`` or
+``partial`` is a no-op: re-reading the same bytes cannot recover more. A ``quarantined``
+file is retried. Ledger rows are replaced with ``replace_source_file`` and written LAST
+for a file, after its data rows, so a crash in between makes the next run redo the file.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import time
+from pathlib import Path
+
+import pyarrow as pa
+import pyarrow.dataset as pds
+
+from pipeline.tables import conform
+from pipeline.warehouse.delta import read_table, replace_source_file
+
+LEDGER = "ingest_ledger"
+STATUSES = ("ok", "partial", "quarantined")
+SKIP_STATUSES = ("ok", "partial")
+_BLOCK = 1 << 20
+
+
+def file_fingerprint(path: Path) -> tuple[int, str]:
+    """``(size_bytes, sha256 hex)`` of the file's content, read in 1 MiB blocks."""
+    h = hashlib.sha256()
+    size = 0
+    with open(path, "rb") as f:
+        while block := f.read(_BLOCK):
+            h.update(block)
+            size += len(block)
+    return size, h.hexdigest()
+
+
+def ledger_entry(
+    source_file: str,
+    *,
+    size_bytes: int,
+    sha256: str,
+    status: str,
+    error: str | None,
+    message_count: int,
+    rows: dict[str, int],
+    rejects_count: int,
+    start_time_ns: int | None,
+    end_time_ns: int | None,
+    ingested_at_ns: int | None = None,
+) -> pa.Table:
+    """One conformed ledger row. ``rows`` (rows written per table) is stored as JSON;
+    ``ingested_at_ns`` defaults to the wall clock (ns since the Unix epoch)."""
+    if status not in STATUSES:
+        raise ValueError(f"ledger status must be one of {STATUSES}, got {status!r}")
+    row = {
+        "source_file": source_file,
+        "size_bytes": size_bytes,
+        "sha256": sha256,
+        "status": status,
+        "error": error,
+        "message_count": message_count,
+        "rows_json": json.dumps(rows, sort_keys=True),
+        "rejects_count": rejects_count,
+        "start_time_ns": start_time_ns,
+        "end_time_ns": end_time_ns,
+        "ingested_at_ns": time.time_ns() if ingested_at_ns is None else ingested_at_ns,
+    }
+    return conform(LEDGER, pa.Table.from_pylist([row]))
+
+
+def write_entry(warehouse: Path, entry: pa.Table) -> None:
+    """Replace the ledger row of the entry's source file (one commit)."""
+    files = set(entry["source_file"].to_pylist())
+    if len(files) != 1:
+        raise ValueError(f"a ledger entry is one source file, got {sorted(files)}")
+    replace_source_file(warehouse, LEDGER, entry, source_file=files.pop())
+
+
+def lookup(warehouse: Path, source_file: str) -> dict | None:
+    """The ledger row of ``source_file`` as a dict, or ``None``."""
+    rows = read_table(
+        warehouse, LEDGER, predicate=pds.field("source_file") == source_file
+    ).to_pylist()
+    return rows[-1] if rows else None
+
+
+def is_unchanged(warehouse: Path, path: str | Path, size: int, sha256: str) -> bool:
+    """True when the ledger already holds ``path`` with this size and hash and status
+    ok/partial: ingesting it again would change nothing."""
+    row = lookup(warehouse, str(path))
+    return (
+        row is not None
+        and row["status"] in SKIP_STATUSES
+        and row["size_bytes"] == size
+        and row["sha256"] == sha256
+    )

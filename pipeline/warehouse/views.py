@@ -1,0 +1,118 @@
+"""DuckDB views over the current Delta snapshot of each warehouse table.
+
+DuckDB's ``delta`` extension downloads itself at run time and fails offline, so each view
+reads exactly the Parquet files listed by the table's current Delta snapshot:
+``read_parquet([...], hive_partitioning=true, union_by_name=true)``. A glob over the table
+folder would also read files that later commits replaced (double counting), so we never
+glob. delta-rs keeps the ``date`` partition only in the path (``date=YYYY-MM-DD/``); the
+view casts it (and every other column) explicitly to the canonical type.
+
+``<warehouse>/surveil.duckdb`` holds these views for analysts. It is built into a temporary
+file and swapped in with ``os.replace``; the pipeline never keeps it open.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+from collections.abc import Iterable
+from pathlib import Path
+
+import duckdb
+import pyarrow as pa
+
+from pipeline.tables import spec, table_specs
+from pipeline.warehouse.delta import sql_literal, table_files
+
+VIEWS_FILE = "surveil.duckdb"
+
+_DUCKDB_TYPES: dict[pa.DataType, str] = {
+    pa.int16(): "SMALLINT",
+    pa.int32(): "INTEGER",
+    pa.int64(): "BIGINT",
+    pa.float64(): "DOUBLE",
+    pa.string(): "VARCHAR",
+    pa.bool_(): "BOOLEAN",
+    pa.binary(): "BLOB",
+    pa.date32(): "DATE",
+}
+
+
+def _ident(name: str) -> str:
+    """Double-quoted SQL identifier."""
+    return '"' + name.replace('"', '""') + '"'
+
+
+def _duckdb_type(t: pa.DataType) -> str:
+    try:
+        return _DUCKDB_TYPES[t]
+    except KeyError:
+        raise TypeError(f"no DuckDB type mapped for Arrow {t}") from None
+
+
+def _select_list(schema: pa.Schema, *, null: bool) -> str:
+    cols = []
+    for f in schema:
+        src = "NULL" if null else _ident(f.name)
+        cols.append(f"CAST({src} AS {_duckdb_type(f.type)}) AS {_ident(f.name)}")
+    return ", ".join(cols)
+
+
+def view_sql(name: str, files: list[str]) -> str:
+    """``CREATE OR REPLACE VIEW`` statement of table ``name`` over ``files``.
+
+    With no files the view is typed and empty (``... WHERE false``). File paths come from
+    the Delta log and are quoted with ``sql_literal`` (DuckDB cannot bind parameters in a
+    view definition).
+    """
+    s = spec(name).schema
+    if not files:
+        body = f"SELECT {_select_list(s, null=True)} WHERE false"
+    else:
+        file_list = ", ".join(sql_literal(f) for f in files)
+        body = (
+            f"SELECT {_select_list(s, null=False)} FROM read_parquet([{file_list}], "
+            "hive_partitioning=true, union_by_name=true)"
+        )
+    return f"CREATE OR REPLACE VIEW {_ident(name)} AS {body}"
+
+
+def register_tables(
+    con: duckdb.DuckDBPyConnection, warehouse: Path, names: Iterable[str] | None = None
+) -> list[str]:
+    """Create one view per table (all canonical tables when ``names`` is None) in ``con``
+    over the table's current snapshot; returns the view names."""
+    selected = list(names) if names is not None else list(table_specs())
+    for name in selected:
+        con.execute(view_sql(name, table_files(warehouse, name)))
+    return selected
+
+
+def rebuild_views_file(warehouse: Path, names: Iterable[str] | None = None) -> Path:
+    """Write ``<warehouse>/surveil.duckdb`` with the views of every table; atomic swap.
+
+    The new database is built in a temporary file beside the target and moved over it
+    with ``os.replace``, so an analyst opening the file sees the old or the new views.
+    """
+    warehouse = Path(warehouse)
+    warehouse.mkdir(parents=True, exist_ok=True)
+    target = warehouse / VIEWS_FILE
+    tmp = warehouse / f".{VIEWS_FILE}.tmp-{os.getpid()}"
+    _remove_db_files(tmp)
+    try:
+        con = duckdb.connect(str(tmp))
+        try:
+            register_tables(con, warehouse, names)
+            con.execute("CHECKPOINT")
+        finally:
+            con.close()
+        os.replace(tmp, target)
+    finally:
+        _remove_db_files(tmp)
+    return target
+
+
+def _remove_db_files(db: Path) -> None:
+    for p in (db, db.with_name(db.name + ".wal")):
+        with contextlib.suppress(FileNotFoundError):
+            p.unlink()

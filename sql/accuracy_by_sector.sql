@@ -1,0 +1,32 @@
+-- name: accuracy_by_sector
+-- description: horizontal position accuracy of each radar's synchronised picture and of
+--   the fused picture, per sector, against the reference (simulated truth when the log
+--   has it, else the identified ship's own AIS positions).
+-- grain: one row per (sector, source, reference)
+-- params: $start_ns (BIGINT, inclusive), $end_ns (BIGINT, exclusive),
+--         $sector (VARCHAR, NULL = every sector)
+-- source table: track_errors (written by `surveil batch`)
+WITH points AS (
+    SELECT
+        coalesce(sector, '(outside sectors)') AS sector,
+        source,
+        reference,
+        error_m,
+        nees
+    FROM track_errors
+    WHERE time_ns >= $start_ns
+      AND time_ns < $end_ns
+      AND (CAST($sector AS VARCHAR) IS NULL OR sector = CAST($sector AS VARCHAR))
+)
+SELECT
+    sector::VARCHAR                                   AS sector,        -- sector polygon name
+    source::VARCHAR                                   AS source,        -- radar site id or 'fused'
+    reference::VARCHAR                                AS reference,     -- truth | ais
+    count(*)::BIGINT                                  AS samples,       -- synchronised points
+    round(sqrt(avg(error_m * error_m)), 2)::DOUBLE    AS rms_error_m,   -- RMS horizontal error, m
+    round(quantile_cont(error_m, 0.95), 2)::DOUBLE    AS p95_error_m,   -- 95th percentile, m
+    round(max(error_m), 2)::DOUBLE                    AS max_error_m,   -- worst point, m
+    round(avg(nees), 3)::DOUBLE                       AS mean_nees      -- ~2 when sigmas are honest
+FROM points
+GROUP BY sector, source, reference
+ORDER BY sector, reference, (source = 'fused') DESC, source;

@@ -1,0 +1,58 @@
+"""Shared fixtures: a short seeded `channel` scenario run through the real chain
+(simulator -> zstd MCAP on disk -> ingest -> Delta warehouse -> batch)."""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+from pipeline.config import Config, load_config
+
+REAL_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "real"
+NS = 1_000_000_000
+# 00:50 -> 01:10: two archive files and two batch units across the hour boundary
+E2E_START_NS = 1_768_438_200 * NS  # 2026-01-15T00:50:00Z
+E2E_DURATION_S = 1200.0
+
+
+def real_data_dir() -> Path:
+    """../shared/data/real, or skip: those recordings are not part of the repository."""
+    env = os.environ.get("SURVEIL_REAL_DATA")
+    path = Path(env) if env else REAL_DATA
+    if not path.is_dir():
+        pytest.skip(f"real recordings not available at {path} (set SURVEIL_REAL_DATA)")
+    return path
+
+
+@dataclass(frozen=True)
+class E2E:
+    cfg: Config
+    archive: list[Path]
+    warehouse: Path
+    start_ns: int
+    end_ns: int
+
+
+@pytest.fixture(scope="session")
+def cfg() -> Config:
+    return load_config()
+
+
+@pytest.fixture(scope="session")
+def e2e(tmp_path_factory: pytest.TempPathFactory, cfg: Config) -> E2E:
+    from jobs.batch import run_batch
+    from jobs.ingest import run_ingest
+    from jobs.simulate import run_simulate
+
+    root = tmp_path_factory.mktemp("e2e")
+    files = run_simulate("channel", E2E_DURATION_S, 7, root / "archive", cfg, start_ns=E2E_START_NS)
+    warehouse = root / "warehouse"
+    ingest = run_ingest(files, cfg, warehouse, executor="serial")
+    assert ingest.exit_code == 0, ingest.render()
+    end_ns = E2E_START_NS + int(E2E_DURATION_S * NS)
+    batch = run_batch(cfg, warehouse, start_ns=E2E_START_NS, end_ns=end_ns, executor_kind="serial")
+    assert batch.exit_code == 0, batch.render()
+    return E2E(cfg, files, warehouse, E2E_START_NS, end_ns)

@@ -1,0 +1,36 @@
+"""Every report in sql/ runs, binds its parameters and has the header it promises."""
+
+from __future__ import annotations
+
+import pytest
+
+from jobs.report import format_report, run_named_report
+from pipeline.reports import UnknownReportError, list_reports, load_report
+
+
+@pytest.mark.parametrize("name", list_reports())
+def test_report_header(name):
+    r = load_report(name)
+    assert r.header.get("name") == name
+    assert "grain" in r.header and "params" in r.header
+    assert "ORDER BY" in r.text.upper()
+
+
+@pytest.mark.parametrize("name", list_reports())
+def test_report_runs_on_the_warehouse(e2e, name):
+    t = run_named_report(e2e.warehouse, name, start_ns=e2e.start_ns, end_ns=e2e.end_ns)
+    assert t.num_rows > 0
+    for fmt in ("table", "csv", "json"):
+        assert format_report(t, fmt, title=name)
+
+
+@pytest.mark.parametrize("name", list_reports())
+def test_report_on_empty_window_is_empty(e2e, name):
+    t = run_named_report(e2e.warehouse, name, start_ns=0, end_ns=1)
+    assert t.num_rows == 0
+
+
+@pytest.mark.parametrize("bad", ["nope", "../etc/passwd", "a;drop"])
+def test_unknown_report(bad):
+    with pytest.raises(UnknownReportError):
+        load_report(bad)
