@@ -1,11 +1,13 @@
-"""Batch job: association, fusion, identification and scoring for one time window.
+"""Batch job: every sensor family's derived tables for one time window.
 
-The window is cut into work units (one per hour, aligned); each unit reads its inputs
-from the warehouse by path, runs the pure stages of ``batch_window`` and writes its
-outputs as staged Parquet files under a deterministic name. Only when every unit of
-the window has succeeded does the driver commit, one atomic Delta overwrite per derived
-table whose predicate is the window; a failure or a crash before that leaves the
-previous data of the window untouched.
+A *batch family* (maritime radar + AIS here; own-ship navigation and airfield surface
+surveillance plug in the same way) reads its inputs from the warehouse for a sub-window
+and returns its derived tables. The window is cut into work units (family, sub-window:
+one per UTC hour, or the whole window for families whose filters need continuity); each
+unit writes its outputs as staged Parquet files under a deterministic name. Only when
+every unit of the window has succeeded does the driver commit, one atomic Delta
+overwrite per derived table whose predicate is the window; a failure or a crash before
+that leaves the previous data of the window untouched.
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ from __future__ import annotations
 import itertools
 import logging
 import shutil
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -48,15 +51,34 @@ class BatchInputs:
     truth: pl.DataFrame | None
 
 
+UnitCompute = Callable[[Path, Config, int, int], dict[str, pl.DataFrame]]
+"""(warehouse, cfg, start_ns, end_ns) -> {table: frame}; reads its inputs by path."""
+
+
+@dataclass(frozen=True)
+class BatchFamily:
+    """A sensor family's batch: the derived tables it owns and how one unit computes
+    them. ``unit_s`` cuts the window at UTC multiples of it (None: one unit for the
+    whole window). ``stitch`` relabels system track ids across unit seams. A unit may
+    also return ``rejects`` rows (stage 'batch') logged inside its sub-window."""
+
+    name: str
+    outputs: tuple[str, ...]
+    compute_unit: UnitCompute
+    unit_s: int | None = UNIT_S
+    stitch: bool = False
+
+
 @dataclass(frozen=True)
 class BatchUnit:
-    """One picklable work unit: a sub-window, read and written by path."""
+    """One picklable work unit: a family's sub-window, read and written by path."""
 
     warehouse: str
     staging_dir: str
     start_ns: int
     end_ns: int
     cfg: Config
+    family: str = "maritime"
 
 
 @dataclass
@@ -159,36 +181,70 @@ def read_inputs(warehouse: Path, cfg: Config, start_ns: int, end_ns: int) -> Bat
     )
 
 
-def run_unit(unit: BatchUnit) -> dict[str, str]:
-    """Worker: read, compute, stage. Returns {table: staged parquet path}."""
-    warehouse = Path(unit.warehouse)
-    inputs = read_inputs(warehouse, unit.cfg, unit.start_ns, unit.end_ns)
-    out = batch_window(inputs, start_ns=unit.start_ns, end_ns=unit.end_ns, cfg=unit.cfg)
+def maritime_unit(warehouse: Path, cfg: Config, start_ns: int, end_ns: int) -> dict:
+    """Maritime family: radar + AIS association, fusion, identification, scoring."""
+    inputs = read_inputs(warehouse, cfg, start_ns, end_ns)
+    return batch_window(inputs, start_ns=start_ns, end_ns=end_ns, cfg=cfg)
+
+
+MARITIME = BatchFamily("maritime", DERIVED_TABLES, maritime_unit, stitch=True)
+
+# Every family the batch runs; each family adds its own line.
+FAMILIES: tuple[BatchFamily, ...] = (MARITIME,)
+
+
+def family(name: str) -> BatchFamily:
+    return next(f for f in FAMILIES if f.name == name)
+
+
+@dataclass(frozen=True)
+class UnitManifest:
+    """What a worker staged: {table: parquet path} for one family's sub-window."""
+
+    family: str
+    start_ns: int
+    files: dict[str, str]
+
+
+def run_unit(unit: BatchUnit) -> UnitManifest:
+    """Worker: read, compute, stage."""
+    fam = family(unit.family)
+    out = fam.compute_unit(Path(unit.warehouse), unit.cfg, unit.start_ns, unit.end_ns)
+    unknown = set(out) - set(fam.outputs) - {"rejects"}
+    if unknown:
+        raise ValueError(f"family {fam.name} returned tables it does not own: {unknown}")
     manifest = {}
     for name, frame in out.items():
         if name == "rejects" and frame.height == 0:
             continue
         table = tables.conform(name, frame)
-        path = Path(unit.staging_dir) / name / f"{unit.start_ns}.parquet"
+        path = Path(unit.staging_dir) / name / f"{unit.family}-{unit.start_ns}.parquet"
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_suffix(".tmp")
         pq.write_table(table, tmp)
         tmp.replace(path)
         manifest[name] = str(path)
-    return manifest
+    return UnitManifest(unit.family, unit.start_ns, manifest)
 
 
 def plan_units(
     warehouse: Path, cfg: Config, start_ns: int, end_ns: int, staging_dir: Path
 ) -> list[BatchUnit]:
-    """Cut [start_ns, end_ns) at UTC hour boundaries into work units."""
-    step = UNIT_S * NS
-    cuts = [start_ns, *range((start_ns // step + 1) * step, end_ns, step), end_ns]
-    return [
-        BatchUnit(str(warehouse), str(staging_dir), a, b, cfg)
-        for a, b in itertools.pairwise(cuts)
-        if b > a
-    ]
+    """Cut [start_ns, end_ns) into each family's work units (at UTC multiples of its
+    ``unit_s``, or one unit for the whole window)."""
+    units = []
+    for fam in FAMILIES:
+        if fam.unit_s is None:
+            cuts = [start_ns, end_ns]
+        else:
+            step = fam.unit_s * NS
+            cuts = [start_ns, *range((start_ns // step + 1) * step, end_ns, step), end_ns]
+        units += [
+            BatchUnit(str(warehouse), str(staging_dir), a, b, cfg, fam.name)
+            for a, b in itertools.pairwise(cuts)
+            if b > a
+        ]
+    return units
 
 
 def run_batch(
@@ -215,7 +271,8 @@ def run_batch(
         if result.ok:
             manifests.append(result.value)
         else:
-            label = f"[{_iso(result.unit.start_ns)}, {_iso(result.unit.end_ns)}): {result.error}"
+            u = result.unit
+            label = f"{u.family} [{_iso(u.start_ns)}, {_iso(u.end_ns)}): {result.error}"
             summary.failed_units.append(label)
             log.error("batch unit failed %s", label)
     if summary.failed_units:
@@ -226,23 +283,22 @@ def run_batch(
     return summary
 
 
-def _commit(warehouse: Path, manifests: list[dict[str, str]], summary: BatchSummary) -> None:
+def _commit(warehouse: Path, manifests: list[UnitManifest], summary: BatchSummary) -> None:
     """Stitch ids across unit seams, then one atomic overwrite per derived table whose
     predicate is the window. Only the driver commits."""
-    manifests = sorted(manifests, key=lambda m: int(Path(next(iter(m.values()))).stem))
-    parts = {
-        name: [pl.read_parquet(m[name]) if name in m else None for m in manifests]
-        for name in (*DERIVED_TABLES, "rejects")
-    }
-    mapping = stitch_track_ids(
-        [p if p is not None else pl.DataFrame() for p in parts["associations"]]
-    )
-    for name in DERIVED_TABLES:
-        frames = [relabel(p, mapping) for p in parts[name] if p is not None]
-        table = tables.conform(name, pl.concat(frames) if frames else tables.empty(name))
-        replace_window(warehouse, name, table, start_ns=summary.start_ns, end_ns=summary.end_ns)
-        summary.rows[name] = table.num_rows
-    frames = [p for p in parts["rejects"] if p is not None]
+    for fam in FAMILIES:
+        ours = sorted((m for m in manifests if m.family == fam.name), key=lambda m: m.start_ns)
+        parts = {name: [pl.read_parquet(m.files[name]) for m in ours if name in m.files]
+                 for name in fam.outputs}
+        mapping = stitch_track_ids(parts.get("associations", [])) if fam.stitch else {}
+        for name in fam.outputs:
+            frames = [relabel(p, mapping) for p in parts[name]]
+            table = tables.conform(name, pl.concat(frames) if frames else tables.empty(name))
+            replace_window(
+                warehouse, name, table, start_ns=summary.start_ns, end_ns=summary.end_ns
+            )
+            summary.rows[name] = table.num_rows
+    frames = [pl.read_parquet(m.files["rejects"]) for m in manifests if "rejects" in m.files]
     rejects = tables.conform("rejects", pl.concat(frames) if frames else tables.empty("rejects"))
     replace_rows(
         warehouse,

@@ -185,6 +185,11 @@ def demo(st: _State, seed, duration, executor) -> None:
     sys.exit(result.exit_code)
 
 
+# Sensor-family commands: each family module defines its click commands; add them here,
+# one line per command, e.g. cli.add_command(import_command).
+# (family commands)
+
+
 def main() -> None:
     """Console entry point: map errors to exit codes instead of tracebacks."""
     try:

@@ -6,8 +6,10 @@ The CLI (``jobs/cli.py``) parses the options and calls :func:`run_simulate`.
 from __future__ import annotations
 
 import re
+from collections.abc import Callable
 from pathlib import Path
 
+from jobs.common import UsageError
 from pipeline.config import Config
 from pipeline.io.mcap_write import write_channel_archive
 from pipeline.simulate.channel import simulate_channel
@@ -15,7 +17,20 @@ from pipeline.simulate.channel import simulate_channel
 NS = 1_000_000_000
 DEFAULT_START_NS = 1_768_435_200 * NS
 """2026-01-15T00:00:00Z, ns since the Unix epoch."""
-SCENARIOS = ("channel",)
+
+
+def _channel(cfg: Config, start_ns: int, duration_s: float, seed: int, out_dir: Path) -> list[Path]:
+    scenario = simulate_channel(cfg, start_ns=start_ns, duration_s=duration_s, seed=seed)
+    return write_channel_archive(scenario, out_dir, scenario_name="channel")
+
+
+ScenarioWriter = Callable[[Config, int, float, int, Path], list[Path]]
+"""(cfg, start_ns, duration_s, seed, out_dir) -> MCAP files written, in time order."""
+
+# One entry per scenario; each sensor family adds its own line.
+SCENARIOS: dict[str, ScenarioWriter] = {
+    "channel": _channel,
+}
 
 _DURATION = re.compile(
     r"^(?:(?P<h>\d+(?:\.\d+)?)h)?(?:(?P<m>\d+(?:\.\d+)?)m)?(?:(?P<s>\d+(?:\.\d+)?)s)?$")
@@ -52,8 +67,7 @@ def run_simulate(
     Unix epoch, UTC; default 2026-01-15T00:00:00Z) and write it under ``out_dir`` as
     hourly MCAP files; return their paths in time order."""
     if scenario not in SCENARIOS:
-        raise ValueError(
+        raise UsageError(
             f"unknown scenario {scenario!r}: available scenarios are {', '.join(SCENARIOS)}")
     start = DEFAULT_START_NS if start_ns is None else int(start_ns)
-    result = simulate_channel(cfg, start_ns=start, duration_s=duration_s, seed=seed)
-    return write_channel_archive(result, Path(out_dir), scenario_name=scenario)
+    return SCENARIOS[scenario](cfg, start, duration_s, seed, Path(out_dir))

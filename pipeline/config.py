@@ -9,8 +9,10 @@ from __future__ import annotations
 
 import math
 import tomllib
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from pipeline.resources import resource_path
 
@@ -64,6 +66,7 @@ class AisConfig:
     sigma_position_m: float = 10.0
     sigma_sog_mps: float = 0.3
     identity_window_s: float = 300.0
+    min_identity_matches: int = 3
 
 
 @dataclass(frozen=True)
@@ -108,6 +111,13 @@ class Config:
     warehouse_path: str = "warehouse"
     execution: ExecutionConfig = field(default_factory=ExecutionConfig)
     source: str = ""
+    # The whole parsed TOML, for sensor-family sections (e.g. [ownship], [airfield])
+    # that their own modules parse into their own frozen dataclasses.
+    sections: Mapping[str, Any] = field(default_factory=dict, compare=False, repr=False)
+
+    def section(self, name: str) -> Mapping[str, Any]:
+        """A family's raw TOML section (empty mapping when absent)."""
+        return self.sections.get(name, {})
 
     def site(self, site_id: str) -> RadarSite:
         for s in self.radar_sites:
@@ -192,4 +202,5 @@ def _parse(raw: dict, source: str) -> Config:
         warehouse_path=raw.get("warehouse", {}).get("path", "warehouse"),
         execution=ExecutionConfig(**raw.get("execution", {})),
         source=source,
+        sections=raw,
     )

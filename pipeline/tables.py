@@ -1,4 +1,5 @@
-"""Canonical Arrow schemas of the warehouse tables, read from ``schemas/tables.toml``.
+"""Canonical Arrow schemas of the warehouse tables, read from ``schemas/tables.toml``
+and ``schemas/tables.d/*.toml`` (one file per sensor family).
 
 The TOML file is the one declaration; this module turns it into ``pyarrow`` schemas
 and conforms tables to them (column order, types, the ``date`` partition column).
@@ -44,9 +45,16 @@ class TableSpec:
 
 @cache
 def table_specs() -> dict[str, TableSpec]:
-    raw = tomllib.loads((resource_path("schemas") / "tables.toml").read_text())
+    root = resource_path("schemas")
+    declared: dict[str, dict] = {}
+    # tables.toml holds the spine's tables; each sensor family adds tables.d/<family>.toml
+    for path in [root / "tables.toml", *sorted((root / "tables.d").glob("*.toml"))]:
+        for name, t in tomllib.loads(path.read_text())["tables"].items():
+            if name in declared:
+                raise ValueError(f"table {name!r} declared twice (again in {path.name})")
+            declared[name] = t
     specs = {}
-    for name, t in raw["tables"].items():
+    for name, t in declared.items():
         fields = [
             pa.field(col, _ARROW_TYPES[typ], nullable=nullable, metadata={"doc": doc})
             for col, typ, nullable, doc in t["columns"]

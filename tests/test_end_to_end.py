@@ -58,3 +58,12 @@ def test_system_track_ids_are_stable(e2e):
     # a ship followed for the whole window keeps one id: long tracks dominate
     life = st.group_by("system_track_id").agg(pl.len().alias("n"))
     assert life["n"].max() * e2e.cfg.sync.epoch_period_s > 600
+
+
+def test_ships_without_ais_rarely_get_an_mmsi(e2e):
+    ident = _report(e2e, "identification_by_sector").filter(
+        pl.col("vessel_class") == "no AIS aboard"
+    )
+    assert ident.height > 0
+    wrong = (ident["wrong_share"] * ident["samples"]).sum() / ident["samples"].sum()
+    assert wrong <= 0.10, ident

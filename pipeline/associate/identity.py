@@ -104,7 +104,7 @@ def identify(
     tracks = system_tracks.sort("time_ns", "system_track_id")
     matches = _match(tracks, ais, gate_threshold(cfg.gate_probability))
     voted = vote_identity(tracks.select("time_ns", "system_track_id"), matches,
-                          cfg.identity_window_s)
+                          cfg.identity_window_s, cfg.min_identity_matches)
     out = tracks.drop("mmsi", strict=False).join(
         voted, on=["time_ns", "system_track_id"], how="left"
     )
@@ -146,9 +146,16 @@ def _match(tracks: pl.DataFrame, ais: pl.DataFrame, gate: float) -> pl.DataFrame
                "ais_time_ns": pl.Int64, "mahalanobis_d2": pl.Float64})
 
 
-def vote_identity(points: pl.DataFrame, matches: pl.DataFrame, window_s: float) -> pl.DataFrame:
+def vote_identity(
+    points: pl.DataFrame, matches: pl.DataFrame, window_s: float, min_matches: int = 3
+) -> pl.DataFrame:
     """Identity of each (time_ns, system_track_id) point: most matches within +-window_s
     on the same track, ties -> smaller summed d^2, then smaller MMSI.
+
+    Mutual support: an MMSI is a candidate only when this track holds the majority of
+    that MMSI's matches in the window (it is the MMSI's main track) and at least
+    ``min_matches`` of them; otherwise a ship without AIS sailing in the lane
+    of an AIS ship inherits its MMSI from one stray gated match.
 
     Vectorised: cumulative match counts / d^2 per (track, MMSI) are read at t + W and
     just before t - W with two ``join_asof`` calls. Returns time_ns, system_track_id,
@@ -174,6 +181,10 @@ def vote_identity(points: pl.DataFrame, matches: pl.DataFrame, window_s: float) 
         "time_ns", *key, (pl.col("n") - pl.col("n_lo")).alias("count"),
         (pl.col("d2") - pl.col("d2_lo")).alias("d2sum"),
     )
+    totals = _mmsi_totals(counts.select("time_ns", "mmsi").unique(), matches, w)
+    counts = counts.join(totals, on=["time_ns", "mmsi"], how="left").filter(
+        (pl.col("count") >= min_matches) & (2 * pl.col("count") > pl.col("total"))
+    )
     return (
         counts.filter(pl.col("count") > 0)
         .sort(["time_ns", "system_track_id", "count", "d2sum", "mmsi"],
@@ -181,3 +192,20 @@ def vote_identity(points: pl.DataFrame, matches: pl.DataFrame, window_s: float) 
         .unique(["time_ns", "system_track_id"], keep="first", maintain_order=True)
         .select("time_ns", "system_track_id", "mmsi")
     )
+
+
+def _mmsi_totals(queries: pl.DataFrame, matches: pl.DataFrame, w: int) -> pl.DataFrame:
+    """Matches of each MMSI to any track within +-w ns of each queried (time_ns, mmsi)."""
+    cum = matches.sort("mmsi", "time_ns").with_columns(
+        pl.int_range(1, pl.len() + 1).over("mmsi").alias("n")
+    ).select("mmsi", "time_ns", "n").sort("time_ns")
+
+    def at(t: pl.Expr) -> pl.DataFrame:
+        q = queries.with_columns(t.alias("_t")).sort("_t")
+        return q.join_asof(cum.rename({"time_ns": "_t"}), on="_t", by="mmsi",
+                           strategy="backward", check_sortedness=False).select(
+            "time_ns", "mmsi", pl.col("n").fill_null(0))
+
+    hi, lo = at(pl.col("time_ns") + w), at(pl.col("time_ns") - w - 1)
+    return hi.join(lo, on=["time_ns", "mmsi"], suffix="_lo").select(
+        "time_ns", "mmsi", (pl.col("n") - pl.col("n_lo")).alias("total"))

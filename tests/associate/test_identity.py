@@ -69,7 +69,7 @@ def test_vote_most_matches_in_window_ties_to_smaller_d2():
         "mahalanobis_d2": [1.0, 1.0, 0.5, 0.5, 9.0, 1.0],
     })
     points = pl.DataFrame({"time_ns": [*t, t[5] + 100 * NS], "system_track_id": [1] * 7})
-    got = vote_identity(points, matches, window_s=4.0)
+    got = vote_identity(points, matches, window_s=4.0, min_matches=1)
     ident = dict(zip(got["time_ns"], got["mmsi"], strict=True))
     assert ident[t[0]] == 10  # window [t0-4, t0+4]: 10 x2
     assert ident[t[1]] == 10  # 10 x2, 20 x1
@@ -77,7 +77,7 @@ def test_vote_most_matches_in_window_ties_to_smaller_d2():
     assert ident[t[3]] == 20  # 20 x2, 30 x1
     assert ident[t[4]] == 20  # 20 x1 (d2 0.5) vs 30 x1 (d2 9): tie -> smaller d2
     assert t[5] + 100 * NS not in ident  # no match in the window: no identity
-    wide = vote_identity(points, matches, window_s=100.0)
+    wide = vote_identity(points, matches, window_s=100.0, min_matches=1)
     assert set(wide["mmsi"]) == {20}  # 10 x2 (d2 2) vs 20 x2 (d2 1)
 
 
@@ -116,3 +116,21 @@ def test_ais_only_ship_far_away_is_never_matched(cfg):
     ids, fused = identify(c.fused, ais, cfg=cfg.ais, region=cfg.region)
     assert 299_000_099 not in ids["mmsi"].to_list()
     assert fused.height == c.fused.height and "mmsi" in fused.columns
+
+
+def test_vote_needs_mutual_support():
+    """A track that caught one stray match of an MMSI whose main track is another one
+    gets no identity from it (a ship without AIS in the lane of an AIS ship)."""
+    t = [T0_NS + k * 4 * NS for k in range(10)]
+    matches = pl.DataFrame({
+        "time_ns": [*t, t[5]],
+        "system_track_id": [1] * 10 + [2],
+        "mmsi": [10] * 11,
+        "mahalanobis_d2": [1.0] * 11,
+    })
+    points = pl.DataFrame({"time_ns": t + t, "system_track_id": [1] * 10 + [2] * 10})
+    got = vote_identity(points, matches, window_s=300.0, min_matches=1)
+    assert set(got.filter(pl.col("system_track_id") == 1)["mmsi"]) == {10}
+    assert got.filter(pl.col("system_track_id") == 2).height == 0
+    few = vote_identity(points, matches.head(2), window_s=300.0, min_matches=3)
+    assert few.height == 0

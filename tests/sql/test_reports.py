@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import pytest
 
+from jobs.demo import DEMO_REPORTS
 from jobs.report import format_report, run_named_report
 from pipeline.reports import UnknownReportError, list_reports, load_report
 
@@ -18,8 +19,11 @@ def test_report_header(name):
 
 @pytest.mark.parametrize("name", list_reports())
 def test_report_runs_on_the_warehouse(e2e, name):
+    """Every report runs on the maritime warehouse; the spine's reports are non-empty
+    there (other families' reports are checked with their own scenarios)."""
     t = run_named_report(e2e.warehouse, name, start_ns=e2e.start_ns, end_ns=e2e.end_ns)
-    assert t.num_rows > 0
+    if name in DEMO_REPORTS:
+        assert t.num_rows > 0
     for fmt in ("table", "csv", "json"):
         assert format_report(t, fmt, title=name)
 
