@@ -1,7 +1,8 @@
 """AIS ``!AIVDM``/``!AIVDO`` sentences -> ``ais_reports``, ``ais_static`` + rejects (pyais).
 
 Each MCAP message of the ``nmea0183`` channel is one raw sentence (an IEC 62320-1 tag
-block ``\\...\\`` in front is accepted and ignored; time is the MCAP log time). A Python
+block ``\\...\\`` in front is accepted; time is the MCAP log time, or the reception time
+the caller read from the tag block's ``c:``, see :mod:`pipeline.decode.nmea`). A Python
 step per sentence is unavoidable here: NMEA framing, fragment assembly and the 6-bit
 payload decode are inherently sequential, and pyais decodes one message per call. The
 rest (unit conversion, not-available codes) works on the decoded values as they are
@@ -258,12 +259,16 @@ def decode_ais(
     source_file: str,
     topic: str,
     final: bool = True,
+    time_ns: np.ndarray | None = None,
 ) -> AisDecoded:
     """Decode a batch of raw AIS sentences (see module docstring).
 
-    ``log_time_ns``: int64 MCAP log times of the sentences, ns.
+    ``log_time_ns``: int64 MCAP log times of the sentences, ns. ``time_ns``: reception
+    times of the sentences (IEC 62320-1 tag block ``c:``, see
+    :mod:`pipeline.decode.nmea`), ns; ``None`` means the log times.
     """
     times = np.asarray(log_time_ns, dtype=np.int64)
+    recv = times if time_ns is None else np.asarray(time_ns, dtype=np.int64)
     dec = _Decoder(list(sentences), final)
     carry_at = dec.run()
     reports: dict[str, list] = {}
@@ -280,7 +285,7 @@ def decode_ais(
         position, static_row, problem = out
         if problem is not None:
             rejects.append((idx, *problem))
-        prov = _provenance(idx, sentences, times)
+        prov = _provenance(idx, sentences, times, recv)
         if position is not None:
             _append(reports, {**position, **prov})
         if static_row is not None:
@@ -323,11 +328,14 @@ def _decode_unit(parts: list[AISSentence]) -> _Unit | int:
     return position, static_row, problem
 
 
-def _provenance(idx: list[int], sentences: list[bytes], times: np.ndarray) -> dict:
-    """time_ns = log_time_ns = log time of the last fragment; nmea = the sentence(s)."""
-    t = int(times[max(idx)])
+def _provenance(
+    idx: list[int], sentences: list[bytes], times: np.ndarray, recv: np.ndarray
+) -> dict:
+    """log_time_ns = log time of the last fragment, time_ns = its reception time (the
+    tag-block time when given, else the log time); nmea = the sentence(s)."""
+    last = max(idx)
     text = "\n".join(sentences[j].decode("ascii", "replace").strip() for j in idx)
-    return {"time_ns": t, "log_time_ns": t, "nmea": text}
+    return {"time_ns": int(recv[last]), "log_time_ns": int(times[last]), "nmea": text}
 
 
 def _table(name: str, cols: dict[str, list], source_file: str, topic: str) -> pa.Table:

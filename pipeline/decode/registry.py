@@ -7,8 +7,33 @@ message encoding  schema encoding  schema name                 decoder -> tables
 ================  ===============  ==========================  =========================
 ``json``          ``jsonschema``   ``surveil.RadarTrackReport``  radar -> radar_tracks
 ``json``          ``jsonschema``   ``surveil.TruthState``        truth -> truth
-``nmea0183``      (none)           (none)                      ais -> ais_reports, ais_static
+``nmea0183``      (any)            (any)                       nmea -> ais_reports, ais_static,
+                                                               nav_gnss, nav_heading,
+                                                               nav_speed_log, arpa_targets,
+                                                               arpa_own_ship
+``json``          ``jsonschema``   ``surveil.AisReport``       ais_json -> ais_reports,
+                                                               ais_static (AIS CSV imports)
+``asterix``       any / (none)     ``asterix`` / (none)        asterix -> airfield_obs,
+                                                               asterix_service
+``cdr``           ``ros2msg``      ``sensor_msgs/msg/NavSatFix``  ros2 -> nav_gnss
+``cdr``           ``ros2msg``      ``sensor_msgs/msg/Imu``     ros2 -> nav_heading
+``cdr``           ``ros2msg``      ``nmea_msgs/msg/Sentence``  ros2 -> (NMEA tables)
+``cdr``           ``ros2msg``      ``foxglove_msgs/msg/LocationFix``  ros2 -> nav_gnss
+``protobuf``      ``protobuf``     ``foxglove.LocationFix``    protobuf -> nav_gnss
+``json``          ``jsonschema``   ``foxglove.LocationFix``    foxglove_json -> nav_gnss
+``ros1``          ``ros1msg``      ``sensor_msgs/NavSatFix``   ros1 -> nav_gnss
+``ros1``          ``ros1msg``      ``sensor_msgs/Imu``         ros1 -> nav_heading
+``json``          ``jsonschema``   ``surveil.VasnReport``      vasn -> airfield_obs
+``json``          ``jsonschema``   ``surveil.AirfieldTruth``   airfield_truth -> airfield_truth
+``protobuf``      ``protobuf``     ``surveil.RadarTrackReport``  radar_binary -> radar_tracks
+``cdr``           ``ros2msg``      ``surveil_msgs/msg/RadarTrackReport``  radar_binary ->
+                                                               radar_tracks
 ================  ===============  ==========================  =========================
+
+Kinds in ``CHANNEL_DECODERS`` are stateful per channel: ``Class.for_channel(batch,
+source_file)`` (``for_channel(batch, source_file, validation)`` when the class sets
+``takes_validation = True``) is built at the channel's first batch, ``feed(batch)`` and
+``finish()`` return ``{table: rows}``.
 
 Any other channel is not decoded: it produces ONE rejects row per channel (reason_code
 ``unknown_schema``) with the message count, not a row per message.
@@ -24,6 +49,7 @@ from __future__ import annotations
 from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import pyarrow as pa
@@ -32,18 +58,67 @@ from pipeline.config import ValidationConfig
 from pipeline.io.mcap_read import ChannelBatch
 from pipeline.tables import conform, empty
 
-RAW_TABLES = ("radar_tracks", "ais_reports", "ais_static", "truth", "rejects")
+RAW_TABLES = (
+    "radar_tracks", "ais_reports", "ais_static", "truth", "rejects",
+    "airfield_obs", "asterix_service", "nav_gnss", "nav_heading",
+    "nav_speed_log", "arpa_targets", "arpa_own_ship", "airfield_truth",
+)  # fmt: skip
 
 RADAR = ("json", "jsonschema", "surveil.RadarTrackReport")
 TRUTH = ("json", "jsonschema", "surveil.TruthState")
-AIS = ("nmea0183", "", "")
-_KINDS = {RADAR: "radar", TRUTH: "truth", AIS: "ais"}
-JSON_BATCH = 50_000  # JSON messages per bulk parse (~15 MB of payload)
+AIS = ("nmea0183", "", "")  # any channel with message encoding nmea0183 is "nmea"
+NMEA_ENCODING = "nmea0183"
+_KINDS = {RADAR: "radar", TRUTH: "truth", ("json", "jsonschema", "surveil.AisReport"): "ais_json"}
+ROS2_SCHEMAS = (
+    "sensor_msgs/msg/NavSatFix", "sensor_msgs/msg/Imu", "nmea_msgs/msg/Sentence",
+    "foxglove_msgs/msg/LocationFix",
+)  # fmt: skip
+_KINDS.update({("cdr", "ros2msg", name): "ros2" for name in ROS2_SCHEMAS})
+_KINDS[("protobuf", "protobuf", "foxglove.LocationFix")] = "protobuf"
+_KINDS[("json", "jsonschema", "foxglove.LocationFix")] = "foxglove_json"
+_KINDS[("json", "jsonschema", "surveil.VasnReport")] = "vasn"
+_KINDS[("json", "jsonschema", "surveil.AirfieldTruth")] = "airfield_truth"
+_KINDS.update({("ros1", "ros1msg", n): "ros1" for n in ("sensor_msgs/NavSatFix",
+                                                        "sensor_msgs/Imu")})  # fmt: skip
+CHANNEL_DECODERS = {
+    "nmea": "pipeline.decode.nmea:NmeaChannelDecoder",
+    "ais_json": "pipeline.decode.ais_json:AisJsonChannelDecoder",
+    "asterix": "pipeline.decode.asterix:AsterixChannelDecoder",
+    "ros2": "pipeline.decode.ros2:Ros2ChannelDecoder",
+    "protobuf": "pipeline.decode.protobuf:ProtobufChannelDecoder",
+    "foxglove_json": "pipeline.decode.foxglove:FoxgloveJsonChannelDecoder",
+    "ros1": "pipeline.decode.ros2:Ros1ChannelDecoder",
+    "vasn": "pipeline.decode.vasn:VasnChannelDecoder",
+    "airfield_truth": "pipeline.decode.vasn:AirfieldTruthChannelDecoder",
+    "radar_binary": "pipeline.decode.radar_binary:RadarBinaryChannelDecoder",
+}
+_KINDS[("protobuf", "protobuf", "surveil.RadarTrackReport")] = "radar_binary"
+_KINDS[("cdr", "ros2msg", "surveil_msgs/msg/RadarTrackReport")] = "radar_binary"
+JSON_BATCH = 50_000  # JSON messages per bulk parse (~20 MB of payload)
+JSON_MAX_CHUNKS = 32  # chunks a pending JSON parse may hold (bounds memory: ~32 MiB)
 
 
 def decoder_kind(message_encoding: str, schema_encoding: str, schema_name: str) -> str | None:
-    """``radar`` | ``truth`` | ``ais``, or ``None`` for a channel we cannot decode."""
+    """``radar`` | ``truth`` | ``ais`` | a key of ``CHANNEL_DECODERS``, or ``None`` for a
+    channel we cannot decode."""
+    if message_encoding == "asterix" and schema_name in ("", "asterix"):
+        return "asterix"
+    if message_encoding == NMEA_ENCODING:
+        return "nmea"
     return _KINDS.get((message_encoding, schema_encoding, schema_name))
+
+
+def _open_channel_decoder(
+    kind: str, batch: ChannelBatch, source_file: str, validation: ValidationConfig | None = None
+) -> Any:
+    """The stateful decoder of ``CHANNEL_DECODERS[kind]`` for ``batch``'s channel."""
+    import importlib
+
+    module, cls = CHANNEL_DECODERS[kind].split(":")
+    factory = getattr(importlib.import_module(module), cls)
+    if getattr(factory, "takes_validation", False):
+        return factory.for_channel(batch, source_file, validation)
+    return factory.for_channel(batch, source_file)
 
 
 def make_rejects(
@@ -87,10 +162,11 @@ class _UnknownChannel:
 class FileDecoder:
     """Decode every batch of one file; ``finish()`` returns the rows per raw table.
 
-    Holds the decoded rows of the file (Arrow columns, not Python objects), up to
-    ``JSON_BATCH`` undecoded JSON payloads per channel, and per AIS topic at most a few
-    trailing fragments of a multi-part message that continues in the next chunk.
-    ``not_stored`` counts valid AIS messages of types we do not keep.
+    Holds the decoded rows not yet taken by :meth:`drain` (Arrow columns, not Python
+    objects), up to ``JSON_BATCH`` undecoded radar/truth JSON messages (of at most
+    ``JSON_MAX_CHUNKS`` chunks: memory does not grow with the file), and per AIS topic at
+    most a few trailing fragments of a multi-part message that continues in the next
+    chunk. ``not_stored`` counts valid AIS messages of types we do not keep.
     """
 
     source_file: str
@@ -98,8 +174,9 @@ class FileDecoder:
     parts: dict[str, list[pa.Table]] = field(default_factory=dict)
     not_stored: Counter = field(default_factory=Counter)
     _unknown: dict[int, _UnknownChannel] = field(default_factory=dict)
-    _ais_carry: dict[str, tuple[list[bytes], np.ndarray]] = field(default_factory=dict)
-    _json: dict[int, list[ChannelBatch]] = field(default_factory=dict)
+    _json: list[ChannelBatch] = field(default_factory=list)
+    _json_count: int = 0
+    _channels: dict[int, Any] = field(default_factory=dict)
 
     def _add(self, name: str, table: pa.Table) -> None:
         if table.num_rows:
@@ -110,61 +187,40 @@ class FileDecoder:
         messages so that each bulk parse is large (a chunk holds only ~4k messages)."""
         kind = decoder_kind(batch.message_encoding, batch.schema_encoding, batch.schema_name)
         if kind in ("radar", "truth"):
-            buf = self._json.setdefault(batch.channel_id, [])
-            buf.append(batch)
-            if sum(len(b) for b in buf) >= JSON_BATCH:
-                self._flush_json(batch.channel_id)
-        elif kind == "ais":
-            self._feed_ais(batch.topic, batch.payloads, batch.log_time_ns, final=False)
+            self._json.append(batch)
+            self._json_count += len(batch)
+            chunks = len({id(b.chunk) for b in self._json})
+            if self._json_count >= JSON_BATCH or chunks > JSON_MAX_CHUNKS:
+                self._flush_json()
+        elif kind in CHANNEL_DECODERS:
+            dec = self._channels.get(batch.channel_id)
+            if dec is None:
+                dec = self._channels[batch.channel_id] = _open_channel_decoder(
+                    kind, batch, self.source_file, self.validation
+                )
+            for name, table in dec.feed(batch).items():
+                self._add(name, table)
         else:
             self._note_unknown(batch)
 
-    def _flush_json(self, channel_id: int) -> None:
-        from pipeline.decode.radar import decode_radar_reports
-        from pipeline.decode.truth import decode_truth_states
+    def _flush_json(self) -> None:
+        """Decode every pending radar/truth batch in one bulk parse (json_bulk)."""
+        from pipeline.decode.json_bulk import decode_json_batches
+        from pipeline.decode.radar import RADAR as RADAR_KIND
+        from pipeline.decode.truth import TRUTH as TRUTH_KIND
 
-        batches = self._json.pop(channel_id, [])
+        batches, self._json, self._json_count = self._json, [], 0
         if not batches:
             return
-        first = batches[0]
-        payloads = [p for b in batches for p in b.payloads]
-        times = np.concatenate([b.log_time_ns for b in batches])
-        kind = decoder_kind(first.message_encoding, first.schema_encoding, first.schema_name)
-        if kind == "radar":
-            rows, rejects = decode_radar_reports(
-                payloads,
-                times,
-                source_file=self.source_file,
-                topic=first.topic,
-                validation=self.validation,
-            )
-            self._add("radar_tracks", rows)
-        else:
-            rows, rejects = decode_truth_states(
-                payloads, times, source_file=self.source_file, topic=first.topic
-            )
-            self._add("truth", rows)
-        self._add("rejects", rejects)
-
-    def _feed_ais(
-        self, topic: str, sentences: list[bytes], log_time_ns: np.ndarray, *, final: bool
-    ) -> None:
-        from pipeline.decode.ais import decode_ais
-
-        carried, carried_t = self._ais_carry.pop(topic, ([], np.empty(0, np.int64)))
-        if carried:
-            sentences = carried + list(sentences)
-            log_time_ns = np.concatenate([carried_t, log_time_ns])
-        out = decode_ais(
-            sentences, log_time_ns, source_file=self.source_file, topic=topic, final=final
+        kinds = {}
+        for b in batches:
+            kind = decoder_kind(b.message_encoding, b.schema_encoding, b.schema_name)
+            kinds[b.channel_id] = RADAR_KIND if kind == "radar" else TRUTH_KIND
+        tables = decode_json_batches(
+            batches, kinds, source_file=self.source_file, validation=self.validation
         )
-        self._add("ais_reports", out.reports)
-        self._add("ais_static", out.static)
-        self._add("rejects", out.rejects)
-        self.not_stored.update(out.not_stored)
-        if out.carry:
-            k = len(sentences) - out.carry
-            self._ais_carry[topic] = (list(sentences[k:]), np.asarray(log_time_ns[k:]))
+        for name, table in tables.items():
+            self._add(name, table)
 
     def _note_unknown(self, batch: ChannelBatch) -> None:
         u = self._unknown.get(batch.channel_id)
@@ -182,12 +238,21 @@ class FileDecoder:
         """Keep extra rejects rows (file-level problems found by the reader)."""
         self._add("rejects", rejects)
 
+    def drain(self) -> dict[str, list[pa.Table]]:
+        """Take the rows decoded so far (per table, in parts): the ingest stages them as
+        it goes, so that the file's rows never sit in memory all at once."""
+        parts, self.parts = self.parts, {}
+        return parts
+
     def finish(self) -> dict[str, pa.Table]:
-        """Rows per raw table (every table of ``RAW_TABLES``, possibly empty), conformed."""
-        for channel_id in list(self._json):
-            self._flush_json(channel_id)
-        for topic in list(self._ais_carry):
-            self._feed_ais(topic, [], np.empty(0, np.int64), final=True)
+        """Rows per raw table not yet drained (every table of ``RAW_TABLES``, possibly
+        empty), conformed."""
+        self._flush_json()
+        for dec in self._channels.values():
+            for name, table in dec.finish().items():
+                self._add(name, table)
+            self.not_stored.update(getattr(dec, "not_stored", {}))
+        self._channels.clear()
         for u in self._unknown.values():
             self._add(
                 "rejects",

@@ -21,9 +21,10 @@ from pipeline.tables import schema
 def test_decoder_kind():
     assert decoder_kind("json", "jsonschema", "surveil.RadarTrackReport") == "radar"
     assert decoder_kind("json", "jsonschema", "surveil.TruthState") == "truth"
-    assert decoder_kind("nmea0183", "", "") == "ais"
+    assert decoder_kind("nmea0183", "", "") == "nmea"
     assert decoder_kind("json", "jsonschema", "acme.Other") is None
-    assert decoder_kind("protobuf", "protobuf", "surveil.RadarTrackReport") is None
+    assert decoder_kind("protobuf", "protobuf", "surveil.RadarTrackReport") == "radar_binary"
+    assert decoder_kind("protobuf", "protobuf", "acme.RadarTrackReport") is None
     assert decoder_kind("cdr", "ros2msg", "") is None
 
 

@@ -1,0 +1,111 @@
+"""Import job: ``surveil import PATH... --out DIR`` wraps legacy captures into MCAP.
+
+One work unit per input file, run in this process (files are small text logs; the work
+is file I/O plus column operations). Each input gives ``<out>/<file name>.mcap`` (see
+:mod:`pipeline.io.legacy_import` for the formats, channels and log-time sources).
+
+Inputs: files are taken as given; directories are walked recursively and every file
+whose content is importable is taken (others are listed as skipped). Usage errors
+(exit 2): a path that does not exist, a directory with no importable file, an explicitly
+named file that is not importable, two inputs with the same file name (their outputs
+would collide). A file that fails while being wrapped (e.g. a damaged ASTERIX file) is
+listed as failed (exit 1); the others are still written.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from jobs.common import UsageError
+from pipeline.io.legacy_import import ImportedFile, detect_format, import_file, output_path
+
+
+@dataclass
+class ImportSummary:
+    """What ``run_import`` did; ``exit_code`` 0 when every file was written."""
+
+    out_dir: str
+    imported: list[ImportedFile] = field(default_factory=list)
+    skipped: list[str] = field(default_factory=list)
+    failed: list[tuple[str, str]] = field(default_factory=list)
+
+    @property
+    def exit_code(self) -> int:
+        return 1 if self.failed else 0
+
+    def render(self) -> str:
+        lines = [
+            f"import: {len(self.imported)} files written to {self.out_dir}, "
+            f"{len(self.skipped)} skipped (not importable), {len(self.failed)} failed"
+        ]
+        for f in self.imported:
+            chans = ", ".join(
+                f"{t} {n} ({f.log_time_source.get(t, '?')})" for t, n in f.messages.items()
+            )
+            lines.append(
+                f"  {Path(f.source).name} [{f.format}] -> {Path(f.output).name}"
+                + (f": {chans}" if chans else "")
+            )
+        for path in self.skipped[:10]:
+            lines.append(f"  skipped {path}")
+        for path, err in self.failed:
+            lines.append(f"  FAILED {path}: {err}")
+        lines.append(f"exit code {self.exit_code}")
+        return "\n".join(lines)
+
+
+def expand_inputs(paths: Sequence[Path | str]) -> tuple[list[Path], list[Path]]:
+    """``(files to import, skipped files)``; raises :class:`UsageError` (see module)."""
+    files: list[Path] = []
+    skipped: list[Path] = []
+    if not paths:
+        raise UsageError("no input paths given")
+    for raw in paths:
+        p = Path(raw).expanduser()
+        if not p.exists():
+            raise UsageError(f"input path does not exist: {p}")
+        if p.is_dir():
+            found = sorted(q for q in p.rglob("*") if q.is_file() and not q.name.startswith("."))
+            ok = [q for q in found if detect_format(q) != "unknown"]
+            if not ok:
+                raise UsageError(
+                    f"no importable files (NMEA text, AIS CSV, ASTERIX, pcap) under directory: {p}"
+                )
+            files += ok
+            skipped += [q for q in found if q not in ok]
+        elif detect_format(p) == "unknown":
+            raise UsageError(
+                f"not an importable file (NMEA 0183 text, AIS CSV, raw ASTERIX or pcap/pcapng): {p}"
+            )
+        else:
+            files.append(p)
+    files = list(dict.fromkeys(q.resolve() for q in files))
+    names: dict[str, Path] = {}
+    for q in files:
+        if q.name in names:
+            raise UsageError(
+                f"two inputs named {q.name!r} would both become "
+                f"{q.name}.mcap: {names[q.name]} and {q}"
+            )
+        names[q.name] = q
+    return files, skipped
+
+
+def run_import(
+    paths: Sequence[Path | str], out_dir: Path | str, *, base_time_ns: int = 0
+) -> ImportSummary:
+    """Wrap every input into ``out_dir`` (created); see the module docstring."""
+    files, skipped = expand_inputs(paths)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    summary = ImportSummary(str(out), skipped=[str(p) for p in skipped])
+    for f in files:
+        if output_path(f, out).resolve() == f:
+            raise UsageError(f"output would overwrite the input: {f}")
+        try:
+            summary.imported.append(import_file(f, out, base_time_ns=base_time_ns))
+        except ValueError as exc:  # damaged or unrecognised content found while wrapping
+            summary.failed.append((str(f), str(exc)))
+    return summary

@@ -1,0 +1,230 @@
+"""``surveil.AisReport`` JSON (AIS CSV imports) -> ``ais_reports``, ``ais_static`` + rejects.
+
+The channel carries one decoded AIS table row per message (``schemas/ais_report.schema.json``)
+in the source's units with its not-available codes. Payloads are parsed in bulk
+(``polars.read_ndjson`` with the declared schema) and converted on whole columns, the
+same way :mod:`pipeline.decode.ais` converts pyais output (ITU-R M.1371-5 §3.3, Table 46
+for the codes):
+
+- SOG knots -> m/s; 102.3 kn -> null (other speeds above the limit are rejected). COG
+  deg -> rad; ≥ 360 or < 0 -> null. Heading deg -> rad; 511 (or > 359) -> null. IMO 0,
+  ship type 0 -> null.
+- ``msg_type`` is 0: a table row does not say which message it came from.
+  ``ais_class``: the source's class, ``"A"`` when it has none (Stone Soup's Solent file).
+- Static data (name, call sign, IMO, ship type, destination) -> one ``ais_static`` row
+  per message that has any of them.
+- Base stations, AtoN and SAR aircraft are not vessels: not stored and not rejected,
+  counted in ``not_stored`` under the message id they transmit (4, 21, 9), as the NMEA
+  AIS decoder does.
+
+Rejects: ``undecodable`` (payload not JSON of this schema, MMSI or time missing),
+``no_position`` (lat 91 / lon 181, or a missing coordinate), ``out_of_range`` (|lat| >
+90, |lon| > 180, SOG above the limit). ``raw`` is the CSV line.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import math
+from collections import Counter
+from typing import Any
+
+import numpy as np
+import polars as pl
+import pyarrow as pa
+
+from pipeline.decode.registry import make_rejects
+from pipeline.tables import conform, empty
+
+KNOT_MPS = 1852.0 / 3600.0
+DEG = math.pi / 180.0
+MAX_SPEED_MPS = 40.0
+NOT_VESSEL_MSG_ID = {"base station": 4, "aton": 21, "sar airborne": 9}
+
+SCHEMA = {
+    "time_ns": pl.Int64, "mmsi": pl.Int64, "mobile_type": pl.String, "ais_class": pl.String,
+    "lat_deg": pl.Float64, "lon_deg": pl.Float64, "sog_kn": pl.Float64, "cog_deg": pl.Float64,
+    "heading_deg": pl.Float64, "rot_deg_per_min": pl.Float64, "nav_status": pl.Int64,
+    "nav_status_text": pl.String, "imo": pl.Int64, "callsign": pl.String,
+    "shipname": pl.String, "ship_type": pl.Int64, "ship_type_text": pl.String,
+    "length_m": pl.Float64, "width_m": pl.Float64, "draught_m": pl.Float64,
+    "destination": pl.String, "source_format": pl.String, "raw": pl.String,
+}  # fmt: skip
+
+
+def parse_payloads(payloads: list[bytes]) -> tuple[pl.DataFrame, list[int]]:
+    """``(rows, bad)``: the parsed payloads (in order, a bad one as an all-null row) and
+    the indexes of payloads that are not JSON objects."""
+    try:
+        df = pl.read_ndjson(io.BytesIO(b"\n".join(payloads)), schema=SCHEMA)
+        if df.height == len(payloads):
+            return df, []
+    except Exception:  # one bad payload fails the bulk parse: fall back below
+        pass
+    rows: list[dict[str, Any]] = []
+    bad: list[int] = []
+    for i, p in enumerate(payloads):  # per message only after a bulk parse failed
+        try:
+            doc = json.loads(p)
+            if not isinstance(doc, dict):
+                raise ValueError("not an object")
+            rows.append({k: doc.get(k) for k in SCHEMA})
+        except Exception:
+            rows.append(dict.fromkeys(SCHEMA))
+            bad.append(i)
+    return pl.DataFrame(rows, schema=SCHEMA, strict=False), bad
+
+
+def _sog_na() -> pl.Expr:
+    """SOG 102.3 kn: "not available" (ITU-R M.1371)."""
+    return (pl.col("sog_kn") - 102.3).abs() < 1e-6
+
+
+def _problems(max_speed_mps: float) -> tuple[pl.Expr, pl.Expr]:
+    lat, lon, sog = pl.col("lat_deg"), pl.col("lon_deg"), pl.col("sog_kn") * KNOT_MPS
+    cases = [
+        (pl.col("_bad"), "undecodable", pl.lit("payload is not a surveil.AisReport object")),
+        (pl.col("mmsi").is_null(), "undecodable", pl.lit("no MMSI")),
+        (pl.col("time_ns").is_null(), "undecodable", pl.lit("no time")),
+        (lat.is_null() | lon.is_null(), "no_position", pl.lit("no latitude/longitude")),
+        ((lat == 91.0) | (lon == 181.0), "no_position",
+         pl.format("position not available (lat {}, lon {})", lat, lon)),
+        (lat.abs() > 90.0, "out_of_range", pl.format("lat_deg={} outside [-90, 90]", lat)),
+        (lon.abs() > 180.0, "out_of_range", pl.format("lon_deg={} outside [-180, 180]", lon)),
+        (~_sog_na() & (sog > max_speed_mps), "out_of_range",
+         pl.format("sog {} kn above {} m/s", pl.col("sog_kn"), pl.lit(max_speed_mps))),
+    ]  # fmt: skip
+    code: pl.Expr = pl.lit(None, pl.String)
+    reason: pl.Expr = pl.lit(None, pl.String)
+    for cond, k, why in reversed(cases):
+        hit = cond.fill_null(False)
+        code = pl.when(hit).then(pl.lit(k)).otherwise(code)
+        reason = pl.when(hit).then(why).otherwise(reason)
+    return code, reason
+
+
+def _si_columns() -> list[pl.Expr]:
+    sog, cog, hdg = pl.col("sog_kn"), pl.col("cog_deg"), pl.col("heading_deg")
+    cls = pl.col("ais_class").str.to_uppercase()
+    return [
+        pl.when(~_sog_na()).then(sog * KNOT_MPS).alias("sog_mps"),
+        pl.when((cog >= 0) & (cog < 360)).then(cog * DEG).alias("cog_rad"),
+        pl.when((hdg >= 0) & (hdg <= 359)).then(hdg * DEG).alias("heading_rad"),
+        pl.when(cls.is_in(["A", "B"])).then(cls).otherwise(pl.lit("A")).alias("ais_class"),
+        pl.lit(0, pl.Int16).alias("msg_type"),
+        pl.col("time_ns").alias("time_ns"),
+        pl.col("raw").alias("nmea"),
+    ]
+
+
+def _static_columns() -> list[pl.Expr]:
+    def positive(c: str) -> pl.Expr:
+        return pl.when(pl.col(c) > 0).then(pl.col(c))
+
+    return [positive("imo").alias("imo"), positive("ship_type").alias("ship_type")]
+
+
+def decode_ais_json(
+    payloads: list[bytes],
+    log_time_ns: np.ndarray,
+    *,
+    source_file: str,
+    topic: str,
+    max_speed_mps: float = MAX_SPEED_MPS,
+) -> tuple[dict[str, pa.Table], dict[int, int]]:
+    """``({"ais_reports", "ais_static", "rejects"}, not_stored)`` of a batch of
+    ``surveil.AisReport`` payloads (see module docstring); ``log_time_ns`` int64 ns."""
+    df, bad = parse_payloads(payloads)
+    n = df.height
+    mask = np.zeros(n, dtype=bool)
+    mask[bad] = True
+    df = df.with_row_index("_i").with_columns(
+        _bad=pl.Series(mask),
+        log_time_ns=pl.Series(np.asarray(log_time_ns, dtype=np.int64)),
+        source_file=pl.lit(source_file),
+        topic=pl.lit(topic),
+        _kind=pl.col("mobile_type").str.to_lowercase().str.strip_chars(),
+    )
+    not_vessel = pl.col("_kind").replace_strict(
+        NOT_VESSEL_MSG_ID, default=None, return_dtype=pl.Int64
+    )
+    df = df.with_columns(_not_vessel=not_vessel.fill_null(-1))
+    skipped = df.filter((pl.col("_not_vessel") >= 0) & ~pl.col("_bad"))
+    not_stored = dict(Counter(skipped["_not_vessel"].to_list()))
+    code, reason = _problems(max_speed_mps)
+    df = df.filter((pl.col("_not_vessel") < 0) | pl.col("_bad")).with_columns(
+        code=code, reason=reason
+    )
+    ok = df.filter(pl.col("code").is_null()).with_columns(_si_columns())
+    static = (
+        df.filter(
+            pl.col("code").is_null()
+            | (pl.col("code") == "no_position")
+            & pl.col("mmsi").is_not_null()
+            & pl.col("time_ns").is_not_null()
+        )
+        .with_columns(_si_columns())
+        .with_columns(_static_columns())
+    )
+    has_static = pl.any_horizontal(
+        [
+            pl.col(c).is_not_null()
+            for c in ("imo", "callsign", "shipname", "ship_type", "destination")
+        ]
+    )
+    static = static.filter(has_static)
+    rej = df.filter(pl.col("code").is_not_null())
+    tables = {
+        "ais_reports": conform("ais_reports", ok.to_arrow()) if ok.height else empty("ais_reports"),
+        "ais_static": conform("ais_static", static.to_arrow())
+        if static.height
+        else empty("ais_static"),
+        "rejects": _rejects(rej, payloads, source_file, topic),
+    }
+    return tables, not_stored
+
+
+def _rejects(rej: pl.DataFrame, payloads: list[bytes], source_file: str, topic: str) -> pa.Table:
+    """Rejects rows; ``raw`` is the CSV line, or the payload when it did not parse."""
+    if not rej.height:
+        return empty("rejects")
+    raw = [
+        r.encode() if r is not None else bytes(payloads[i])  # per reject row
+        for r, i in zip(rej["raw"].to_list(), rej["_i"].to_list(), strict=True)
+    ]
+    return make_rejects(
+        rej["log_time_ns"].to_numpy(),
+        source_file=source_file,
+        topic=topic,
+        reason_code=rej["code"].to_list(),
+        reason=rej["reason"].to_list(),
+        raw=raw,
+    )
+
+
+class AisJsonChannelDecoder:
+    """Stateful per-channel adapter for :mod:`pipeline.decode.registry`: decodes each
+    batch as it comes (rows are independent) and counts ``not_stored``."""
+
+    def __init__(self, source_file: str, topic: str):
+        self.source_file = source_file
+        self.topic = topic
+        self.not_stored: Counter = Counter()
+
+    @classmethod
+    def for_channel(cls, batch: Any, source_file: str) -> AisJsonChannelDecoder:
+        return cls(source_file, batch.topic)
+
+    def feed(self, batch: Any) -> dict[str, pa.Table]:
+        tables, not_stored = decode_ais_json(
+            list(batch.payloads),
+            batch.log_time_ns,
+            source_file=self.source_file,
+            topic=self.topic,
+        )
+        self.not_stored.update(not_stored)
+        return {k: v for k, v in tables.items() if v.num_rows}
+
+    def finish(self) -> dict[str, pa.Table]:
+        return {}

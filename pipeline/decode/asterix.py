@@ -1,0 +1,716 @@
+"""ASTERIX data blocks -> ``airfield_obs`` (target reports), ``asterix_service`` (service
+messages) and ``rejects``.
+
+MCAP channel convention: message encoding ``asterix``; no schema, or a schema named
+``asterix``; each payload is ONE ASTERIX data block (CAT 1 octet, LEN 2 octets, records;
+EUROCONTROL ASTERIX Part 1). Several concatenated blocks in one payload are accepted and
+split by their LEN fields. Channel metadata may carry ``sensor_id`` and
+``sensor_kind`` (``smr`` | ``mlat`` | ...): they then override what the records say.
+
+Records are parsed by ``asterix_decoder`` (Croatia Control's C++ decoder, PyPI) with the
+category definitions it ships; the editions we read, and the items used:
+
+=====  =============================  =======  ===============  ==============================
+CAT    content                        edition  table            items read
+=====  =============================  =======  ===============  ==============================
+010    SMR / MLAT target reports      1.1      airfield_obs     010 000 020 140 040 041 042
+                                                                200 202 161 220 245 500
+020    MLAT target reports            1.10     airfield_obs     010 140 041 042 161 202 220
+                                                                245 500
+021    ADS-B reports                  2.6      airfield_obs     010 071/073/075/077 130 131
+                                                                160 161 080 170
+048    monoradar target reports       1.21     airfield_obs     010 020 140 040 042 161 200
+                                                                220 240
+062    SDPS system tracks             1.18     airfield_obs     010 040 070 100 105 185 245
+                                                                380(ADR, ID) 500(APC)
+034    radar service messages         1.27     asterix_service  000 010 020 030 041 (+ rest
+                                                                as JSON)
+065    SDPS service status            1.3      asterix_service  000 010 015 020 030 (+ rest)
+=====  =============================  =======  ===============  ==============================
+
+Units are converted at decode: NM -> m (1852), kt -> m/s, degrees -> rad (azimuth and
+track angle clockwise from north), ``vx``/``vy`` east/north. ``sensor_kind`` from the
+record: CAT010 I020 TYP (0, 1, 5 multilateration -> ``mlat``; 2 -> ``adsb``; 3 PSR ->
+``smr``; else ``other``), CAT020 -> ``mlat``, CAT021 -> ``adsb``, CAT048 I020 TYP (1
+single PSR -> ``psr``, else ``ssr``), CAT062 -> ``system_track``.
+
+Time: ``time_ns`` = the record's time of day (CAT010/020/048 I140, CAT062 I070, CAT021
+I071 else I073, I075, I077; CAT034/065 I030) placed on the UTC date of the block's
+log_time, shifted by one day when that lands more than 12 h from the log_time (midnight
+rollover, see :func:`tod_to_time_ns`). A record without a time item takes the log_time.
+
+Rejects (``raw`` = the whole data block, or the bytes that do not frame):
+
+- ``undecodable``: bytes that do not frame as data blocks (LEN < 3 or past the end of
+  the payload), or a block whose records do not parse under the edition above (the
+  decoder reports an unparsed record, a record has no item, or the records do not fill
+  LEN exactly). The whole block is rejected: after one bad record the record boundaries
+  are unknown.
+- ``out_of_range``: a record carries a value its encoding should never hold: latitude
+  outside [-90, 90], longitude outside [-180, 180], time of day outside [0, 86400) s. That
+  is the mark of a block written in another edition (another UAP) read with ours, so the
+  WHOLE block is rejected (one row naming the first bad record): its other records share
+  the same source and edition.
+- ``no_position``: a target report (CAT010 message type 1, or any CAT020/021/048/062
+  record) with neither polar, Cartesian nor WGS-84 position; one row per record.
+  CAT010 status messages (start of update cycle, periodic / event-triggered status) are
+  kept in ``airfield_obs`` with their ``message_type`` and null positions.
+- ``unsupported_category``: ONE row per channel and category (by
+  :class:`AsterixChannelDecoder`) with the count of data blocks, not one per block; raw =
+  the first such block.
+
+``asterix_decoder`` ships definitions of CAT048 1.21 and CAT065 1.3 whose UAP lists the
+RE/SP fields without defining them, so any record carrying RE fails to parse. Before the
+first parse, :func:`_ensure_definitions` loads patched copies of those two definitions
+that declare the missing fields as opaque explicit-length items (ASTERIX Part 1: an
+explicit field starts with its own length octet, so skipping it is always well defined).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import re
+import tempfile
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+
+from pipeline.decode.registry import make_rejects
+from pipeline.io.mcap_read import ChannelBatch
+from pipeline.tables import conform, empty
+
+NS = 1_000_000_000
+DAY_NS = 86_400 * NS
+NM_M = 1852.0
+KT_MPS = NM_M / 3600.0
+TARGET_CATEGORIES = frozenset({10, 20, 21, 48, 62})
+SERVICE_CATEGORIES = frozenset({34, 65})
+SUPPORTED_CATEGORIES = TARGET_CATEGORIES | SERVICE_CATEGORIES
+OBS_COLUMNS = (
+    "sac", "sic", "message_type", "sensor_kind", "track_number", "target_address",
+    "callsign", "range_m", "azimuth_rad", "x_m", "y_m", "vx_mps", "vy_mps", "lat_deg",
+    "lon_deg", "sigma_x_m", "sigma_y_m",
+)  # fmt: skip
+SERVICE_COLUMNS = (
+    "sac", "sic", "message_type", "sector_azimuth_rad", "antenna_period_s", "service_id",
+    "batch_number", "status_json",
+)  # fmt: skip
+TARGET_REPORT = "target report"
+CAT010_MESSAGE_TYPES = {
+    1: TARGET_REPORT,
+    2: "start of update cycle",
+    3: "periodic status",
+    4: "event-triggered status",
+}
+CAT034_MESSAGE_TYPES = {
+    1: "north marker",
+    2: "sector crossing",
+    3: "geographical filtering",
+    4: "jamming strobe",
+    5: "solar storm",
+    6: "ssr jamming strobe",
+    7: "mode s jamming strobe",
+}
+CAT065_MESSAGE_TYPES = {1: "sdps status", 2: "end of batch", 3: "service status report"}
+CAT010_KINDS = {0: "mlat", 1: "mlat", 2: "adsb", 3: "smr", 5: "mlat"}
+
+
+# -- framing -----------------------------------------------------------------------------
+
+
+def split_blocks(payload: bytes) -> tuple[list[bytes], bytes]:
+    """Consecutive data blocks of ``payload`` framed by their LEN octets (ASTERIX Part 1:
+    CAT, LEN = length of the whole block incl. CAT and LEN), and the trailing bytes
+    that do not frame (LEN < 3, or LEN past the end), ``b""`` when everything frames."""
+    blocks: list[bytes] = []
+    pos, n = 0, len(payload)
+    while pos < n:
+        if n - pos < 3:
+            return blocks, payload[pos:]
+        length = int.from_bytes(payload[pos + 1 : pos + 3], "big")
+        if length < 3 or pos + length > n:
+            return blocks, payload[pos:]
+        blocks.append(payload[pos : pos + length])
+        pos += length
+    return blocks, b""
+
+
+# -- asterix_decoder ---------------------------------------------------------------------
+
+_DEFINITIONS_READY = False
+_OPAQUE_ITEM = (
+    '<DataItem id="{id}"><DataItemName>{id} (opaque, added by surveil)</DataItemName>'
+    "<DataItemDefinition>explicit-length field, skipped</DataItemDefinition>"
+    '<DataItemFormat desc="Explicit"><Explicit><Fixed length="1"><Bits from="8" to="1">'
+    "<BitsShortName>VAL</BitsShortName></Bits></Fixed></Explicit></DataItemFormat>"
+    "</DataItem>\n"
+)
+
+
+def _patched_definition(xml: str) -> str | None:
+    """The definition with opaque RE/SP items added where its UAP uses them undefined."""
+    defined = set(re.findall(r'<DataItem\s+id="([^"]+)"', xml))
+    used = set(re.findall(r"<UAPItem[^>]*>\s*(RE|SP)\s*</UAPItem>", xml))
+    missing = sorted(used - defined)
+    if not missing:
+        return None
+    items = "".join(_OPAQUE_ITEM.format(id=m) for m in missing)
+    return xml.replace("<UAP>", items + "<UAP>", 1)
+
+
+def _ensure_definitions() -> None:
+    """Load patched CAT048/CAT065 definitions into ``asterix_decoder`` once per process
+    (see the module docstring); idempotent."""
+    global _DEFINITIONS_READY
+    if _DEFINITIONS_READY:
+        return
+    import asterix
+
+    for name in ("cat048", "cat065"):
+        src = Path(asterix.get_configuration_file(name))
+        patched = _patched_definition(src.read_text())
+        if patched is None:
+            continue
+        fd, tmp = tempfile.mkstemp(prefix=f"surveil_{name}_", suffix=".xml")
+        try:
+            with os.fdopen(fd, "w") as f:
+                f.write(patched)
+            asterix.init(tmp)
+        finally:
+            os.unlink(tmp)
+    _DEFINITIONS_READY = True
+
+
+def parse_block(block: bytes) -> list[dict] | str:
+    """Records of one data block as ``asterix_decoder`` dicts (``verbose=False``), or the
+    reason why the block does not decode."""
+    import asterix
+
+    _ensure_definitions()
+    try:
+        records = asterix.parse(block, verbose=False)
+    except Exception as exc:  # the C extension raises on malformed input
+        return f"asterix_decoder raised {type(exc).__name__}: {exc}"
+    cat = block[0]
+    if not records:
+        return f"CAT{cat:03d} block of {len(block)} B holds no record"
+    for i, rec in enumerate(records):
+        if rec.get("hexdata") is None or rec.get("category") != cat:
+            return f"CAT{cat:03d} record {i + 1} does not parse under the supported edition"
+        if not any(k.startswith("I") for k in rec):
+            return f"CAT{cat:03d} record {i + 1} has no data item (empty FSPEC)"
+    filled = sum(int(r["len"]) for r in records)
+    if filled != len(block) - 3:
+        return f"CAT{cat:03d} records fill {filled} B of a {len(block) - 3} B block"
+    return records
+
+
+# -- item access -------------------------------------------------------------------------
+
+
+def _v(rec: Mapping[str, Any], item: str, *path: str) -> Any:
+    """``rec[item][path...]["val"]`` or ``None`` when the item or field is absent."""
+    try:
+        node = rec[item]
+        for key in path:
+            node = node[key]
+        return node["val"]
+    except (KeyError, TypeError, IndexError):  # absent item/field, or a list item
+        return None
+
+
+def _f(x: Any) -> float | None:
+    return None if x is None else float(x)
+
+
+def _rad(deg: Any) -> float | None:
+    return None if deg is None else math.radians(deg)
+
+
+def _hex_int(x: Any) -> int | None:
+    if x is None:
+        return None
+    try:
+        return int(x, 16) if isinstance(x, str) else int(x)
+    except ValueError:
+        return None
+
+
+def _text(x: Any) -> str | None:
+    if x is None:
+        return None
+    s = str(x).strip()
+    return s or None
+
+
+def _scaled(x: Any, k: float) -> float | None:
+    return None if x is None else float(x) * k
+
+
+def _ground_vector(speed_mps: float | None, angle_deg: Any) -> tuple[float | None, ...]:
+    """East/north velocity from a speed and a track angle clockwise from north."""
+    if speed_mps is None or angle_deg is None:
+        return None, None
+    a = math.radians(angle_deg)
+    return speed_mps * math.sin(a), speed_mps * math.cos(a)
+
+
+def _name(names: Mapping[int, str], code: Any) -> str | None:
+    """The name of a message type code (``message type N`` when undefined)."""
+    if code is None:
+        return None
+    return names.get(code, f"message type {code}")
+
+
+def _source(rec: Mapping[str, Any]) -> dict[str, Any]:
+    return {"sac": _v(rec, "I010", "SAC"), "sic": _v(rec, "I010", "SIC")}
+
+
+# -- per-category extraction -------------------------------------------------------------
+# One dict per record: asterix_decoder returns one nested dict per record (records are
+# FSPEC-driven and variable-length), so this step is per record by construction.
+
+
+def _cat010(rec: Mapping[str, Any]) -> dict[str, Any]:
+    """CAT010 ed 1.1 (SMR/MLAT target reports and status messages)."""
+    msg = _v(rec, "I000", "MsgTyp")
+    typ = _v(rec, "I020", "TYP")
+    vx, vy = _f(_v(rec, "I202", "Vx")), _f(_v(rec, "I202", "Vy"))
+    if vx is None:  # polar velocity I200: GS in NM/s, TA in degrees
+        vx, vy = _ground_vector(_scaled(_v(rec, "I200", "GS"), NM_M), _v(rec, "I200", "TA"))
+    return {
+        **_source(rec),
+        "tod_s": _v(rec, "I140", "ToD"),
+        "message_type": TARGET_REPORT if msg is None else _name(CAT010_MESSAGE_TYPES, msg),
+        "sensor_kind": None if typ is None else CAT010_KINDS.get(typ, "other"),
+        "track_number": _v(rec, "I161", "TrkNb"),
+        "target_address": _hex_int(_v(rec, "I220", "TAddr")),
+        "callsign": _text(_v(rec, "I245", "TId")),
+        "range_m": _f(_v(rec, "I040", "RHO")),
+        "azimuth_rad": _rad(_v(rec, "I040", "Theta")),
+        "x_m": _f(_v(rec, "I042", "X")),
+        "y_m": _f(_v(rec, "I042", "Y")),
+        "vx_mps": vx,
+        "vy_mps": vy,
+        "lat_deg": _f(_v(rec, "I041", "Lat")),
+        "lon_deg": _f(_v(rec, "I041", "Lon")),
+        "sigma_x_m": _f(_v(rec, "I500", "Qx")),
+        "sigma_y_m": _f(_v(rec, "I500", "Qy")),
+    }
+
+
+def _cat020(rec: Mapping[str, Any]) -> dict[str, Any]:
+    """CAT020 ed 1.10 (multilateration target reports)."""
+    return {
+        **_source(rec),
+        "tod_s": _v(rec, "I140", "ToD"),
+        "message_type": TARGET_REPORT,
+        "sensor_kind": "mlat",
+        "track_number": _v(rec, "I161", "TrkNb"),
+        "target_address": _hex_int(_v(rec, "I220", "TAddr")),
+        "callsign": _text(_v(rec, "I245", "TId")),
+        "x_m": _f(_v(rec, "I042", "X")),
+        "y_m": _f(_v(rec, "I042", "Y")),
+        "vx_mps": _f(_v(rec, "I202", "Vx")),
+        "vy_mps": _f(_v(rec, "I202", "Vy")),
+        "lat_deg": _f(_v(rec, "I041", "Lat")),
+        "lon_deg": _f(_v(rec, "I041", "Lon")),
+        "sigma_x_m": _f(_v(rec, "I500", "SDP", "SDPx")),
+        "sigma_y_m": _f(_v(rec, "I500", "SDP", "SDPy")),
+    }
+
+
+def _cat021(rec: Mapping[str, Any]) -> dict[str, Any]:
+    """CAT021 ed 2.6 (ADS-B reports); position time I071, else I073, I075, I077."""
+    tod = next(
+        (t for t in (
+            _v(rec, "I071", "time_applicability_position"),
+            _v(rec, "I073", "time_reception_position"),
+            _v(rec, "I075", "time_reception_velocity"),
+            _v(rec, "I077", "time_report_transmission"),
+        ) if t is not None),
+        None,
+    )  # fmt: skip
+    lat, lon = _v(rec, "I131", "Lat"), _v(rec, "I131", "Lon")
+    if lat is None:
+        lat, lon = _v(rec, "I130", "Lat"), _v(rec, "I130", "Lon")
+    vx, vy = _ground_vector(_scaled(_v(rec, "I160", "GS"), NM_M), _v(rec, "I160", "TA"))
+    return {
+        **_source(rec),
+        "tod_s": tod,
+        "message_type": TARGET_REPORT,
+        "sensor_kind": "adsb",
+        "track_number": _v(rec, "I161", "TrackN"),
+        "target_address": _hex_int(_v(rec, "I080", "TAddr")),
+        "callsign": _text(_v(rec, "I170", "TId")),
+        "vx_mps": vx,
+        "vy_mps": vy,
+        "lat_deg": _f(lat),
+        "lon_deg": _f(lon),
+    }
+
+
+def _cat048(rec: Mapping[str, Any]) -> dict[str, Any]:
+    """CAT048 ed 1.21 (monoradar target reports); NM and kt converted to m and m/s."""
+    typ = _v(rec, "I020", "TYP")
+    vx, vy = _ground_vector(_scaled(_v(rec, "I200", "CGS"), KT_MPS), _v(rec, "I200", "CHdg"))
+    return {
+        **_source(rec),
+        "tod_s": _v(rec, "I140", "ToD"),
+        "message_type": TARGET_REPORT,
+        "sensor_kind": None if typ is None else ("psr" if typ == 1 else "ssr"),
+        "track_number": _v(rec, "I161", "Tn"),
+        "target_address": _hex_int(_v(rec, "I220", "ACAddr")),
+        "callsign": _text(_v(rec, "I240", "TId")),
+        "range_m": _scaled(_v(rec, "I040", "RHO"), NM_M),
+        "azimuth_rad": _rad(_v(rec, "I040", "THETA")),
+        "x_m": _scaled(_v(rec, "I042", "X"), NM_M),
+        "y_m": _scaled(_v(rec, "I042", "Y"), NM_M),
+        "vx_mps": vx,
+        "vy_mps": vy,
+    }
+
+
+def _cat062(rec: Mapping[str, Any]) -> dict[str, Any]:
+    """CAT062 ed 1.18 (SDPS system tracks); x/y in the system's reference frame."""
+    callsign = _text(_v(rec, "I245", "TId")) or _text(_v(rec, "I380", "ID", "ACID"))
+    return {
+        **_source(rec),
+        "tod_s": _v(rec, "I070", "ToT"),
+        "message_type": TARGET_REPORT,
+        "sensor_kind": "system_track",
+        "track_number": _v(rec, "I040", "TrkN"),
+        "target_address": _hex_int(_v(rec, "I380", "ADR", "ADR")),
+        "callsign": callsign,
+        "x_m": _f(_v(rec, "I100", "X")),
+        "y_m": _f(_v(rec, "I100", "Y")),
+        "vx_mps": _f(_v(rec, "I185", "Vx")),
+        "vy_mps": _f(_v(rec, "I185", "Vy")),
+        "lat_deg": _f(_v(rec, "I105", "Lat")),
+        "lon_deg": _f(_v(rec, "I105", "Lon")),
+        "sigma_x_m": _f(_v(rec, "I500", "APC", "APC_X")),
+        "sigma_y_m": _f(_v(rec, "I500", "APC", "APC_Y")),
+    }
+
+
+def _plain(node: Any) -> Any:
+    """asterix_decoder's ``{"field": {"val": v}}`` nesting without the ``val`` level."""
+    if isinstance(node, Mapping):
+        if set(node) == {"val"}:
+            return node["val"]
+        return {k: _plain(v) for k, v in node.items() if k not in ("spare", "FX", "fx")}
+    if isinstance(node, list):
+        return [_plain(v) for v in node]
+    return node
+
+
+def _status_json(rec: Mapping[str, Any], used: set[str]) -> str | None:
+    rest = {k: _plain(v) for k, v in rec.items() if k.startswith("I") and k not in used}
+    return json.dumps(rest, sort_keys=True, separators=(",", ":")) if rest else None
+
+
+def _cat034(rec: Mapping[str, Any]) -> dict[str, Any]:
+    """CAT034 ed 1.27 (radar service messages)."""
+    msg = _v(rec, "I000", "MsgTyp")
+    return {
+        **_source(rec),
+        "tod_s": _v(rec, "I030", "ToD"),
+        "message_type": _name(CAT034_MESSAGE_TYPES, msg),
+        "sector_azimuth_rad": _rad(_v(rec, "I020", "Azi")),
+        "antenna_period_s": _f(_v(rec, "I041", "RotS")),
+        "status_json": _status_json(rec, {"I000", "I010", "I020", "I030", "I041"}),
+    }
+
+
+def _cat065(rec: Mapping[str, Any]) -> dict[str, Any]:
+    """CAT065 ed 1.3 (SDPS service status messages)."""
+    msg = _v(rec, "I000", "Typ")
+    return {
+        **_source(rec),
+        "tod_s": _v(rec, "I030", "ToD"),
+        "message_type": _name(CAT065_MESSAGE_TYPES, msg),
+        "service_id": _v(rec, "I015", "SID"),
+        "batch_number": _v(rec, "I020", "BTN"),
+        "status_json": _status_json(rec, {"I000", "I010", "I015", "I020", "I030"}),
+    }
+
+
+EXTRACTORS: dict[int, Callable[[Mapping[str, Any]], dict[str, Any]]] = {
+    10: _cat010, 20: _cat020, 21: _cat021, 48: _cat048, 62: _cat062, 34: _cat034, 65: _cat065,
+}  # fmt: skip
+
+
+# -- time --------------------------------------------------------------------------------
+
+
+def tod_to_time_ns(tod_s: np.ndarray, log_time_ns: np.ndarray) -> np.ndarray:
+    """Absolute UTC ns of an ASTERIX time of day (s since UTC midnight, NaN when absent).
+
+    .. math:: t = \\lfloor t_{log} / D \\rfloor D + \\mathrm{ToD};\\quad
+              t \\mathrel{-}= D \\text{ if } t - t_{log} > D/2;\\quad
+              t \\mathrel{+}= D \\text{ if } t - t_{log} < -D/2
+
+    with D one day: a report stamped 23:59:59.9 and logged at 00:00:00.2 belongs to the
+    previous day, and vice versa. Where ``tod_s`` is NaN the log time is returned.
+    ToD has an LSB of 1/128 s, so ``tod * 1e9`` rounds exactly to integer ns.
+    """
+    log_time_ns = np.asarray(log_time_ns, dtype=np.int64)
+    tod = np.asarray(tod_s, dtype=np.float64)
+    have = np.isfinite(tod)
+    day0 = np.floor_divide(log_time_ns, DAY_NS) * DAY_NS
+    t = day0 + np.round(np.where(have, tod, 0.0) * NS).astype(np.int64)
+    d = t - log_time_ns
+    t = t - DAY_NS * (d > DAY_NS // 2) + DAY_NS * (d < -(DAY_NS // 2))
+    return np.where(have, t, log_time_ns)
+
+
+# -- decoding ----------------------------------------------------------------------------
+
+
+@dataclass
+class _Rows:
+    """Column lists of extracted records (one dict per record, see the extractors)."""
+
+    columns: tuple[str, ...]
+    cols: dict[str, list] = field(default_factory=dict)
+    tod: list[float] = field(default_factory=list)
+    category: list[int] = field(default_factory=list)
+    log_time: list[int] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        self.cols = {c: [] for c in self.columns}
+
+    def add(self, row: Mapping[str, Any], cat: int, t: int) -> None:
+        get = row.get
+        for c, values in self.cols.items():
+            values.append(get(c))
+        tod = row.get("tod_s")
+        self.tod.append(np.nan if tod is None else float(tod))
+        self.category.append(cat)
+        self.log_time.append(t)
+
+    def __len__(self) -> int:
+        return len(self.category)
+
+
+@dataclass(frozen=True)
+class Unsupported:
+    """Data blocks of one category that is not decoded: count, first log time, first
+    block (kept as the reject's raw bytes)."""
+
+    count: int
+    first_log_time_ns: int
+    first_block: bytes
+
+    def plus(self, other: Unsupported) -> Unsupported:
+        return Unsupported(self.count + other.count, self.first_log_time_ns, self.first_block)
+
+
+@dataclass(frozen=True)
+class AsterixDecoded:
+    """``obs``: airfield_obs rows; ``service``: asterix_service rows; ``rejects``: rejects
+    rows (not including unsupported categories); ``unsupported``: per category;
+    ``blocks``: data blocks framed."""
+
+    obs: pa.Table
+    service: pa.Table
+    rejects: pa.Table
+    unsupported: dict[int, Unsupported]
+    blocks: int
+
+
+@dataclass(frozen=True)
+class _Context:
+    source_file: str
+    topic: str
+    sensor_id: str | None
+    sensor_kind: str | None
+
+
+@dataclass
+class _Rejects:
+    t: list[int] = field(default_factory=list)
+    code: list[str] = field(default_factory=list)
+    reason: list[str] = field(default_factory=list)
+    raw: list[bytes] = field(default_factory=list)
+
+    def add(self, t: int, code: str, reason: str, raw: bytes) -> None:
+        self.t.append(t)
+        self.code.append(code)
+        self.reason.append(reason)
+        self.raw.append(raw)
+
+
+def implausible(row: Mapping[str, Any]) -> str | None:
+    """Why an extracted record cannot be right (a value its encoding should never carry:
+    the sign of a record read with another edition's UAP), else ``None``."""
+    tod = row.get("tod_s")
+    if tod is not None and not 0 <= tod < 86_400:
+        return f"time of day {tod} s outside [0, 86400)"
+    lat, lon = row.get("lat_deg"), row.get("lon_deg")
+    if (lat is not None and abs(lat) > 90) or (lon is not None and abs(lon) > 180):
+        return f"latitude {lat} / longitude {lon} deg out of range"
+    return None
+
+
+def has_position(row: Mapping[str, Any]) -> bool:
+    """A polar, Cartesian or WGS-84 position is present."""
+    return any(row.get(k) is not None for k in ("range_m", "x_m", "lat_deg"))
+
+
+def decode_asterix(
+    payloads: Sequence[bytes],
+    log_time_ns: Sequence[int] | np.ndarray,
+    *,
+    source_file: str,
+    topic: str,
+    metadata: Mapping[str, str] | None = None,
+) -> AsterixDecoded:
+    """Decode one channel's ASTERIX payloads (one data block each) with their log times.
+
+    ``metadata``: the channel's MCAP metadata; ``sensor_id`` / ``sensor_kind`` there
+    override the record's SAC/SIC and kind. See the module docstring for the mapping and
+    the reject rules.
+    """
+    meta = metadata or {}
+    ctx = _Context(source_file, topic, meta.get("sensor_id"), meta.get("sensor_kind"))
+    times = np.asarray(log_time_ns, dtype=np.int64)
+    obs, svc, rej = _Rows(OBS_COLUMNS), _Rows(SERVICE_COLUMNS), _Rejects()
+    unsupported: dict[int, Unsupported] = {}
+    n_blocks = 0
+    # one asterix_decoder call per data block (records are variable-length; the library
+    # parses a block at a time, and a concatenation of blocks parses slower, measured)
+    for payload, t in zip(payloads, times.tolist(), strict=True):
+        blocks, rest = split_blocks(payload)
+        if rest:
+            rej.add(t, "undecodable", _framing_reason(rest), rest)
+        for block in blocks:
+            n_blocks += 1
+            cat = block[0]
+            if cat in SUPPORTED_CATEGORIES:
+                _decode_block(block, t, obs if cat in TARGET_CATEGORIES else svc, rej)
+            else:
+                u = Unsupported(1, t, block)
+                unsupported[cat] = unsupported[cat].plus(u) if cat in unsupported else u
+    rejects = make_rejects(
+        rej.t, source_file=source_file, topic=topic, reason_code=rej.code,
+        reason=rej.reason, raw=rej.raw,
+    )  # fmt: skip
+    return AsterixDecoded(
+        _table("airfield_obs", obs, ctx), _table("asterix_service", svc, ctx), rejects,
+        unsupported, n_blocks,
+    )  # fmt: skip
+
+
+def _decode_block(block: bytes, t: int, rows: _Rows, rej: _Rejects) -> None:
+    """Records of one block into ``rows``; the block or a record into ``rej``."""
+    cat = block[0]
+    records = parse_block(block)
+    if isinstance(records, str):
+        rej.add(t, "undecodable", records, block)
+        return
+    extracted = [EXTRACTORS[cat](rec) for rec in records]
+    for k, row in enumerate(extracted):
+        why = implausible(row)
+        if why is not None:  # the whole block: its records share one source and edition
+            rej.add(t, "out_of_range", f"CAT{cat:03d} record {k + 1}: {why}", block)
+            return
+    for k, row in enumerate(extracted):
+        if (
+            cat in TARGET_CATEGORIES
+            and row.get("message_type") == TARGET_REPORT
+            and (not has_position(row))
+        ):
+            reason = f"CAT{cat:03d} record {k + 1}: target report without a position"
+            rej.add(t, "no_position", reason, block)
+        else:
+            rows.add(row, cat, t)
+
+
+def _framing_reason(rest: bytes) -> str:
+    if len(rest) < 3:
+        return f"{len(rest)} trailing bytes, shorter than a data block header"
+    length = int.from_bytes(rest[1:3], "big")
+    return (
+        f"bytes do not frame as an ASTERIX data block: CAT {rest[0]}, LEN {length} with "
+        f"{len(rest)} bytes left"
+    )
+
+
+def _table(name: str, rows: _Rows, ctx: _Context) -> pa.Table:
+    """Conformed ``airfield_obs`` / ``asterix_service`` rows with time and provenance."""
+    if not len(rows):
+        return empty(name)
+    log_t = np.asarray(rows.log_time, dtype=np.int64)
+    data: dict[str, Any] = dict(rows.cols)
+    if ctx.sensor_id is not None:
+        data["sensor_id"] = [ctx.sensor_id] * len(rows)
+    else:
+        data["sensor_id"] = [
+            ctx.topic if a is None or b is None else f"{a}/{b}"
+            for a, b in zip(rows.cols["sac"], rows.cols["sic"], strict=True)
+        ]
+    if "sensor_kind" in data:
+        data["sensor_kind"] = [ctx.sensor_kind or k or "other" for k in data["sensor_kind"]]
+    data |= {
+        "time_ns": tod_to_time_ns(np.asarray(rows.tod), log_t),
+        "asterix_category": rows.category,
+        "source_file": [ctx.source_file] * len(rows),
+        "topic": [ctx.topic] * len(rows),
+        "log_time_ns": log_t,
+    }
+    return conform(name, pa.table({k: pa.array(v) for k, v in data.items()}))
+
+
+# -- per channel -------------------------------------------------------------------------
+
+
+@dataclass
+class AsterixChannelDecoder:
+    """Decode one channel batch by batch; unsupported categories are counted over the
+    whole channel and become ONE rejects row per category in :meth:`finish`."""
+
+    source_file: str
+    topic: str
+    metadata: Mapping[str, str] = field(default_factory=dict)
+    unsupported: dict[int, Unsupported] = field(default_factory=dict)
+
+    @classmethod
+    def for_channel(cls, batch: ChannelBatch, source_file: str) -> AsterixChannelDecoder:
+        return cls(source_file, batch.topic, dict(batch.metadata))
+
+    def feed(self, batch: ChannelBatch) -> dict[str, pa.Table]:
+        out = decode_asterix(
+            batch.payloads, batch.log_time_ns, source_file=self.source_file, topic=self.topic,
+            metadata=self.metadata,
+        )  # fmt: skip
+        for cat, u in out.unsupported.items():
+            prev = self.unsupported.get(cat)
+            self.unsupported[cat] = u if prev is None else prev.plus(u)
+        return {"airfield_obs": out.obs, "asterix_service": out.service, "rejects": out.rejects}
+
+    def finish(self) -> dict[str, pa.Table]:
+        cats = sorted(self.unsupported)
+        if not cats:
+            return {}
+        supported = ", ".join(f"{c:03d}" for c in sorted(SUPPORTED_CATEGORIES))
+        rejects = make_rejects(
+            [self.unsupported[c].first_log_time_ns for c in cats],
+            source_file=self.source_file,
+            topic=self.topic,
+            reason_code="unsupported_category",
+            reason=[
+                f"{self.unsupported[c].count} data blocks of CAT{c:03d} not decoded "
+                f"(supported: CAT {supported}); raw = the first block"
+                for c in cats
+            ],
+            raw=[self.unsupported[c].first_block for c in cats],
+        )
+        self.unsupported = {}
+        return {"rejects": rejects}
