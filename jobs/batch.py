@@ -23,15 +23,24 @@ import numpy as np
 import polars as pl
 import pyarrow.parquet as pq
 
+from jobs.batch_airfield import OUTPUTS as AIRFIELD_OUTPUTS
+from jobs.batch_airfield import UNIT_S as AIRFIELD_UNIT_S
+from jobs.batch_airfield import airfield_unit
+from jobs.batch_gaps import OUTPUTS as GAPS_OUTPUTS
+from jobs.batch_gaps import gaps_unit
+from jobs.batch_nav import OUTPUTS as NAV_OUTPUTS
+from jobs.batch_nav import nav_unit
 from pipeline import tables
 from pipeline.align import align_reports
 from pipeline.associate.identity import identify
 from pipeline.associate.stitch import relabel, stitch_track_ids
 from pipeline.associate.track_to_track import associate_tracks
 from pipeline.config import Config
+from pipeline.cross_track_eval import cross_track_by_leg
 from pipeline.executors import make_executor
 from pipeline.fuse import fuse
 from pipeline.geometry import add_geodetic, assign_sectors, cross_track
+from pipeline.metrics.siap import siap_by_sector, siap_config
 from pipeline.score import score_tracks
 from pipeline.sync import epoch_grid, synchronise
 from pipeline.warehouse.delta import read_table, replace_rows, replace_window
@@ -42,6 +51,8 @@ log = logging.getLogger(__name__)
 NS = 1_000_000_000
 UNIT_S = 3600
 DERIVED_TABLES = ("associations", "system_tracks", "identifications", "track_errors")
+# maritime audit tables (docs/maritime.md): SIAP against truth, cross-track error per leg
+AUDIT_TABLES = ("siap_by_sector", "cross_track_by_leg")
 
 
 @dataclass(frozen=True)
@@ -114,7 +125,8 @@ def batch_window(
     """Compose the pure batch stages for the epochs in [start_ns, end_ns).
 
     Returns frames for ``associations``, ``system_tracks``, ``identifications``,
-    ``track_errors`` and batch ``rejects`` (reports from unknown sites).
+    ``track_errors``, ``siap_by_sector`` (empty without truth), ``cross_track_by_leg``
+    and batch ``rejects`` (reports from unknown sites).
     """
     aligned, unknown = align_reports(inputs.radar_tracks, cfg)
     epochs = epoch_grid(start_ns, end_ns, cfg.sync.epoch_period_s)
@@ -140,11 +152,22 @@ def batch_window(
         pl.col("P_yy").sqrt().alias("sigma_y_m"),
         pl.col("P_xy").alias("cov_xy_m2"),
     )
+    siap = siap_by_sector(
+        fused, inputs.truth, epochs_ns=epochs, epoch_period_s=cfg.sync.epoch_period_s,
+        region=cfg.region, sectors=cfg.sectors, cfg=siap_config(cfg), start_ns=start_ns,
+        end_ns=end_ns,
+    )
+    cross = cross_track_by_leg(
+        fused, associations, errors, legs=cfg.fairway_legs, region=cfg.region,
+        sites=cfg.radar_sites,
+    )
     return {
         "associations": associations,
         "system_tracks": fused,
         "identifications": identifications,
         "track_errors": errors,
+        "siap_by_sector": siap,
+        "cross_track_by_leg": cross,
         "rejects": _unknown_site_rejects(unknown, start_ns, end_ns),
     }
 
@@ -187,10 +210,17 @@ def maritime_unit(warehouse: Path, cfg: Config, start_ns: int, end_ns: int) -> d
     return batch_window(inputs, start_ns=start_ns, end_ns=end_ns, cfg=cfg)
 
 
-MARITIME = BatchFamily("maritime", DERIVED_TABLES, maritime_unit, stitch=True)
+MARITIME = BatchFamily("maritime", DERIVED_TABLES + AUDIT_TABLES, maritime_unit, stitch=True)
+
+# airfield surface surveillance (jobs/batch_airfield.py; built here: BatchFamily lives here)
+AIRFIELD = BatchFamily("airfield", AIRFIELD_OUTPUTS, airfield_unit, unit_s=AIRFIELD_UNIT_S)
+
+# forecasts across data gaps (jobs/batch_gaps.py): one unit per window (filter continuity)
+GAPS = BatchFamily("gaps", GAPS_OUTPUTS, gaps_unit, unit_s=None)
 
 # Every family the batch runs; each family adds its own line.
-FAMILIES: tuple[BatchFamily, ...] = (MARITIME,)
+NAV = BatchFamily("nav", NAV_OUTPUTS, nav_unit, unit_s=None)
+FAMILIES: tuple[BatchFamily, ...] = (MARITIME, AIRFIELD, GAPS, NAV)
 
 
 def family(name: str) -> BatchFamily:

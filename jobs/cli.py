@@ -188,6 +188,20 @@ def demo(st: _State, seed, duration, executor) -> None:
 # Sensor-family commands: each family module defines its click commands; add them here,
 # one line per command, e.g. cli.add_command(import_command).
 # (family commands)
+from jobs.cli_gaps import gaps_montecarlo  # noqa: E402
+
+cli.add_command(gaps_montecarlo)
+from jobs.cli_airfield import calibrate as _airfield_calibrate  # noqa: E402
+
+cli.add_command(_airfield_calibrate)
+from jobs.cli_ingest import import_command  # noqa: E402
+
+cli.add_command(import_command)
+from jobs.cli_maritime import calibrate_radars as _maritime_calibrate  # noqa: E402
+from jobs.cli_maritime import experiment as _maritime_experiment  # noqa: E402
+
+cli.add_command(_maritime_experiment)
+cli.add_command(_maritime_calibrate)
 
 
 def main() -> None:

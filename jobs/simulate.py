@@ -10,9 +10,12 @@ from collections.abc import Callable
 from pathlib import Path
 
 from jobs.common import UsageError
+from jobs.simulate_gaps import write_gaps_archive
 from pipeline.config import Config
+from pipeline.io.airfield_mcap import simulate_airfield_archive
 from pipeline.io.mcap_write import write_channel_archive
 from pipeline.simulate.channel import simulate_channel
+from pipeline.simulate.ownship import simulate_ownship_archive
 
 NS = 1_000_000_000
 DEFAULT_START_NS = 1_768_435_200 * NS
@@ -30,6 +33,9 @@ ScenarioWriter = Callable[[Config, int, float, int, Path], list[Path]]
 # One entry per scenario; each sensor family adds its own line.
 SCENARIOS: dict[str, ScenarioWriter] = {
     "channel": _channel,
+    "airfield": simulate_airfield_archive,
+    "gaps": write_gaps_archive,
+    "ownship": simulate_ownship_archive,
 }
 
 _DURATION = re.compile(

@@ -25,6 +25,8 @@ message encoding  schema encoding  schema name                 decoder -> tables
 ``ros1``          ``ros1msg``      ``sensor_msgs/Imu``         ros1 -> nav_heading
 ``json``          ``jsonschema``   ``surveil.VasnReport``      vasn -> airfield_obs
 ``json``          ``jsonschema``   ``surveil.AirfieldTruth``   airfield_truth -> airfield_truth
+``json``          ``jsonschema``   ``surveil.GyroSignals``     ownship -> nav_gyro_signals
+``json``          ``jsonschema``   ``surveil.OwnshipTruth``    ownship -> ownship_truth
 ``protobuf``      ``protobuf``     ``surveil.RadarTrackReport``  radar_binary -> radar_tracks
 ``cdr``           ``ros2msg``      ``surveil_msgs/msg/RadarTrackReport``  radar_binary ->
                                                                radar_tracks
@@ -62,6 +64,7 @@ RAW_TABLES = (
     "radar_tracks", "ais_reports", "ais_static", "truth", "rejects",
     "airfield_obs", "asterix_service", "nav_gnss", "nav_heading",
     "nav_speed_log", "arpa_targets", "arpa_own_ship", "airfield_truth",
+    "nav_gyro_signals", "ownship_truth",
 )  # fmt: skip
 
 RADAR = ("json", "jsonschema", "surveil.RadarTrackReport")
@@ -94,6 +97,10 @@ CHANNEL_DECODERS = {
 }
 _KINDS[("protobuf", "protobuf", "surveil.RadarTrackReport")] = "radar_binary"
 _KINDS[("cdr", "ros2msg", "surveil_msgs/msg/RadarTrackReport")] = "radar_binary"
+CHANNEL_DECODERS["gyro_signals"] = "pipeline.decode.ownship:GyroSignalsChannelDecoder"
+CHANNEL_DECODERS["ownship_truth"] = "pipeline.decode.ownship:OwnshipTruthChannelDecoder"
+_KINDS[("json", "jsonschema", "surveil.GyroSignals")] = "gyro_signals"
+_KINDS[("json", "jsonschema", "surveil.OwnshipTruth")] = "ownship_truth"
 JSON_BATCH = 50_000  # JSON messages per bulk parse (~20 MB of payload)
 JSON_MAX_CHUNKS = 32  # chunks a pending JSON parse may hold (bounds memory: ~32 MiB)
 

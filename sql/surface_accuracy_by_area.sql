@@ -1,0 +1,56 @@
+-- name: surface_accuracy_by_area
+-- description: airfield surface surveillance accuracy per ED-87 area (manoeuvring area,
+--   apron taxiways, stands): 95th-percentile horizontal error of each channel's reports and
+--   of the fused tracks against the reference, probability of identification (fused, over
+--   cooperative targets), share of updates after a gap of 3-5 s and of more than 5 s, beside
+--   the ED-87 requirements (95% <= 12 / 20 / 25 m; identification >= 0.999) and the
+--   sensor-level 7.5 m (ED-116/117).
+-- grain: one row per (area, source); source = a channel's sensor id or 'fused'
+-- params: $start_ns (BIGINT, inclusive), $end_ns (BIGINT, exclusive),
+--         $sector (VARCHAR, NULL = every sector)
+-- source tables: airfield_tracks, channel_health (written by `surveil batch`)
+WITH updates AS (   -- one row per update of a target by a source
+    SELECT coalesce(area, '(outside areas)') AS area, channel AS source, track_id, time_ns,
+           error_m, CAST(NULL AS BOOLEAN) AS identity_correct, CAST(NULL AS BOOLEAN) AS cooperative
+    FROM channel_health
+    WHERE report_x_m IS NOT NULL
+      AND time_ns >= $start_ns AND time_ns < $end_ns
+      AND (CAST($sector AS VARCHAR) IS NULL OR sector = CAST($sector AS VARCHAR))
+    UNION ALL
+    SELECT coalesce(area, '(outside areas)'), 'fused', track_id, time_ns, error_m,
+           identity_correct, cooperative
+    FROM airfield_tracks
+    WHERE n_channels > 0
+      AND time_ns >= $start_ns AND time_ns < $end_ns
+      AND (CAST($sector AS VARCHAR) IS NULL OR sector = CAST($sector AS VARCHAR))
+),
+gaps AS (
+    SELECT *, (time_ns - lag(time_ns) OVER (PARTITION BY source, track_id ORDER BY time_ns)) / 1e9 AS gap_s
+    FROM updates
+),
+req AS (
+    SELECT * FROM (VALUES ('manoeuvring', 12.0), ('apron_taxiway', 20.0), ('stand', 25.0))
+        AS r(area, ed87_p95_m)
+)
+SELECT
+    g.area::VARCHAR                                                           AS area,              -- manoeuvring | apron_taxiway | stand
+    g.source::VARCHAR                                                         AS source,            -- sensor id or 'fused'
+    count(*)::BIGINT                                                          AS updates,           -- target updates
+    count(g.error_m)::BIGINT                                                  AS scored,            -- updates with a reference
+    round(quantile_cont(g.error_m, 0.95), 2)::DOUBLE                          AS p95_error_m,       -- 95th percentile error, m
+    round(sqrt(avg(g.error_m * g.error_m)), 2)::DOUBLE                        AS rms_error_m,       -- RMS error, m
+    any_value(r.ed87_p95_m)::DOUBLE                                           AS ed87_p95_req_m,    -- ED-87 95% requirement, m
+    (quantile_cont(g.error_m, 0.95) <= any_value(r.ed87_p95_m))::BOOLEAN      AS meets_ed87,        -- p95 within it
+    7.5::DOUBLE                                                               AS sensor_p95_req_m,  -- ED-116/117 sensor level, m
+    (quantile_cont(g.error_m, 0.95) <= 7.5)::BOOLEAN                          AS meets_sensor_level,
+    round(avg(CASE WHEN g.identity_correct THEN 1.0 ELSE 0.0 END)
+          FILTER (WHERE g.cooperative), 5)::DOUBLE                            AS p_identification,  -- fused, cooperative targets
+    0.999::DOUBLE                                                             AS p_id_req,          -- ED-87
+    round(avg(CASE WHEN g.gap_s >= 3 AND g.gap_s <= 5 THEN 1.0 ELSE 0.0 END)
+          FILTER (WHERE g.gap_s IS NOT NULL), 5)::DOUBLE                      AS gap_3_5s_share,    -- updates after a 3-5 s gap
+    round(avg(CASE WHEN g.gap_s > 5 THEN 1.0 ELSE 0.0 END)
+          FILTER (WHERE g.gap_s IS NOT NULL), 5)::DOUBLE                      AS gap_over_5s_share  -- updates after a > 5 s gap
+FROM gaps AS g
+LEFT JOIN req AS r ON r.area = g.area
+GROUP BY g.area, g.source
+ORDER BY g.area, (g.source = 'fused') DESC, g.source;
