@@ -15,6 +15,10 @@ measurements to one coordinate system"):
    rotated into the regional frame. A polar covariance rotated by rho is the polar
    covariance at azimuth ``az + rho`` (J depends on the azimuth only), which is how it
    is computed: R(rho) P R(rho)^T == polar_covariance(r, az + rho, sr, sa).
+
+Before these steps, when ``[radar_bias] apply = true``, each site's estimated
+registration bias (``[radar_bias.correction]``: range, azimuth, time offset; see
+pipeline/bias.py and ``surveil calibrate-radars``) is removed from its raw reports.
 """
 
 from __future__ import annotations
@@ -23,13 +27,17 @@ import numpy as np
 import polars as pl
 
 from pipeline import frames
+from pipeline.bias import correct_registration, radar_bias_config
 from pipeline.config import Config, RadarSite
 
 UNKNOWN_SITE = "unknown_site"
 
 
-def align_reports(radar_tracks: pl.DataFrame, cfg: Config) -> tuple[pl.DataFrame, pl.DataFrame]:
-    """Align radar track reports to the regional frame.
+def align_reports(
+    radar_tracks: pl.DataFrame, cfg: Config, *, correct_bias: bool = True
+) -> tuple[pl.DataFrame, pl.DataFrame]:
+    """Align radar track reports to the regional frame (first removing the configured
+    registration biases when ``[radar_bias] apply`` and ``correct_bias``).
 
     Consumes (radar_tracks): site_id, range_m, azimuth_rad, course_rad, sigma_range_m,
     sigma_azimuth_rad, scan_end_azimuth_rad (all other columns pass through).
@@ -44,6 +52,9 @@ def align_reports(radar_tracks: pl.DataFrame, cfg: Config) -> tuple[pl.DataFrame
       ``reason_code`` ("unknown_site") and ``reason``: for the rejects table, so that
       nothing is dropped silently.
     """
+    bias = radar_bias_config(cfg)
+    if correct_bias and bias.apply:
+        radar_tracks = correct_registration(radar_tracks, bias.correction)
     known = [s.site_id for s in cfg.radar_sites]
     is_known = pl.col("site_id").is_in(known)
     unknown = radar_tracks.filter(~is_known).with_columns(
@@ -52,9 +63,9 @@ def align_reports(radar_tracks: pl.DataFrame, cfg: Config) -> tuple[pl.DataFrame
     )
     parts = [
         _align_site(part, cfg.site(site_id), cfg)
-        for (site_id,), part in radar_tracks.filter(is_known).partition_by(
-            "site_id", as_dict=True, maintain_order=True
-        ).items()
+        for (site_id,), part in radar_tracks.filter(is_known)
+        .partition_by("site_id", as_dict=True, maintain_order=True)
+        .items()
     ]
     if not parts:
         return _align_site(radar_tracks.clear(), cfg.radar_sites[0], cfg), unknown
@@ -70,14 +81,19 @@ def _align_site(reports: pl.DataFrame, site: RadarSite, cfg: Config) -> pl.DataF
     az = np.mod(reports["azimuth_rad"].to_numpy() + site.north_alignment_rad, frames.TWO_PI)
     x_site, y_site = frames.polar_to_enu(r, az)
     x, y = frames.site_to_region(
-        x_site, y_site, site.lat_deg, site.lon_deg,
-        cfg.region.origin_lat_deg, cfg.region.origin_lon_deg,
+        x_site,
+        y_site,
+        site.lat_deg,
+        site.lon_deg,
+        cfg.region.origin_lat_deg,
+        cfg.region.origin_lon_deg,
     )
     P = frames.polar_covariance(
         r, az + rho, reports["sigma_range_m"].to_numpy(), reports["sigma_azimuth_rad"].to_numpy()
     )
-    course = np.mod(reports["course_rad"].to_numpy() + site.north_alignment_rad + rho,
-                    frames.TWO_PI)
+    course = np.mod(
+        reports["course_rad"].to_numpy() + site.north_alignment_rad + rho, frames.TWO_PI
+    )
     scan_end = np.mod(
         reports["scan_end_azimuth_rad"].to_numpy() + site.north_alignment_rad, frames.TWO_PI
     )

@@ -24,8 +24,12 @@ def geodetic_to_enu(
 ) -> tuple[np.ndarray, np.ndarray]:
     """WGS-84 (lat, lon, height 0) -> (east_m, north_m) on the tangent plane at the origin."""
     e, n, _ = pm.geodetic2enu(
-        np.asarray(lat_deg, float), np.asarray(lon_deg, float), 0.0,
-        origin_lat_deg, origin_lon_deg, 0.0,
+        np.asarray(lat_deg, float),
+        np.asarray(lon_deg, float),
+        0.0,
+        origin_lat_deg,
+        origin_lon_deg,
+        0.0,
     )
     return np.asarray(e, float), np.asarray(n, float)
 
@@ -80,7 +84,9 @@ def enu_to_polar(east_m: np.ndarray, north_m: np.ndarray) -> tuple[np.ndarray, n
 
 
 def polar_covariance(
-    range_m: np.ndarray, azimuth_rad: np.ndarray, sigma_range_m: np.ndarray,
+    range_m: np.ndarray,
+    azimuth_rad: np.ndarray,
+    sigma_range_m: np.ndarray,
     sigma_azimuth_rad: np.ndarray,
 ) -> np.ndarray:
     """Cartesian position covariance of a polar measurement, (n, 2, 2) in m^2.

@@ -51,8 +51,10 @@ def position_covariance(df: pl.DataFrame) -> tuple[np.ndarray, np.ndarray, np.nd
 def add_geodetic(df: pl.DataFrame, region: RegionConfig) -> pl.DataFrame:
     """Add lat_deg / lon_deg (WGS-84, deg) from x_enu_m / y_enu_m (regional ENU, m)."""
     lat, lon = frames.enu_to_geodetic(
-        df["x_enu_m"].to_numpy(), df["y_enu_m"].to_numpy(),
-        region.origin_lat_deg, region.origin_lon_deg,
+        df["x_enu_m"].to_numpy(),
+        df["y_enu_m"].to_numpy(),
+        region.origin_lat_deg,
+        region.origin_lon_deg,
     )
     return df.with_columns(
         pl.Series("lat_deg", np.atleast_1d(lat), dtype=pl.Float64),
@@ -87,6 +89,7 @@ def leg_endpoints(
     legs: Sequence[FairwayLeg], region: RegionConfig
 ) -> tuple[np.ndarray, np.ndarray]:
     """Start and end of each leg in regional ENU, two (n_legs, 2) arrays, m."""
+
     def enu(lat: list[float], lon: list[float]) -> np.ndarray:
         e, n = frames.geodetic_to_enu(
             np.array(lat), np.array(lon), region.origin_lat_deg, region.origin_lon_deg
@@ -99,8 +102,13 @@ def leg_endpoints(
 
 
 def cross_track_xy(
-    x: np.ndarray, y: np.ndarray, P_xx: np.ndarray, P_yy: np.ndarray, P_xy: np.ndarray,
-    start: np.ndarray, end: np.ndarray,
+    x: np.ndarray,
+    y: np.ndarray,
+    P_xx: np.ndarray,
+    P_yy: np.ndarray,
+    P_xy: np.ndarray,
+    start: np.ndarray,
+    end: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Nearest leg SEGMENT and the cross-track deviation from its axis.
 

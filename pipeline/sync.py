@@ -52,8 +52,19 @@ NS = 1_000_000_000
 SCAN_TOLERANCE_S = 0.25
 
 SYNCED_COLUMNS = (
-    "time_ns", "site_id", "local_track_id", "report_time_ns", "x_enu_m", "y_enu_m",
-    "P_xx", "P_yy", "P_xy", "course_rad", "speed_mps", "sigma_course_rad", "sigma_speed_mps",
+    "time_ns",
+    "site_id",
+    "local_track_id",
+    "report_time_ns",
+    "x_enu_m",
+    "y_enu_m",
+    "P_xx",
+    "P_yy",
+    "P_xy",
+    "course_rad",
+    "speed_mps",
+    "sigma_course_rad",
+    "sigma_speed_mps",
 )
 
 
@@ -100,7 +111,10 @@ def extrapolation_covariance(
 
 
 def extrapolate_position(
-    x_m: np.ndarray, y_m: np.ndarray, speed_mps: np.ndarray, course_rad: np.ndarray,
+    x_m: np.ndarray,
+    y_m: np.ndarray,
+    speed_mps: np.ndarray,
+    course_rad: np.ndarray,
     dt_s: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Multi-radar paper eq. 9 (x east): x* = x + V dt sin C, y* = y + V dt cos C, m."""
@@ -133,7 +147,8 @@ def _step1_scans(aligned: pl.DataFrame) -> pl.DataFrame:
     the latest t_TO in it. A track reported twice in one scan keeps its latest report.
     """
     dt1 = scan_end_offset_s(
-        aligned["azimuth_rad"].to_numpy(), aligned["scan_end_azimuth_rad"].to_numpy(),
+        aligned["azimuth_rad"].to_numpy(),
+        aligned["scan_end_azimuth_rad"].to_numpy(),
         aligned["scan_period_s"].to_numpy(),
     )
     df = aligned.with_columns(
@@ -191,8 +206,13 @@ def _step2(pick: pl.DataFrame, epoch: np.ndarray, sigma_dt_s: float) -> pl.DataF
     V, C = pick["speed_mps"].to_numpy(), pick["course_rad"].to_numpy()
     x, y = extrapolate_position(pick["x_enu_m"].to_numpy(), pick["y_enu_m"].to_numpy(), V, C, dt)
     dxx, dyy, dxy = extrapolation_covariance(
-        V, C, dt, pick["sigma_speed_mps"].to_numpy(), pick["sigma_course_rad"].to_numpy(),
-        sigma_dt_s, n_timing_errors=2,
+        V,
+        C,
+        dt,
+        pick["sigma_speed_mps"].to_numpy(),
+        pick["sigma_course_rad"].to_numpy(),
+        sigma_dt_s,
+        n_timing_errors=2,
     )
     return (
         pick.with_columns(

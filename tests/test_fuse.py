@@ -25,13 +25,20 @@ def test_eq14_weights_and_sum_of_weights_sigma_inline():
                  P_yy=[900.0, 225.0], P_xy=[30.0, -20.0], speed_mps=[5.0, 6.0],
                  sigma_speed_mps=[0.2, 0.4], site_id=["R2", "R1"])
     f = fuse(rows).row(0, named=True)
-    wx, wy = np.array([1 / 100, 1 / 400]), np.array([1 / 900, 1 / 225])
-    assert f["x_enu_m"] == pytest.approx((10 * wx[0] + 40 * wx[1]) / wx.sum())
-    assert f["y_enu_m"] == pytest.approx((5 * wy[0] - 5 * wy[1]) / wy.sum())
-    assert f["sigma_x_m"] == pytest.approx(wx.sum() ** -0.5)
-    assert f["sigma_y_m"] == pytest.approx(wy.sum() ** -0.5)
-    assert f["cov_xy_m2"] == pytest.approx((wx * wy * np.array([30.0, -20.0])).sum()
-                                          / (wx.sum() * wy.sum()))
+    # position: eq. 14 with matrix weights P_i^-1 (information form), recomputed inline
+    P = [np.array([[100.0, 30.0], [30.0, 900.0]]), np.array([[400.0, -20.0], [-20.0, 225.0]])]
+    p = [np.array([10.0, 5.0]), np.array([40.0, -5.0])]
+    P_hat = np.linalg.inv(sum(np.linalg.inv(Pi) for Pi in P))
+    p_hat = P_hat @ sum(np.linalg.solve(Pi, pi) for Pi, pi in zip(P, p, strict=True))
+    assert [f["x_enu_m"], f["y_enu_m"]] == pytest.approx(p_hat.tolist())
+    assert f["sigma_x_m"] == pytest.approx(P_hat[0, 0] ** 0.5)
+    assert f["sigma_y_m"] == pytest.approx(P_hat[1, 1] ** 0.5)
+    assert f["cov_xy_m2"] == pytest.approx(P_hat[0, 1])
+    # with diagonal covariances it is eq. 14 per axis, sigma (sum w)^-1/2
+    diag = fuse(rows.with_columns(pl.lit(0.0).alias("P_xy"))).row(0, named=True)
+    wx = np.array([1 / 100, 1 / 400])
+    assert diag["x_enu_m"] == pytest.approx((10 * wx[0] + 40 * wx[1]) / wx.sum())
+    assert diag["sigma_x_m"] == pytest.approx(wx.sum() ** -0.5)
     wv = np.array([0.2, 0.4]) ** -2
     assert f["speed_mps"] == pytest.approx((5 * wv[0] + 6 * wv[1]) / wv.sum())
     assert f["sigma_speed_mps"] == pytest.approx(wv.sum() ** -0.5)
@@ -93,5 +100,13 @@ def test_monte_carlo_fused_beats_each_radar_and_is_calibrated():
     nees = (sy**2 * ex**2 - 2 * cxy * ex * ey + sx**2 * ey**2) / (sx**2 * sy**2 - cxy**2)
     assert 1.9 < nees.mean() < 2.1
     assert np.std(ex) == pytest.approx(sx[0], rel=0.05)
-    # eq. 15 reports a smaller sigma than the spread actually seen
-    assert paper_eq15_sigma([20.0, 60.0]) < 0.95 * np.std(ex)
+    # eq. 15 reports a smaller sigma than the spread actually seen of the per-axis
+    # eq. 14 mean it describes (east weights 1/20^2, 1/60^2)
+    w = np.array([20.0, 60.0]) ** -2
+    ex_axis = (w[0] * e1[:, 0] + w[1] * e2[:, 0]) / w.sum()
+    assert paper_eq15_sigma([20.0, 60.0]) < 0.95 * np.std(ex_axis)
+    # matrix weights: no direction is worse than the better radar's
+    for a in np.radians([0.0, 45.0, 90.0, 135.0]):
+        n = np.array([np.sin(a), np.cos(a)])
+        proj = ex * n[0] + ey * n[1]
+        assert np.std(proj) < min(np.std(e1 @ n), np.std(e2 @ n))

@@ -60,8 +60,12 @@ def ais_at_epochs(
         np.searchsorted(epochs, t + round(cfg.max_report_age_s * NS), side="right"),
         np.searchsorted(epochs, nxt, side="left"),
     )
-    x0, y0 = geodetic_to_enu(ais["lat_deg"].to_numpy(), ais["lon_deg"].to_numpy(),
-                             region.origin_lat_deg, region.origin_lon_deg)
+    x0, y0 = geodetic_to_enu(
+        ais["lat_deg"].to_numpy(),
+        ais["lon_deg"].to_numpy(),
+        region.origin_lat_deg,
+        region.origin_lon_deg,
+    )
     row, idx = expand_ranges(lo, hi)
     pick = ais[row]
     epoch = epochs[idx]
@@ -73,21 +77,26 @@ def ais_at_epochs(
     along = (cfg.sigma_sog_mps * dt) ** 2 * moving.to_numpy()
     s, c = np.sin(cog), np.cos(cog)
     var_p = cfg.sigma_position_m**2
-    return pl.DataFrame({
-        "time_ns": epoch,
-        "mmsi": pick["mmsi"],
-        "ais_time_ns": pick["time_ns"],
-        "x_enu_m": x,
-        "y_enu_m": y,
-        "P_xx": var_p + along * s * s,
-        "P_yy": var_p + along * c * c,
-        "P_xy": along * s * c,
-    }, schema_overrides={"time_ns": pl.Int64, "mmsi": pl.Int64, "ais_time_ns": pl.Int64}
+    return pl.DataFrame(
+        {
+            "time_ns": epoch,
+            "mmsi": pick["mmsi"],
+            "ais_time_ns": pick["time_ns"],
+            "x_enu_m": x,
+            "y_enu_m": y,
+            "P_xx": var_p + along * s * s,
+            "P_yy": var_p + along * c * c,
+            "P_xy": along * s * c,
+        },
+        schema_overrides={"time_ns": pl.Int64, "mmsi": pl.Int64, "ais_time_ns": pl.Int64},
     ).sort("time_ns", "mmsi")
 
 
 def identify(
-    system_tracks: pl.DataFrame, ais_reports: pl.DataFrame, *, cfg: AisConfig,
+    system_tracks: pl.DataFrame,
+    ais_reports: pl.DataFrame,
+    *,
+    cfg: AisConfig,
     region: RegionConfig,
 ) -> tuple[pl.DataFrame, pl.DataFrame]:
     """Match AIS reports to fused tracks and vote each fused point's identity.
@@ -103,8 +112,12 @@ def identify(
     ais = ais_at_epochs(ais_reports, epochs, cfg=cfg, region=region)
     tracks = system_tracks.sort("time_ns", "system_track_id")
     matches = _match(tracks, ais, gate_threshold(cfg.gate_probability))
-    voted = vote_identity(tracks.select("time_ns", "system_track_id"), matches,
-                          cfg.identity_window_s, cfg.min_identity_matches)
+    voted = vote_identity(
+        tracks.select("time_ns", "system_track_id"),
+        matches,
+        cfg.identity_window_s,
+        cfg.min_identity_matches,
+    )
     out = tracks.drop("mmsi", strict=False).join(
         voted, on=["time_ns", "system_track_id"], how="left"
     )
@@ -136,14 +149,22 @@ def _match(tracks: pl.DataFrame, ais: pl.DataFrame, gate: float) -> pl.DataFrame
         d2_all.append(d2[r, c])
     ti = np.concatenate(ti_all) if ti_all else np.empty(0, int)
     ai = np.concatenate(ai_all) if ai_all else np.empty(0, int)
-    return pl.DataFrame({
-        "time_ns": tt[ti],
-        "system_track_id": tracks["system_track_id"].to_numpy()[ti],
-        "mmsi": ais["mmsi"].to_numpy()[ai],
-        "ais_time_ns": ais["ais_time_ns"].to_numpy()[ai],
-        "mahalanobis_d2": np.concatenate(d2_all) if d2_all else np.empty(0),
-    }, schema={"time_ns": pl.Int64, "system_track_id": pl.Int64, "mmsi": pl.Int64,
-               "ais_time_ns": pl.Int64, "mahalanobis_d2": pl.Float64})
+    return pl.DataFrame(
+        {
+            "time_ns": tt[ti],
+            "system_track_id": tracks["system_track_id"].to_numpy()[ti],
+            "mmsi": ais["mmsi"].to_numpy()[ai],
+            "ais_time_ns": ais["ais_time_ns"].to_numpy()[ai],
+            "mahalanobis_d2": np.concatenate(d2_all) if d2_all else np.empty(0),
+        },
+        schema={
+            "time_ns": pl.Int64,
+            "system_track_id": pl.Int64,
+            "mmsi": pl.Int64,
+            "ais_time_ns": pl.Int64,
+            "mahalanobis_d2": pl.Float64,
+        },
+    )
 
 
 def vote_identity(
@@ -163,22 +184,33 @@ def vote_identity(
     """
     w = round(window_s * NS)
     key = ["system_track_id", "mmsi"]
-    cum = matches.sort(*key, "time_ns").with_columns(
-        pl.int_range(1, pl.len() + 1).over(key).alias("n"),
-        pl.col("mahalanobis_d2").cum_sum().over(key).alias("d2"),
-    ).select(*key, "time_ns", "n", "d2").sort("time_ns")
+    cum = (
+        matches.sort(*key, "time_ns")
+        .with_columns(
+            pl.int_range(1, pl.len() + 1).over(key).alias("n"),
+            pl.col("mahalanobis_d2").cum_sum().over(key).alias("d2"),
+        )
+        .select(*key, "time_ns", "n", "d2")
+        .sort("time_ns")
+    )
     queries = points.join(matches.select(key).unique(), on="system_track_id", how="inner")
 
     def cum_at(t: pl.Expr) -> pl.DataFrame:
         q = queries.with_columns(t.alias("_t")).sort("_t")
-        return q.join_asof(cum.rename({"time_ns": "_t"}), on="_t", by=key,
-                           strategy="backward", check_sortedness=False).select(
-            "time_ns", *key, pl.col("n").fill_null(0), pl.col("d2").fill_null(0.0))
+        return q.join_asof(
+            cum.rename({"time_ns": "_t"}),
+            on="_t",
+            by=key,
+            strategy="backward",
+            check_sortedness=False,
+        ).select("time_ns", *key, pl.col("n").fill_null(0), pl.col("d2").fill_null(0.0))
 
     hi = cum_at(pl.col("time_ns") + w)
     lo = cum_at(pl.col("time_ns") - w - 1)
     counts = hi.join(lo, on=["time_ns", *key], suffix="_lo").select(
-        "time_ns", *key, (pl.col("n") - pl.col("n_lo")).alias("count"),
+        "time_ns",
+        *key,
+        (pl.col("n") - pl.col("n_lo")).alias("count"),
         (pl.col("d2") - pl.col("d2_lo")).alias("d2sum"),
     )
     totals = _mmsi_totals(counts.select("time_ns", "mmsi").unique(), matches, w)
@@ -187,8 +219,10 @@ def vote_identity(
     )
     return (
         counts.filter(pl.col("count") > 0)
-        .sort(["time_ns", "system_track_id", "count", "d2sum", "mmsi"],
-              descending=[False, False, True, False, False])
+        .sort(
+            ["time_ns", "system_track_id", "count", "d2sum", "mmsi"],
+            descending=[False, False, True, False, False],
+        )
         .unique(["time_ns", "system_track_id"], keep="first", maintain_order=True)
         .select("time_ns", "system_track_id", "mmsi")
     )
@@ -196,16 +230,24 @@ def vote_identity(
 
 def _mmsi_totals(queries: pl.DataFrame, matches: pl.DataFrame, w: int) -> pl.DataFrame:
     """Matches of each MMSI to any track within +-w ns of each queried (time_ns, mmsi)."""
-    cum = matches.sort("mmsi", "time_ns").with_columns(
-        pl.int_range(1, pl.len() + 1).over("mmsi").alias("n")
-    ).select("mmsi", "time_ns", "n").sort("time_ns")
+    cum = (
+        matches.sort("mmsi", "time_ns")
+        .with_columns(pl.int_range(1, pl.len() + 1).over("mmsi").alias("n"))
+        .select("mmsi", "time_ns", "n")
+        .sort("time_ns")
+    )
 
     def at(t: pl.Expr) -> pl.DataFrame:
         q = queries.with_columns(t.alias("_t")).sort("_t")
-        return q.join_asof(cum.rename({"time_ns": "_t"}), on="_t", by="mmsi",
-                           strategy="backward", check_sortedness=False).select(
-            "time_ns", "mmsi", pl.col("n").fill_null(0))
+        return q.join_asof(
+            cum.rename({"time_ns": "_t"}),
+            on="_t",
+            by="mmsi",
+            strategy="backward",
+            check_sortedness=False,
+        ).select("time_ns", "mmsi", pl.col("n").fill_null(0))
 
     hi, lo = at(pl.col("time_ns") + w), at(pl.col("time_ns") - w - 1)
     return hi.join(lo, on=["time_ns", "mmsi"], suffix="_lo").select(
-        "time_ns", "mmsi", (pl.col("n") - pl.col("n_lo")).alias("total"))
+        "time_ns", "mmsi", (pl.col("n") - pl.col("n_lo")).alias("total")
+    )

@@ -26,7 +26,8 @@ def stitch_track_ids(associations_by_unit: list[pl.DataFrame]) -> dict[int, int]
         if prev.height == 0 or nxt.height == 0:
             continue
         tail = prev.filter(pl.col("time_ns") == pl.col("time_ns").max()).select(
-            "site_id", "local_track_id",
+            "site_id",
+            "local_track_id",
             pl.col("system_track_id").replace(mapping).alias("continues"),
         )
         head = nxt.filter(pl.col("time_ns") == pl.col("time_ns").min()).select(

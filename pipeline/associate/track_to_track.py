@@ -135,14 +135,30 @@ class _Candidates:
         self.sums = np.zeros((capacity, 10))
         self.prev_ids = np.full((capacity, n_sites), -1, dtype=np.int64)
 
-    def add(self, clusters: np.ndarray, rows: Kinematics, sv: np.ndarray, sc: np.ndarray,
-            prev: np.ndarray, site: int) -> None:
+    def add(
+        self,
+        clusters: np.ndarray,
+        rows: Kinematics,
+        sv: np.ndarray,
+        sc: np.ndarray,
+        prev: np.ndarray,
+        site: int,
+    ) -> None:
         wx, wy, wv, wc = 1.0 / rows.P_xx, 1.0 / rows.P_yy, sv**-2, sc**-2
-        contrib = np.column_stack([
-            wx, wx * rows.x_m, wy, wy * rows.y_m, wx * wy * rows.P_xy,
-            wv, wv * rows.speed_mps, wc, wc * np.sin(rows.course_rad),
-            wc * np.cos(rows.course_rad),
-        ])
+        contrib = np.column_stack(
+            [
+                wx,
+                wx * rows.x_m,
+                wy,
+                wy * rows.y_m,
+                wx * wy * rows.P_xy,
+                wv,
+                wv * rows.speed_mps,
+                wc,
+                wc * np.sin(rows.course_rad),
+                wc * np.cos(rows.course_rad),
+            ]
+        )
         np.add.at(self.sums, clusters, contrib)
         self.prev_ids[clusters, site] = prev
 
@@ -155,8 +171,13 @@ class _Candidates:
         """Fused kinematics of the candidates, with (sigma_speed, sigma_course)."""
         s = self.sums[: self.n].T
         kin = Kinematics(
-            s[1] / s[0], s[3] / s[2], 1.0 / s[0], 1.0 / s[2], s[4] / (s[0] * s[2]),
-            s[6] / s[5], np.mod(np.arctan2(s[8], s[9]), 2 * np.pi),
+            s[1] / s[0],
+            s[3] / s[2],
+            1.0 / s[0],
+            1.0 / s[2],
+            s[4] / (s[0] * s[2]),
+            s[6] / s[5],
+            np.mod(np.arctan2(s[8], s[9]), 2 * np.pi),
         )
         return kin, s[5] ** -0.5, s[7] ** -0.5
 
@@ -181,9 +202,7 @@ class _Memory:
         return idx
 
 
-def associate_tracks(
-    synced: pl.DataFrame, *, cfg: AssociationConfig, id_base: int
-) -> pl.DataFrame:
+def associate_tracks(synced: pl.DataFrame, *, cfg: AssociationConfig, id_base: int) -> pl.DataFrame:
     """Assign every synchronised radar track to a system track, epoch by epoch.
 
     Consumes (from ``synchronise``): time_ns, site_id, local_track_id, x_enu_m, y_enu_m,
@@ -214,8 +233,12 @@ def _assign_ids(
     linear_sum_assignment per site and one for the ids); epochs must be processed in
     order because each epoch's ids depend on the previous ones, hence the loop."""
     t = df["time_ns"].to_numpy()
-    kin = Kinematics(*(df[c].to_numpy().astype(float) for c in (
-        "x_enu_m", "y_enu_m", "P_xx", "P_yy", "P_xy", "speed_mps", "course_rad")))
+    kin = Kinematics(
+        *(
+            df[c].to_numpy().astype(float)
+            for c in ("x_enu_m", "y_enu_m", "P_xx", "P_yy", "P_xy", "speed_mps", "course_rad")
+        )
+    )
     sv, sc = df["sigma_speed_mps"].to_numpy(), df["sigma_course_rad"].to_numpy()
     key = df["_key"].to_numpy().astype(np.int64)
     mem = _Memory(
@@ -231,24 +254,40 @@ def _assign_ids(
     for a, b in pairwise(bounds):
         rows = np.arange(a, b)
         prev = np.where(mem.key_seen[key[rows]] >= t[a] - timeout_ns, mem.key_sys[key[rows]], -1)
-        cand, member = _cluster_epoch(kin.take(rows), sv[rows], sc[rows], prev,
-                                      site_idx[rows], n_sites, cfg, gate)
+        cand, member = _cluster_epoch(
+            kin.take(rows), sv[rows], sc[rows], prev, site_idx[rows], n_sites, cfg, gate
+        )
         ids = _resolve_ids(cand, mem, int(t[a]), cfg, gate)
         out[rows] = ids[member]
         mem.key_sys[key[rows]] = out[rows]
         mem.key_seen[key[rows]] = t[a]
         fused, fsv, fsc = cand.state()
         mem.sys_seen[ids] = t[a]
-        mem.sys_state[ids] = np.column_stack([
-            fused.x_m, fused.y_m, fused.P_xx, fused.P_yy, fused.P_xy,
-            fused.speed_mps, fused.course_rad, fsv, fsc,
-        ])
+        mem.sys_state[ids] = np.column_stack(
+            [
+                fused.x_m,
+                fused.y_m,
+                fused.P_xx,
+                fused.P_yy,
+                fused.P_xy,
+                fused.speed_mps,
+                fused.course_rad,
+                fsv,
+                fsc,
+            ]
+        )
     return out
 
 
 def _cluster_epoch(
-    rows: Kinematics, sv: np.ndarray, sc: np.ndarray, prev: np.ndarray, site: np.ndarray,
-    n_sites: int, cfg: AssociationConfig, gate: float,
+    rows: Kinematics,
+    sv: np.ndarray,
+    sc: np.ndarray,
+    prev: np.ndarray,
+    site: np.ndarray,
+    n_sites: int,
+    cfg: AssociationConfig,
+    gate: float,
 ) -> tuple[_Candidates, np.ndarray]:
     """Sequential N-radar clustering of one epoch's rows (sorted by site). Returns the
     candidates and each row's candidate index."""
@@ -288,8 +327,7 @@ def _resolve_ids(
     orphan = ~(cand.prev_ids[: cand.n] >= 0).any(axis=1)
     cost = np.full(votes.shape, np.inf)
     age_rank = np.broadcast_to(np.arange(live.size) / max(live.size, 1), votes.shape)
-    cost[voted] = (-10.0 * votes[voted] + age_rank[voted]
-                   + 0.01 * np.minimum(d2[voted] / gate, 1.0))
+    cost[voted] = -10.0 * votes[voted] + age_rank[voted] + 0.01 * np.minimum(d2[voted] / gate, 1.0)
     reuse = orphan[:, None] & np.isfinite(d2)
     cost[reuse] = d2[reuse] / gate - 1.0
     ids = np.full(cand.n, -1, np.int64)
@@ -315,15 +353,16 @@ def _with_leave_one_out_d2(df: pl.DataFrame) -> pl.DataFrame:
     system track at that epoch (group sums minus the row's own terms); null when alone."""
     g = ["time_ns", "system_track_id"]
     wx, wy = 1.0 / pl.col("P_xx"), 1.0 / pl.col("P_yy")
-    ox = (wx.sum().over(g) - wx)
-    oy = (wy.sum().over(g) - wy)
+    ox = wx.sum().over(g) - wx
+    oy = wy.sum().over(g) - wy
     tmp = df.with_columns(
         ((wx * pl.col("x_enu_m")).sum().over(g) - wx * pl.col("x_enu_m")).truediv(ox).alias("_xo"),
         ((wy * pl.col("y_enu_m")).sum().over(g) - wy * pl.col("y_enu_m")).truediv(oy).alias("_yo"),
         (1.0 / ox).alias("_Pxx"),
         (1.0 / oy).alias("_Pyy"),
-        (((wx * wy * pl.col("P_xy")).sum().over(g) - wx * wy * pl.col("P_xy")) / (ox * oy))
-        .alias("_Pxy"),
+        (((wx * wy * pl.col("P_xy")).sum().over(g) - wx * wy * pl.col("P_xy")) / (ox * oy)).alias(
+            "_Pxy"
+        ),
         pl.len().over(g).alias("_n"),
     )
     dx, dy = pl.col("x_enu_m") - pl.col("_xo"), pl.col("y_enu_m") - pl.col("_yo")
@@ -333,4 +372,3 @@ def _with_leave_one_out_d2(df: pl.DataFrame) -> pl.DataFrame:
     return tmp.with_columns(
         pl.when(pl.col("_n") > 1).then(d2).otherwise(None).alias("mahalanobis_d2")
     ).drop("_xo", "_yo", "_Pxx", "_Pyy", "_Pxy", "_n")
-

@@ -102,21 +102,45 @@ def write_channel_archive(
     parts = []
     for s in site_ids:
         df = scenario.radar_reports.filter(pl.col("site_id") == s)
-        parts.append(pl.DataFrame({
-            "log_time_ns": df["log_time_ns"], "channel": rank[radar_topic(s)],
-            "payload": _json_payloads(df, radar_fields)}))
+        parts.append(
+            pl.DataFrame(
+                {
+                    "log_time_ns": df["log_time_ns"],
+                    "channel": rank[radar_topic(s)],
+                    "payload": _json_payloads(df, radar_fields),
+                }
+            )
+        )
     ais = scenario.ais_sentences
-    parts.append(pl.DataFrame({
-        "log_time_ns": ais["log_time_ns"], "channel": rank[AIS_TOPIC],
-        "payload": ais["sentence"].cast(pl.Binary)}))
+    parts.append(
+        pl.DataFrame(
+            {
+                "log_time_ns": ais["log_time_ns"],
+                "channel": rank[AIS_TOPIC],
+                "payload": ais["sentence"].cast(pl.Binary),
+            }
+        )
+    )
     truth = scenario.truth
-    parts.append(pl.DataFrame({
-        "log_time_ns": truth["time_ns"], "channel": rank[TRUTH_TOPIC],
-        "payload": _json_payloads(truth, truth_fields)}))
+    parts.append(
+        pl.DataFrame(
+            {
+                "log_time_ns": truth["time_ns"],
+                "channel": rank[TRUTH_TOPIC],
+                "payload": _json_payloads(truth, truth_fields),
+            }
+        )
+    )
     messages = (
-        pl.concat([p.with_columns(pl.col("channel").cast(pl.Int32),
-                                  pl.int_range(pl.len(), dtype=pl.Int64).alias("row"))
-                   for p in parts])
+        pl.concat(
+            [
+                p.with_columns(
+                    pl.col("channel").cast(pl.Int32),
+                    pl.int_range(pl.len(), dtype=pl.Int64).alias("row"),
+                )
+                for p in parts
+            ]
+        )
         .sort(["log_time_ns", "channel", "row"])
         .with_columns((pl.col("log_time_ns") // period_ns).alias("file_index"))
     )
@@ -133,15 +157,23 @@ def write_channel_archive(
     for (file_index,), df in messages.group_by(["file_index"], maintain_order=True):
         period_start = int(file_index) * period_ns
         path = out_dir / archive_file_name(scenario_name, period_start)
-        meta = {**metadata, "file_start_ns": str(period_start),
-                "file_end_ns": str(period_start + period_ns)}
+        meta = {
+            **metadata,
+            "file_start_ns": str(period_start),
+            "file_end_ns": str(period_start + period_ns),
+        }
         _write_file(path, channels, schemas, meta, df)
         paths.append(path)
     return paths
 
 
-def _write_file(path: Path, channels: list[tuple[str, str, str | None]],
-                schemas: dict[str, bytes], metadata: dict[str, str], df: pl.DataFrame) -> None:
+def _write_file(
+    path: Path,
+    channels: list[tuple[str, str, str | None]],
+    schemas: dict[str, bytes],
+    metadata: dict[str, str],
+    df: pl.DataFrame,
+) -> None:
     fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(fd, "wb") as f:
@@ -154,14 +186,19 @@ def _write_file(path: Path, channels: list[tuple[str, str, str | None]],
                 if schema_name is not None:
                     if schema_name not in schema_ids:
                         schema_ids[schema_name] = writer.register_schema(
-                            schema_name, "jsonschema", schemas[schema_name])
+                            schema_name, "jsonschema", schemas[schema_name]
+                        )
                     sid = schema_ids[schema_name]
                 channel_ids.append(writer.register_channel(topic, encoding, sid))
             writer.add_metadata("surveil.scenario", metadata)
             sequence = [0] * len(channels)
             add = writer.add_message
-            for t, ch, payload in zip(df["log_time_ns"].to_list(), df["channel"].to_list(),
-                                      df["payload"].to_list(), strict=True):
+            for t, ch, payload in zip(
+                df["log_time_ns"].to_list(),
+                df["channel"].to_list(),
+                df["payload"].to_list(),
+                strict=True,
+            ):
                 add(channel_ids[ch], t, payload, t, sequence[ch])
                 sequence[ch] += 1
             writer.finish()

@@ -128,16 +128,52 @@ _FLAGS: tuple[tuple[int, str], ...] = (
     (207, "LZ"),  # Bulgaria
 )
 _NAME_FIRST = (
-    "DNIPRO", "ODESA", "PIVDENNYI", "CHORNOMORSK", "IZMAIL", "DANUBE", "AEGEAN", "MARMARA",
-    "ANATOLIA", "HANSA", "AMBER", "CORAL", "NORDIC", "ATLANTIC", "PONTIC", "TAVRIA",
+    "DNIPRO",
+    "ODESA",
+    "PIVDENNYI",
+    "CHORNOMORSK",
+    "IZMAIL",
+    "DANUBE",
+    "AEGEAN",
+    "MARMARA",
+    "ANATOLIA",
+    "HANSA",
+    "AMBER",
+    "CORAL",
+    "NORDIC",
+    "ATLANTIC",
+    "PONTIC",
+    "TAVRIA",
 )
 _NAME_SECOND = (
-    "STAR", "TRADER", "SPIRIT", "PIONEER", "GLORY", "WAVE", "EXPRESS", "HOPE", "VENTURE",
-    "PRIDE", "LIGHT", "BREEZE", "CARRIER", "PROSPECT",
+    "STAR",
+    "TRADER",
+    "SPIRIT",
+    "PIONEER",
+    "GLORY",
+    "WAVE",
+    "EXPRESS",
+    "HOPE",
+    "VENTURE",
+    "PRIDE",
+    "LIGHT",
+    "BREEZE",
+    "CARRIER",
+    "PROSPECT",
 )
 _SMALL_CRAFT = (
-    "CHAIKA", "DELFIN", "VESNA", "ALBATROS", "MRIYA", "ZORIA", "KALYNA", "BRIZ", "SKIF",
-    "KATRAN", "BUREVISNYK", "VITRYLO",
+    "CHAIKA",
+    "DELFIN",
+    "VESNA",
+    "ALBATROS",
+    "MRIYA",
+    "ZORIA",
+    "KALYNA",
+    "BRIZ",
+    "SKIF",
+    "KATRAN",
+    "BUREVISNYK",
+    "VITRYLO",
 )
 _DESTINATIONS_INBOUND = ("ODESA", "PIVDENNYI", "CHORNOMORSK", "MYKOLAIV")
 _DESTINATIONS_OUTBOUND = ("ISTANBUL", "CONSTANTA", "VARNA", "PIRAEUS", "BOURGAS")
@@ -151,8 +187,9 @@ def _imo_with_check_digit(body6: int) -> int:
     return body6 * 10 + check
 
 
-def draw_identity(rng: np.random.Generator, *, ais_class: str, kind: str, inbound: bool) -> (
-        AisIdentity):
+def draw_identity(
+    rng: np.random.Generator, *, ais_class: str, kind: str, inbound: bool
+) -> AisIdentity:
     """Random but plausible static data for one station.
 
     ``kind``: "fairway" (merchant ship or, for Class B, small craft) or "ferry".
@@ -165,7 +202,8 @@ def draw_identity(rng: np.random.Generator, *, ais_class: str, kind: str, inboun
     mmsi = mid * 1_000_000 + int(rng.integers(100_000, 1_000_000))
     callsign = cs_prefix + "".join(_ALNUM[int(i)] for i in rng.integers(0, 36, size=4))
     destination = (_DESTINATIONS_INBOUND if inbound else _DESTINATIONS_OUTBOUND)[
-        int(rng.integers(0, 4))]
+        int(rng.integers(0, 4))
+    ]
     if kind == "ferry":
         name = f"FERRY {_NAME_FIRST[int(rng.integers(0, len(_NAME_FIRST)))]}"
         ship_type, length, beam, draught = 60, rng.uniform(60, 110), rng.uniform(14, 20), 4.0
@@ -175,8 +213,10 @@ def draw_identity(rng: np.random.Generator, *, ais_class: str, kind: str, inboun
         ship_type = (37, 36, 30)[int(rng.integers(0, 3))]  # pleasure, sailing, fishing
         length, beam, draught = rng.uniform(8, 22), rng.uniform(3, 6), 1.5
     else:
-        name = (f"{_NAME_FIRST[int(rng.integers(0, len(_NAME_FIRST)))]} "
-                f"{_NAME_SECOND[int(rng.integers(0, len(_NAME_SECOND)))]}")
+        name = (
+            f"{_NAME_FIRST[int(rng.integers(0, len(_NAME_FIRST)))]} "
+            f"{_NAME_SECOND[int(rng.integers(0, len(_NAME_SECOND)))]}"
+        )
         ship_type = (70, 70, 70, 80, 80, 52)[int(rng.integers(0, 6))]  # cargo, tanker, tug
         if ship_type == 52:
             length, beam, draught = rng.uniform(25, 40), rng.uniform(8, 12), 4.0
@@ -203,13 +243,15 @@ def draw_identity(rng: np.random.Generator, *, ais_class: str, kind: str, inboun
 
 # --- schedules ---------------------------------------------------------------------
 
+
 def _turning(t: float, windows: np.ndarray) -> bool:
     i = int(np.searchsorted(windows[:, 0], t, side="right")) - 1
     return i >= 0 and t < windows[i, 1]
 
 
-def position_report_times(station: AisStation, phase_u: float, duration_s: float) -> tuple[
-        np.ndarray, np.ndarray]:
+def position_report_times(
+    station: AisStation, phase_u: float, duration_s: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Times of the position reports, s since the scenario start, and their message id.
 
     The first report comes ``phase_u`` (uniform in [0, 1)) of an interval after the
@@ -226,8 +268,9 @@ def position_report_times(station: AisStation, phase_u: float, duration_s: float
         n = max(0, math.ceil((end - t) / step))
         arr = t + step * np.arange(n, dtype=float)
         return arr[arr < end], np.full(int(np.sum(arr < end)), 18, dtype=np.int16)
-    t = station.t_enter_s + phase_u * class_a_interval_s(sog_kn, _turning(station.t_enter_s,
-                                                                           windows))
+    t = station.t_enter_s + phase_u * class_a_interval_s(
+        sog_kn, _turning(station.t_enter_s, windows)
+    )
     prev_step = None
     while t < end:
         step = class_a_interval_s(sog_kn, _turning(t, windows))
@@ -239,19 +282,25 @@ def position_report_times(station: AisStation, phase_u: float, duration_s: float
     return np.asarray(times, dtype=float), np.asarray(msg_ids, dtype=np.int16)
 
 
-def _offset_lat_lon(lat_deg: np.ndarray, lon_deg: np.ndarray, east_m: np.ndarray,
-                    north_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _offset_lat_lon(
+    lat_deg: np.ndarray, lon_deg: np.ndarray, east_m: np.ndarray, north_m: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Move WGS-84 points by small east/north offsets (m), with the ellipsoid's radii."""
     phi = np.radians(lat_deg)
     w = 1.0 - _WGS84_E2 * np.sin(phi) ** 2
     n_radius = _WGS84_A_M / np.sqrt(w)
     m_radius = _WGS84_A_M * (1.0 - _WGS84_E2) / w**1.5
-    return (lat_deg + np.degrees(north_m / m_radius),
-            lon_deg + np.degrees(east_m / (n_radius * np.cos(phi))))
+    return (
+        lat_deg + np.degrees(north_m / m_radius),
+        lon_deg + np.degrees(east_m / (n_radius * np.cos(phi))),
+    )
 
 
 def simulate_ais(
-    stations: Sequence[tuple[AisStation, StateFn]], *, start_ns: int, duration_s: float,
+    stations: Sequence[tuple[AisStation, StateFn]],
+    *,
+    start_ns: int,
+    duration_s: float,
     seed: int,
 ) -> pl.DataFrame:
     """AIS sentences received from ``stations`` during [0, duration_s).
@@ -278,9 +327,14 @@ def simulate_ais(
             second = (fix_ns // 1_000_000_000) % 60
             for i in range(t_pos.size):
                 msg: dict = {
-                    "type": int(msg_ids[i]), "mmsi": ident.mmsi, "speed": float(sog_kn[i]),
-                    "accuracy": True, "lon": float(lon[i]), "lat": float(lat[i]),
-                    "course": float(cog_deg[i]), "second": int(second[i]),
+                    "type": int(msg_ids[i]),
+                    "mmsi": ident.mmsi,
+                    "speed": float(sog_kn[i]),
+                    "accuracy": True,
+                    "lon": float(lon[i]),
+                    "lat": float(lat[i]),
+                    "course": float(cog_deg[i]),
+                    "second": int(second[i]),
                 }
                 if ident.ais_class == "A":
                     msg.update(status=0, heading=int(heading[i]), maneuver=0)
@@ -309,8 +363,9 @@ def simulate_ais(
         if nparts > 1:
             seq_id = seq_counter % 10
             seq_counter += 1
-        parts = encode_dict(msg, talker_id="AI", sentence_type="VDM", radio_channel=channel,
-                            seq_id=seq_id)
+        parts = encode_dict(
+            msg, talker_id="AI", sentence_type="VDM", radio_channel=channel, seq_id=seq_id
+        )
         t_ns = start_ns + round(t * 1e3) * 1_000_000
         for p in parts:
             log_time.append(t_ns)
@@ -319,27 +374,56 @@ def simulate_ais(
             types.append(msg["type"])
     return pl.DataFrame(
         {"log_time_ns": log_time, "sentence": sentences, "mmsi": mmsis, "msg_type": types},
-        schema={"log_time_ns": pl.Int64, "sentence": pl.String, "mmsi": pl.Int64,
-                "msg_type": pl.Int16},
+        schema={
+            "log_time_ns": pl.Int64,
+            "sentence": pl.String,
+            "mmsi": pl.Int64,
+            "msg_type": pl.Int16,
+        },
     )
 
 
-def _static_messages(ident: AisIdentity, t: float, vessel_id: int, start_ns: int) -> list[
-        tuple[float, int, int, int, dict]]:
+def _static_messages(
+    ident: AisIdentity, t: float, vessel_id: int, start_ns: int
+) -> list[tuple[float, int, int, int, dict]]:
     """Message 5 (Class A, two sentences) or messages 24 A and B (Class B) at ``t``."""
-    dims = {"to_bow": ident.to_bow_m, "to_stern": ident.to_stern_m, "to_port": ident.to_port_m,
-            "to_starboard": ident.to_starboard_m}
+    dims = {
+        "to_bow": ident.to_bow_m,
+        "to_stern": ident.to_stern_m,
+        "to_port": ident.to_port_m,
+        "to_starboard": ident.to_starboard_m,
+    }
     if ident.ais_class == "A":
         eta = datetime.fromtimestamp(start_ns // 1_000_000_000 + 86_400, tz=UTC)
         msg5 = {
-            "type": 5, "mmsi": ident.mmsi, "ais_version": 2, "imo": ident.imo,
-            "callsign": ident.callsign, "shipname": ident.shipname, "ship_type": ident.ship_type,
-            "epfd": 1, "month": eta.month, "day": eta.day, "hour": 12, "minute": 0,
-            "draught": ident.draught_m, "destination": ident.destination, "dte": False, **dims,
+            "type": 5,
+            "mmsi": ident.mmsi,
+            "ais_version": 2,
+            "imo": ident.imo,
+            "callsign": ident.callsign,
+            "shipname": ident.shipname,
+            "ship_type": ident.ship_type,
+            "epfd": 1,
+            "month": eta.month,
+            "day": eta.day,
+            "hour": 12,
+            "minute": 0,
+            "draught": ident.draught_m,
+            "destination": ident.destination,
+            "dte": False,
+            **dims,
         }
         return [(t, vessel_id, 0, 2, msg5)]
     part_a = {"type": 24, "mmsi": ident.mmsi, "partno": 0, "shipname": ident.shipname}
-    part_b = {"type": 24, "mmsi": ident.mmsi, "partno": 1, "ship_type": ident.ship_type,
-              "vendorid": ident.vendor_id, "model": 1, "serial": ident.mmsi % 1_000_000,
-              "callsign": ident.callsign, **dims}
+    part_b = {
+        "type": 24,
+        "mmsi": ident.mmsi,
+        "partno": 1,
+        "ship_type": ident.ship_type,
+        "vendorid": ident.vendor_id,
+        "model": 1,
+        "serial": ident.mmsi % 1_000_000,
+        "callsign": ident.callsign,
+        **dims,
+    }
     return [(t, vessel_id, 0, 1, part_a), (t + CLASS_B_PART_B_DELAY_S, vessel_id, 1, 1, part_b)]

@@ -53,6 +53,10 @@ it with time = that sweep time, published at the end of the scan (log time):
 - the trackers run for 60 s before the start on the ships already under way (not
   archived), so the log opens, like a cut from a continuous archive, with confirmed
   tracks; ships that arrive later start with "new" tracks.
+- registration bias (``[radar_bias.simulate]``, see :mod:`pipeline.bias`; none by
+  default): the site's range_bias_m is added to every range, azimuth_bias_deg to every
+  azimuth and course (a misaligned antenna encoder), and time_offset_s to every report
+  time (a clock offset; the log time is the recorder's and is not shifted).
 
 AIS: see :mod:`pipeline.simulate.ais_traffic` (ITU-R M.1371 intervals, pyais encoding).
 
@@ -69,6 +73,7 @@ import numpy as np
 import polars as pl
 from scipy.special import ndtr
 
+from pipeline.bias import SiteBias, radar_bias_config
 from pipeline.config import Config, RadarSite
 from pipeline.frames import (
     TWO_PI,
@@ -111,17 +116,32 @@ SCAN_END_AZIMUTH_RAD = TWO_PI
 _FLEET, _ARRIVALS, _FERRIES, _IDENTITY, _RADAR_PHASE, _RADAR, _AIS = range(1, 8)
 
 RADAR_REPORT_SCHEMA: dict[str, pl.DataType] = {
-    "site_id": pl.String(), "track_id": pl.Int64(), "time_ns": pl.Int64(),
-    "range_m": pl.Float64(), "azimuth_rad": pl.Float64(), "x_m": pl.Float64(),
-    "y_m": pl.Float64(), "course_rad": pl.Float64(), "speed_mps": pl.Float64(),
-    "sigma_range_m": pl.Float64(), "sigma_azimuth_rad": pl.Float64(),
-    "sigma_course_rad": pl.Float64(), "sigma_speed_mps": pl.Float64(),
-    "scan_period_s": pl.Float64(), "scan_end_azimuth_rad": pl.Float64(),
-    "status": pl.String(), "log_time_ns": pl.Int64(),
+    "site_id": pl.String(),
+    "track_id": pl.Int64(),
+    "time_ns": pl.Int64(),
+    "range_m": pl.Float64(),
+    "azimuth_rad": pl.Float64(),
+    "x_m": pl.Float64(),
+    "y_m": pl.Float64(),
+    "course_rad": pl.Float64(),
+    "speed_mps": pl.Float64(),
+    "sigma_range_m": pl.Float64(),
+    "sigma_azimuth_rad": pl.Float64(),
+    "sigma_course_rad": pl.Float64(),
+    "sigma_speed_mps": pl.Float64(),
+    "scan_period_s": pl.Float64(),
+    "scan_end_azimuth_rad": pl.Float64(),
+    "status": pl.String(),
+    "log_time_ns": pl.Int64(),
 }
 TRUTH_SCHEMA: dict[str, pl.DataType] = {
-    "vessel_id": pl.Int64(), "mmsi": pl.Int64(), "time_ns": pl.Int64(), "lat_deg": pl.Float64(),
-    "lon_deg": pl.Float64(), "course_rad": pl.Float64(), "speed_mps": pl.Float64(),
+    "vessel_id": pl.Int64(),
+    "mmsi": pl.Int64(),
+    "time_ns": pl.Int64(),
+    "lat_deg": pl.Float64(),
+    "lon_deg": pl.Float64(),
+    "course_rad": pl.Float64(),
+    "speed_mps": pl.Float64(),
 }
 _STATUS = np.array(["", "new", "confirmed", "coasting"], dtype=object)
 
@@ -163,6 +183,7 @@ class ChannelScenario:
 
 
 # --- routes ----------------------------------------------------------------------
+
 
 @dataclass(frozen=True, eq=False)
 class Route:
@@ -241,9 +262,14 @@ def build_route(vertices_m: np.ndarray, radius_m: float, *, closed: bool = False
         else:
             p = v[i + 1]
     return Route(
-        s_start_m=np.asarray(s_start), turn=np.asarray(turn, dtype=np.int8),
-        x_m=np.asarray(xs), y_m=np.asarray(ys), course_rad=np.asarray(cs),
-        radius_m=float(radius_m), length_m=s, closed=closed,
+        s_start_m=np.asarray(s_start),
+        turn=np.asarray(turn, dtype=np.int8),
+        x_m=np.asarray(xs),
+        y_m=np.asarray(ys),
+        course_rad=np.asarray(cs),
+        radius_m=float(radius_m),
+        length_m=s,
+        closed=closed,
     )
 
 
@@ -263,16 +289,19 @@ def offset_polyline(vertices_m: np.ndarray, offset_m: float) -> np.ndarray:
     return out
 
 
-def convergence_rad(lat_deg: np.ndarray, lon_deg: np.ndarray, origin_lat_deg: float,
-                    origin_lon_deg: float) -> np.ndarray:
+def convergence_rad(
+    lat_deg: np.ndarray, lon_deg: np.ndarray, origin_lat_deg: float, origin_lon_deg: float
+) -> np.ndarray:
     """Angle of true north at (lat, lon) in the ENU frame of the origin (meridian
     convergence, Δλ · sin φ_mean, same sign as :func:`pipeline.frames.site_rotation_rad`):
     course_frame = course_true + convergence."""
     return -np.radians(np.asarray(lon_deg) - origin_lon_deg) * np.sin(
-        np.radians(0.5 * (np.asarray(lat_deg) + origin_lat_deg)))
+        np.radians(0.5 * (np.asarray(lat_deg) + origin_lat_deg))
+    )
 
 
 # --- vessels ---------------------------------------------------------------------
+
 
 @dataclass(frozen=True, eq=False)
 class _Vessel:
@@ -335,8 +364,12 @@ def _fairway_vertices(cfg: Config) -> np.ndarray:
 def _middle_leg(cfg: Config, frame: _Frame) -> tuple[np.ndarray, np.ndarray]:
     """(start, end) of the middle fairway leg in the regional frame, m."""
     leg = cfg.fairway_legs[len(cfg.fairway_legs) // 2]
-    x, y = geodetic_to_enu(np.array([leg.start_lat_deg, leg.end_lat_deg]),
-                           np.array([leg.start_lon_deg, leg.end_lon_deg]), frame.lat0, frame.lon0)
+    x, y = geodetic_to_enu(
+        np.array([leg.start_lat_deg, leg.end_lat_deg]),
+        np.array([leg.start_lon_deg, leg.end_lon_deg]),
+        frame.lat0,
+        frame.lon0,
+    )
     return np.array([x[0], y[0]]), np.array([x[1], y[1]])
 
 
@@ -349,15 +382,29 @@ def _s_abeam(route: Route, point: np.ndarray) -> float:
 
 def _plan_vessels(cfg: Config, frame: _Frame, duration_s: float, seed: int) -> list[_Vessel]:
     axis = _fairway_vertices(cfg)
-    directions = (("-".join(leg.leg_id for leg in cfg.fairway_legs), axis, True),
-                  ("-".join(leg.leg_id for leg in reversed(cfg.fairway_legs)), axis[::-1], False))
+    directions = (
+        ("-".join(leg.leg_id for leg in cfg.fairway_legs), axis, True),
+        ("-".join(leg.leg_id for leg in reversed(cfg.fairway_legs)), axis[::-1], False),
+    )
     v_lo, v_hi = SPEED_RANGE_MPS
     o_lo, o_hi = LATERAL_OFFSET_RANGE_M
     leg_a, leg_b = _middle_leg(cfg, frame)
     meet_point = 0.5 * (leg_a + leg_b)
 
-    def fairway(key, name, verts, inbound, speed, offset, *, s_enter=None, t_enter=0.0,
-                frac=0.0, ais_class="A", close_pass=False) -> _Vessel:
+    def fairway(
+        key,
+        name,
+        verts,
+        inbound,
+        speed,
+        offset,
+        *,
+        s_enter=None,
+        t_enter=0.0,
+        frac=0.0,
+        ais_class="A",
+        close_pass=False,
+    ) -> _Vessel:
         route = build_route(offset_polyline(verts, offset), FAIRWAY_TURN_RADIUS_M)
         if s_enter is None:
             s_enter = frac * route.length_m
@@ -365,33 +412,67 @@ def _plan_vessels(cfg: Config, frame: _Frame, duration_s: float, seed: int) -> l
             t_enter, s_enter = t_enter - s_enter / speed, 0.0
         t_exit = t_enter + (route.length_m - s_enter) / speed
         seen_from = max(t_enter - RADAR_WARMUP_S, t_enter - s_enter / speed)
-        return _Vessel(key, "fairway", name, route, speed, s_enter, t_enter,
-                       min(t_exit, duration_s), seen_from, offset, close_pass, ais_class,
-                       inbound)
+        return _Vessel(
+            key,
+            "fairway",
+            name,
+            route,
+            speed,
+            s_enter,
+            t_enter,
+            min(t_exit, duration_s),
+            seen_from,
+            offset,
+            close_pass,
+            ais_class,
+            inbound,
+        )
 
     vessels: list[_Vessel] = []
     # initial fleet: 11 per direction under way at the start
     u = np.random.default_rng([seed, _FLEET]).random((2, N_INITIAL_PER_DIRECTION, 3))
     n_other = 2 * N_INITIAL_PER_DIRECTION - 2  # all but the close-pass pair
-    carriage: list[str | None] = ([None] * N_NO_AIS_INITIAL + ["B"] * N_CLASS_B_INITIAL
-                                  + ["A"] * (n_other - N_NO_AIS_INITIAL - N_CLASS_B_INITIAL))
+    carriage: list[str | None] = (
+        [None] * N_NO_AIS_INITIAL
+        + ["B"] * N_CLASS_B_INITIAL
+        + ["A"] * (n_other - N_NO_AIS_INITIAL - N_CLASS_B_INITIAL)
+    )
     order = np.random.default_rng([seed, _FLEET, 1]).permutation(n_other)
     c_iter = iter([carriage[j] for j in order])
     for d, (name, verts, inbound) in enumerate(directions):
         for i in range(N_INITIAL_PER_DIRECTION):
             speed = v_lo + (v_hi - v_lo) * u[d, i, 0]
             if i == 0:  # the close-pass pair meets abeam mid-leg at CLOSE_PASS_TIME_S
-                route = build_route(offset_polyline(verts, CLOSE_PASS_OFFSET_M),
-                                    FAIRWAY_TURN_RADIUS_M)
+                route = build_route(
+                    offset_polyline(verts, CLOSE_PASS_OFFSET_M), FAIRWAY_TURN_RADIUS_M
+                )
                 s_meet = _s_abeam(route, meet_point)
-                vessels.append(fairway((0, d, i), name, verts, inbound, speed,
-                                       CLOSE_PASS_OFFSET_M,
-                                       s_enter=s_meet - speed * CLOSE_PASS_TIME_S,
-                                       close_pass=True))
+                vessels.append(
+                    fairway(
+                        (0, d, i),
+                        name,
+                        verts,
+                        inbound,
+                        speed,
+                        CLOSE_PASS_OFFSET_M,
+                        s_enter=s_meet - speed * CLOSE_PASS_TIME_S,
+                        close_pass=True,
+                    )
+                )
             else:
                 offset = o_lo + (o_hi - o_lo) * u[d, i, 1]
-                vessels.append(fairway((0, d, i), name, verts, inbound, speed, offset,
-                                       frac=0.98 * u[d, i, 2], ais_class=next(c_iter)))
+                vessels.append(
+                    fairway(
+                        (0, d, i),
+                        name,
+                        verts,
+                        inbound,
+                        speed,
+                        offset,
+                        frac=0.98 * u[d, i, 2],
+                        ais_class=next(c_iter),
+                    )
+                )
     # ferries shuttling across the middle leg
     along = (leg_b - leg_a) / np.hypot(*(leg_b - leg_a))
     across = np.array([along[1], -along[0]])
@@ -400,13 +481,33 @@ def _plan_vessels(cfg: Config, frame: _Frame, duration_s: float, seed: int) -> l
     for j in range(N_FERRIES):
         centre = leg_a + (j + 1) / (N_FERRIES + 1) * (leg_b - leg_a)
         h, w = FERRY_HALF_CROSSING_M, 0.5 * FERRY_LANE_SEPARATION_M
-        loop = np.array([centre - h * across - w * along, centre + h * across - w * along,
-                         centre + h * across + w * along, centre - h * across + w * along])
+        loop = np.array(
+            [
+                centre - h * across - w * along,
+                centre + h * across - w * along,
+                centre + h * across + w * along,
+                centre - h * across + w * along,
+            ]
+        )
         route = build_route(loop, FERRY_TURN_RADIUS_M, closed=True)
         speed = f_lo + (f_hi - f_lo) * uf[j, 0]
-        vessels.append(_Vessel((1, 0, j), "ferry", f"ferry-{j + 1}", route, speed,
-                               uf[j, 1] * route.length_m, 0.0, duration_s, -RADAR_WARMUP_S,
-                               0.0, False, "A", True))
+        vessels.append(
+            _Vessel(
+                (1, 0, j),
+                "ferry",
+                f"ferry-{j + 1}",
+                route,
+                speed,
+                uf[j, 1] * route.length_m,
+                0.0,
+                duration_s,
+                -RADAR_WARMUP_S,
+                0.0,
+                False,
+                "A",
+                True,
+            )
+        )
     # arrivals at both fairway ends (Poisson, rate = initial count / mean transit time)
     arrivals: list[_Vessel] = []
     for d, (name, verts, inbound) in enumerate(directions):
@@ -420,11 +521,22 @@ def _plan_vessels(cfg: Config, frame: _Frame, duration_s: float, seed: int) -> l
             t += -math.log1p(-a[0]) / rate
             if t >= duration_s:
                 break
-            ais_class = None if a[3] < P_NO_AIS_ARRIVAL else ("B" if a[4] < P_CLASS_B_ARRIVAL
-                                                               else "A")
-            arrivals.append(fairway((2, d, i), name, verts, inbound, v_lo + (v_hi - v_lo) * a[1],
-                                    o_lo + (o_hi - o_lo) * a[2], s_enter=0.0, t_enter=t,
-                                    ais_class=ais_class))
+            ais_class = (
+                None if a[3] < P_NO_AIS_ARRIVAL else ("B" if a[4] < P_CLASS_B_ARRIVAL else "A")
+            )
+            arrivals.append(
+                fairway(
+                    (2, d, i),
+                    name,
+                    verts,
+                    inbound,
+                    v_lo + (v_hi - v_lo) * a[1],
+                    o_lo + (o_hi - o_lo) * a[2],
+                    s_enter=0.0,
+                    t_enter=t,
+                    ais_class=ais_class,
+                )
+            )
             i += 1
     arrivals.sort(key=lambda v: v.t_enter_s)
     return vessels + arrivals
@@ -432,8 +544,16 @@ def _plan_vessels(cfg: Config, frame: _Frame, duration_s: float, seed: int) -> l
 
 # --- radar -----------------------------------------------------------------------
 
-def _site_reports(site: RadarSite, site_index: int, vessels: list[_Vessel], frame: _Frame,
-                  duration_s: float, seed: int) -> tuple[dict[str, np.ndarray], list[tuple]]:
+
+def _site_reports(
+    site: RadarSite,
+    site_index: int,
+    vessels: list[_Vessel],
+    frame: _Frame,
+    duration_s: float,
+    seed: int,
+    bias: SiteBias = SiteBias(),  # noqa: B008
+) -> tuple[dict[str, np.ndarray], list[tuple]]:
     """Track reports of one site's tracker, as column arrays, plus one
     (first_time_s, vessel_index, track_no, first_row, last_row) per track."""
     T = site.scan_period_s
@@ -447,12 +567,17 @@ def _site_reports(site: RadarSite, site_index: int, vessels: list[_Vessel], fram
         e, n = geodetic_to_enu(lat, lon, site.lat_deg, site.lon_deg)
         r, az = enu_to_polar(e, n)
         az = np.mod(az - site.north_alignment_rad, TWO_PI)
-        c = np.mod(course + convergence_rad(lat, lon, site.lat_deg, site.lon_deg)
-                   - site.north_alignment_rad, TWO_PI)
+        c = np.mod(
+            course
+            + convergence_rad(lat, lon, site.lat_deg, site.lon_deg)
+            - site.north_alignment_rad,
+            TWO_PI,
+        )
         return r, az, c, speed
 
-    cols: dict[str, list[np.ndarray]] = {k: [] for k in (
-        "vessel", "track_no", "t", "log_t", "r", "az", "x", "y", "c", "v", "status")}
+    cols: dict[str, list[np.ndarray]] = {
+        k: [] for k in ("vessel", "track_no", "t", "log_t", "r", "az", "x", "y", "c", "v", "status")
+    }
     tracks: list[tuple] = []
     n_rows = 0
     for vi, v in enumerate(vessels):
@@ -475,9 +600,9 @@ def _site_reports(site: RadarSite, site_index: int, vessels: list[_Vessel], fram
         rep = np.flatnonzero((status > 0) & (ts >= 0.0))  # the warm-up is not archived
         if rep.size == 0:
             continue
-        r_m = np.abs(r + site.sigma_range_m * z[:, 2])
-        az_m = np.mod(az + site.sigma_azimuth_rad * z[:, 3], TWO_PI)
-        c_m = np.mod(c + site.sigma_course_rad * z[:, 4], TWO_PI)
+        r_m = np.abs(r + bias.range_bias_m + site.sigma_range_m * z[:, 2])
+        az_m = np.mod(az + bias.azimuth_bias_rad + site.sigma_azimuth_rad * z[:, 3], TWO_PI)
+        c_m = np.mod(c + bias.azimuth_bias_rad + site.sigma_course_rad * z[:, 4], TWO_PI)
         v_m = np.abs(spd + site.sigma_speed_mps * z[:, 5])
         x_m, y_m = polar_to_enu(r_m, az_m)
         for i in np.flatnonzero(status == 3):  # coast: predict from the previous report
@@ -486,23 +611,34 @@ def _site_reports(site: RadarSite, site_index: int, vessels: list[_Vessel], fram
             y_m[i] = y_m[i - 1] + v_m[i - 1] * dt * math.cos(c_m[i - 1])
             c_m[i], v_m[i] = c_m[i - 1], v_m[i - 1]
             r_m[i], az_m[i] = enu_to_polar(x_m[i], y_m[i])
-        for name, arr in (("t", ts), ("r", r_m), ("az", az_m), ("x", x_m), ("y", y_m),
-                          ("c", c_m), ("v", v_m), ("status", status), ("track_no", track_no)):
+        for name, arr in (
+            ("t", ts),
+            ("r", r_m),
+            ("az", az_m),
+            ("x", x_m),
+            ("y", y_m),
+            ("c", c_m),
+            ("v", v_m),
+            ("status", status),
+            ("track_no", track_no),
+        ):
             cols[name].append(arr[rep])
         cols["log_t"].append(tk[rep] + T)
         cols["vessel"].append(np.full(rep.size, vi))
         tn = track_no[rep]
         for j in np.unique(tn):
             rows = np.flatnonzero(tn == j)
-            tracks.append((float(ts[rep[rows[0]]]), vi, j, n_rows + rows[0], n_rows + rows[-1],
-                           rows.size))
+            tracks.append(
+                (float(ts[rep[rows[0]]]), vi, j, n_rows + rows[0], n_rows + rows[-1], rows.size)
+            )
         n_rows += rep.size
     out = {k: (np.concatenate(a) if a else np.empty(0)) for k, a in cols.items()}
     return out, tracks
 
 
-def _track_life(valid: np.ndarray, detected: np.ndarray, lost: np.ndarray) -> tuple[
-        np.ndarray, np.ndarray]:
+def _track_life(
+    valid: np.ndarray, detected: np.ndarray, lost: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """The site tracker's state machine over consecutive scans of one target.
 
     Returns per scan the report status (0 none, 1 new, 2 confirmed, 3 coasting), the
@@ -540,8 +676,10 @@ def _track_life(valid: np.ndarray, detected: np.ndarray, lost: np.ndarray) -> tu
 
 # --- the scenario ----------------------------------------------------------------
 
-def simulate_channel(cfg: Config, *, start_ns: int, duration_s: float, seed: int) -> (
-        ChannelScenario):
+
+def simulate_channel(
+    cfg: Config, *, start_ns: int, duration_s: float, seed: int
+) -> ChannelScenario:
     """Simulate the ``channel`` scenario over [start_ns, start_ns + duration_s).
 
     ``start_ns``: ns since the Unix epoch, UTC; ``duration_s``: s (> 0; the close pass
@@ -563,8 +701,12 @@ def simulate_channel(cfg: Config, *, start_ns: int, duration_s: float, seed: int
             mmsi_of.append(None)
             names.append(None)
             continue
-        ident = draw_identity(np.random.default_rng([seed, _IDENTITY, *v.key]),
-                              ais_class=v.ais_class, kind=v.kind, inbound=v.inbound)
+        ident = draw_identity(
+            np.random.default_rng([seed, _IDENTITY, *v.key]),
+            ais_class=v.ais_class,
+            kind=v.kind,
+            inbound=v.inbound,
+        )
         mmsi = ident.mmsi
         while mmsi in used:
             mmsi = mmsi + 1 if mmsi % 1_000_000 != 999_999 else mmsi - 999_999 + 100_000
@@ -572,94 +714,142 @@ def simulate_channel(cfg: Config, *, start_ns: int, duration_s: float, seed: int
         ident = replace(ident, mmsi=mmsi)
         mmsi_of.append(mmsi)
         names.append(ident.shipname)
-        station = AisStation(vid, ident, v.speed_mps, v.t_enter_s, v.t_exit_s,
-                             v.turn_windows_s(), (_AIS, *v.key))
+        station = AisStation(
+            vid, ident, v.speed_mps, v.t_enter_s, v.t_exit_s, v.turn_windows_s(), (_AIS, *v.key)
+        )
         stations.append((station, _state_fn(frame, v)))
 
     truth = _truth(plans, frame, mmsi_of, start_ns, duration_s)
     reports, links = _radar(cfg, plans, frame, start_ns, duration_s, seed)
     ais = simulate_ais(stations, start_ns=start_ns, duration_s=duration_s, seed=seed)
-    vessels = pl.DataFrame({
-        "vessel_id": np.arange(1, len(plans) + 1, dtype=np.int64),
-        "mmsi": pl.Series(mmsi_of, dtype=pl.Int64),
-        "ais_class": pl.Series([v.ais_class for v in plans], dtype=pl.String),
-        "shipname": pl.Series(names, dtype=pl.String),
-        "kind": [v.kind for v in plans],
-        "route": [v.route_name for v in plans],
-        "speed_mps": np.array([v.speed_mps for v in plans]),
-        "lateral_offset_m": np.array([v.lateral_offset_m for v in plans]),
-        "enter_time_ns": np.array([start_ns + round(v.t_enter_s * NS) for v in plans],
-                                  dtype=np.int64),
-        "exit_time_ns": np.array([start_ns + round(v.t_exit_s * NS) for v in plans],
-                                 dtype=np.int64),
-        "close_pass": [v.close_pass for v in plans],
-    })
-    return ChannelScenario(truth=truth, radar_reports=reports, ais_sentences=ais,
-                           vessels=vessels, radar_track_truth=links, seed=seed,
-                           start_ns=start_ns, duration_s=float(duration_s),
-                           site_ids=tuple(s.site_id for s in cfg.radar_sites))
+    vessels = pl.DataFrame(
+        {
+            "vessel_id": np.arange(1, len(plans) + 1, dtype=np.int64),
+            "mmsi": pl.Series(mmsi_of, dtype=pl.Int64),
+            "ais_class": pl.Series([v.ais_class for v in plans], dtype=pl.String),
+            "shipname": pl.Series(names, dtype=pl.String),
+            "kind": [v.kind for v in plans],
+            "route": [v.route_name for v in plans],
+            "speed_mps": np.array([v.speed_mps for v in plans]),
+            "lateral_offset_m": np.array([v.lateral_offset_m for v in plans]),
+            "enter_time_ns": np.array(
+                [start_ns + round(v.t_enter_s * NS) for v in plans], dtype=np.int64
+            ),
+            "exit_time_ns": np.array(
+                [start_ns + round(v.t_exit_s * NS) for v in plans], dtype=np.int64
+            ),
+            "close_pass": [v.close_pass for v in plans],
+        }
+    )
+    return ChannelScenario(
+        truth=truth,
+        radar_reports=reports,
+        ais_sentences=ais,
+        vessels=vessels,
+        radar_track_truth=links,
+        seed=seed,
+        start_ns=start_ns,
+        duration_s=float(duration_s),
+        site_ids=tuple(s.site_id for s in cfg.radar_sites),
+    )
 
 
 def _state_fn(frame: _Frame, v: _Vessel) -> StateFn:
     def state(t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         lat, lon, course, speed, _ = frame.state(v, t_s)
         return lat, lon, course, speed
+
     return state
 
 
-def _truth(plans: list[_Vessel], frame: _Frame, mmsi_of: list[int | None], start_ns: int,
-           duration_s: float) -> pl.DataFrame:
+def _truth(
+    plans: list[_Vessel], frame: _Frame, mmsi_of: list[int | None], start_ns: int, duration_s: float
+) -> pl.DataFrame:
     parts = []
     for vid, (v, mmsi) in enumerate(zip(plans, mmsi_of, strict=True), start=1):
-        t = np.arange(math.ceil(v.t_enter_s), math.floor(min(v.t_exit_s, duration_s)) + 1,
-                      dtype=np.int64)
+        t = np.arange(
+            math.ceil(v.t_enter_s), math.floor(min(v.t_exit_s, duration_s)) + 1, dtype=np.int64
+        )
         t = t[t < duration_s]
         if t.size == 0:
             continue
         lat, lon, course, speed, _ = frame.state(v, t.astype(float))
-        parts.append(pl.DataFrame({
-            "vessel_id": np.full(t.size, vid, dtype=np.int64),
-            "mmsi": pl.Series([mmsi] * t.size, dtype=pl.Int64),
-            "time_ns": start_ns + t * NS, "lat_deg": lat, "lon_deg": lon,
-            "course_rad": course, "speed_mps": speed,
-        }, schema=TRUTH_SCHEMA))
+        parts.append(
+            pl.DataFrame(
+                {
+                    "vessel_id": np.full(t.size, vid, dtype=np.int64),
+                    "mmsi": pl.Series([mmsi] * t.size, dtype=pl.Int64),
+                    "time_ns": start_ns + t * NS,
+                    "lat_deg": lat,
+                    "lon_deg": lon,
+                    "course_rad": course,
+                    "speed_mps": speed,
+                },
+                schema=TRUTH_SCHEMA,
+            )
+        )
     if not parts:
         return pl.DataFrame(schema=TRUTH_SCHEMA)
     return pl.concat(parts).sort(["time_ns", "vessel_id"])
 
 
-def _radar(cfg: Config, plans: list[_Vessel], frame: _Frame, start_ns: int, duration_s: float,
-           seed: int) -> tuple[pl.DataFrame, pl.DataFrame]:
+def _radar(
+    cfg: Config, plans: list[_Vessel], frame: _Frame, start_ns: int, duration_s: float, seed: int
+) -> tuple[pl.DataFrame, pl.DataFrame]:
     frames, links = [], []
     for si, site in enumerate(cfg.radar_sites):
-        cols, tracks = _site_reports(site, si, plans, frame, duration_s, seed)
+        bias = radar_bias_config(cfg).simulate.get(site.site_id, SiteBias())
+        cols, tracks = _site_reports(site, si, plans, frame, duration_s, seed, bias)
         n = cols["t"].size
         track_id = np.zeros(n, dtype=np.int64)
         # local track ids increase with initiation time; a track's rows are contiguous
         for rank, (_, vi, _, first, last, count) in enumerate(sorted(tracks)):
             tid = 1000 * (si + 1) + rank
-            track_id[first:last + 1] = tid
-            links.append((site.site_id, tid, vi + 1, start_ns + round(cols["t"][first] * NS),
-                          start_ns + round(cols["t"][last] * NS), count))
-        df = pl.DataFrame({
-            "site_id": [site.site_id] * n,
-            "track_id": track_id,
-            "time_ns": start_ns + np.round(cols["t"] * NS).astype(np.int64),
-            "range_m": cols["r"], "azimuth_rad": cols["az"], "x_m": cols["x"],
-            "y_m": cols["y"], "course_rad": cols["c"], "speed_mps": cols["v"],
-            "sigma_range_m": np.full(n, site.sigma_range_m),
-            "sigma_azimuth_rad": np.full(n, site.sigma_azimuth_rad),
-            "sigma_course_rad": np.full(n, site.sigma_course_rad),
-            "sigma_speed_mps": np.full(n, site.sigma_speed_mps),
-            "scan_period_s": np.full(n, site.scan_period_s),
-            "scan_end_azimuth_rad": np.full(n, SCAN_END_AZIMUTH_RAD),
-            "status": _STATUS[cols["status"].astype(np.int64)] if n else np.empty(0, object),
-            "log_time_ns": start_ns + np.round(cols["log_t"] * NS).astype(np.int64),
-        }, schema=RADAR_REPORT_SCHEMA)
+            track_id[first : last + 1] = tid
+            links.append(
+                (
+                    site.site_id,
+                    tid,
+                    vi + 1,
+                    start_ns + round(cols["t"][first] * NS),
+                    start_ns + round(cols["t"][last] * NS),
+                    count,
+                )
+            )
+        df = pl.DataFrame(
+            {
+                "site_id": [site.site_id] * n,
+                "track_id": track_id,
+                "time_ns": start_ns
+                + np.round((cols["t"] + bias.time_offset_s) * NS).astype(np.int64),
+                "range_m": cols["r"],
+                "azimuth_rad": cols["az"],
+                "x_m": cols["x"],
+                "y_m": cols["y"],
+                "course_rad": cols["c"],
+                "speed_mps": cols["v"],
+                "sigma_range_m": np.full(n, site.sigma_range_m),
+                "sigma_azimuth_rad": np.full(n, site.sigma_azimuth_rad),
+                "sigma_course_rad": np.full(n, site.sigma_course_rad),
+                "sigma_speed_mps": np.full(n, site.sigma_speed_mps),
+                "scan_period_s": np.full(n, site.scan_period_s),
+                "scan_end_azimuth_rad": np.full(n, SCAN_END_AZIMUTH_RAD),
+                "status": _STATUS[cols["status"].astype(np.int64)] if n else np.empty(0, object),
+                "log_time_ns": start_ns + np.round(cols["log_t"] * NS).astype(np.int64),
+            },
+            schema=RADAR_REPORT_SCHEMA,
+        )
         frames.append(df)
     reports = pl.concat(frames).sort(["log_time_ns", "site_id", "time_ns", "track_id"])
-    link_schema = {"site_id": pl.String, "track_id": pl.Int64, "vessel_id": pl.Int64,
-                   "first_time_ns": pl.Int64, "last_time_ns": pl.Int64, "n_reports": pl.Int64}
+    link_schema = {
+        "site_id": pl.String,
+        "track_id": pl.Int64,
+        "vessel_id": pl.Int64,
+        "first_time_ns": pl.Int64,
+        "last_time_ns": pl.Int64,
+        "n_reports": pl.Int64,
+    }
     track_truth = pl.DataFrame(links, schema=link_schema, orient="row").sort(
-        ["site_id", "track_id"])
+        ["site_id", "track_id"]
+    )
     return reports, track_truth

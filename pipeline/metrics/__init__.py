@@ -1,0 +1,1 @@
+"""Evaluation metrics of the fused picture against truth."""
