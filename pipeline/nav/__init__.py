@@ -1,0 +1,1 @@
+"""Own-ship integrated navigation (gyro/GNSS/log paper): modes, dead reckoning, outages."""
