@@ -119,7 +119,7 @@ def ingest(st: _State, paths, from_, to, force, executor) -> None:
 @_executor_opt
 @click.pass_obj
 def batch(st: _State, from_, to, executor) -> None:
-    """Associate, fuse, identify and score one window; commit it atomically."""
+    """Run every sensor family's batch over one window; commit it atomically."""
     from jobs.batch import run_batch
 
     start, end = _window(from_, to, required=True)
