@@ -1,13 +1,21 @@
-"""Ingest job: MCAP archive files -> raw Delta tables, rejects and the ingest ledger.
+"""Ingest job: MCAP archive files -> raw Delta tables, rejects, mcap_index and the ledger.
 
-One work unit per source file (:class:`IngestUnit`, small and picklable). A worker reads
-the file chunk by chunk, decodes every channel, and writes the file's rows per raw table
-to a staged Parquet file with a deterministic name (temp file + ``os.replace``); it
-returns a small :class:`FileManifest`. The DRIVER then commits, per file and in this
-order: ``replace_source_file`` on radar_tracks, ais_reports, ais_static, truth, rejects
-(also when the file has no rows for a table, so a changed file leaves no stale rows),
-and the ledger row LAST. A crash in between leaves a ledger without the new hash, so the
-next run redoes the file. ``<warehouse>/surveil.duckdb`` is rebuilt once at the end.
+One work unit per source file (:class:`IngestUnit`, small and picklable). A worker streams
+the file: the reader yields chunk by chunk (``pipeline.io.mcap_read``: chunk index walk,
+decompression in a background thread, no Python object per message), the decoder turns
+batches into Arrow rows (radar/truth JSON in bulk parses of ~50k messages), and
+:class:`~pipeline.warehouse.staged.TableStager` appends those rows to staged Parquet files,
+one per (table, date), as they come. Memory holds a few chunks and row groups, not the
+file. Meanwhile a thread computes the file's SHA-256 (whole-file runs only). The worker
+returns a small :class:`FileManifest`.
+
+The DRIVER then commits, per file: every raw table (``RAW_TABLES``) with
+:func:`~pipeline.warehouse.staged.commit_staged`, ONE Delta commit per table that removes
+the file's old data files and adds the staged ones (also when the file has no rows for a
+table, so a changed file leaves no stale rows; a table with nothing to add or remove is
+not touched), then the file's ``mcap_index`` rows, and the ledger row LAST. A crash in
+between leaves a ledger without the new hash, so the next run redoes the file.
+``<warehouse>/surveil.duckdb`` is rebuilt once at the end.
 
 Ledger: a file whose size and SHA-256 match its ledger row (status ok/partial) is skipped
 without any commit, unless ``force``. Status: ``ok``; ``partial`` (chunks lost, file cut
@@ -15,11 +23,14 @@ off); ``quarantined`` (not MCAP, or nothing readable: one rejects row says why).
 
 Time window ``[start_ns, end_ns)``: rows are kept when the table's time column is inside
 (``time_ns``; ``log_time_ns`` for rejects) and the replace predicate is source_file AND
-window, so the file's rows outside the window stay. Messages are read with
-``WINDOW_READ_MARGIN_NS`` of log time on each side so that a report whose own time is in
-the window but was logged just outside it is not lost. File-level rejects (not_mcap,
+window (``replace_source_file``), so the file's rows outside the window stay. Only the
+chunks whose index overlaps the window (widened by ``WINDOW_READ_MARGIN_NS`` of log time
+on each side, so that a report whose own time is in the window but was logged just outside
+it is not lost) are read; a file whose summary lies wholly outside is read no further
+than its footer and summary, and is not hashed. File-level rejects (not_mcap,
 corrupt_chunk, truncated, unknown_schema) are clipped into the window. A windowed run
-neither skips by the ledger nor writes it: the ledger describes whole-file ingests.
+neither skips by the ledger nor writes it (nor ``mcap_index``): those describe whole-file
+ingests.
 """
 
 from __future__ import annotations
@@ -31,22 +42,24 @@ import shutil
 import time
 from collections import Counter
 from collections.abc import Callable, Iterable, Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
-import pyarrow.parquet as pq
 
 from jobs.common import UsageError
 from pipeline.config import Config, ValidationConfig
 from pipeline.decode.registry import RAW_TABLES, FileDecoder, make_rejects
 from pipeline.executors import Executor, UnitResult, make_executor
+from pipeline.io.mcap_index import mcap_index_rows
 from pipeline.io.mcap_read import ReadStatus, read_mcap_batches
 from pipeline.tables import conform, empty, spec
 from pipeline.warehouse.delta import replace_source_file
-from pipeline.warehouse.ledger import file_fingerprint, is_unchanged, ledger_entry, write_entry
+from pipeline.warehouse.ledger import file_fingerprint, ledger_entry, lookup, write_entry
+from pipeline.warehouse.staged import StagedFile, TableStager, commit_staged, read_staged
 from pipeline.warehouse.views import rebuild_views_file
 
 WINDOW_READ_MARGIN_NS = 60 * 10**9
@@ -77,7 +90,9 @@ class IngestUnit:
 
 @dataclass(frozen=True)
 class FileManifest:
-    """What a worker made of one file; ``staged`` maps table -> staged Parquet path."""
+    """What a worker made of one file: counts, status, the staged Parquet files per table,
+    the file's ``mcap_index`` rows (whole-file runs), and what was read (``bytes_read``,
+    ``chunks_decompressed``)."""
 
     source_file: str
     size_bytes: int
@@ -91,7 +106,10 @@ class FileManifest:
     not_stored: dict[str, int] = field(default_factory=dict)
     start_time_ns: int | None = None
     end_time_ns: int | None = None
-    staged: dict[str, str] = field(default_factory=dict)
+    staged: dict[str, list[StagedFile]] = field(default_factory=dict)
+    index_rows: pa.Table | None = None
+    bytes_read: int = 0
+    chunks_decompressed: int = 0
 
 
 @dataclass
@@ -189,19 +207,85 @@ def expand_paths(paths: Iterable[Path | str]) -> list[Path]:
 def ingest_file(unit: IngestUnit) -> FileManifest:
     """Decode one file and stage its rows (runs in a worker; commits nothing)."""
     path = Path(unit.path)
-    size, sha = file_fingerprint(path)
-    if not unit.force and not unit.windowed and is_unchanged(unit.warehouse, unit.path, size, sha):
-        return FileManifest(unit.path, size, sha, skipped=True)
+    size = path.stat().st_size
+    sha: str | Future[str] = ""
+    hasher = None
+    if not unit.windowed:  # a windowed run never uses the hash: do not read the whole file
+        prior = None if unit.force else lookup(unit.warehouse, unit.path)
+        if (
+            prior is not None
+            and prior["status"] in ("ok", "partial")
+            and prior["size_bytes"] == size
+        ):
+            sha = file_fingerprint(path)[1]
+            if sha == prior["sha256"]:
+                return FileManifest(unit.path, size, sha, skipped=True)
+        else:  # hash while decoding (hashlib releases the GIL)
+            hasher = ThreadPoolExecutor(1, thread_name_prefix="sha256")
+            sha = hasher.submit(lambda: file_fingerprint(path)[1])
+    try:
+        return _decode_and_stage(unit, path, size, sha)
+    finally:
+        if hasher is not None:
+            hasher.shutdown(wait=True)
+
+
+def _decode_and_stage(
+    unit: IngestUnit, path: Path, size: int, sha: str | Future[str]
+) -> FileManifest:
     lo, hi = _read_window(unit)
     scan = read_mcap_batches(path, start_ns=lo, end_ns=hi)
     decoder = FileDecoder(source_file=unit.path, validation=unit.validation)
-    for batch in scan:
-        decoder.feed(batch)
-    decoder.add_rejects(_status_rejects(unit, scan.status))
-    tables = decoder.finish()
-    if unit.windowed:
-        tables = {n: _in_window(n, t, unit.start_ns, unit.end_ns) for n, t in tables.items()}
-    return _manifest(unit, size, sha, scan.status, decoder, tables)
+    stager = TableStager(_stage_folder(unit))
+    reasons: Counter = Counter()
+
+    def stage(name: str, table: pa.Table) -> None:
+        if unit.windowed:
+            table = _in_window(name, table, unit.start_ns, unit.end_ns)  # type: ignore[arg-type]
+        if name == "rejects" and table.num_rows:
+            reasons.update(table["reason_code"].to_pylist())
+        stager.add(name, table)
+
+    try:
+        for batch in scan:
+            decoder.feed(batch)
+            for name, parts in decoder.drain().items():
+                for part in parts:
+                    stage(name, part)
+        decoder.add_rejects(_status_rejects(unit, scan.status))
+        for name, table in decoder.finish().items():
+            stage(name, table)
+    finally:
+        staged = stager.close()
+    by_table: dict[str, list[StagedFile]] = {}
+    for sf in staged:
+        by_table.setdefault(sf.table, []).append(sf)
+    status = scan.status
+    index = None
+    if not unit.windowed:
+        index = mcap_index_rows(unit.path, size, scan.summary, scan.channels, status)
+    return FileManifest(
+        source_file=unit.path,
+        size_bytes=size,
+        sha256=sha if isinstance(sha, str) else sha.result(),
+        status=status.status,
+        error=status.error,
+        message_count=status.messages_read,
+        rows={n: stager.rows.get(n, 0) for n in (*RAW_TABLES, *stager.rows)},
+        rejects_by_reason=dict(reasons),
+        not_stored={f"ais_type_{k}": v for k, v in sorted(decoder.not_stored.items())},
+        start_time_ns=status.start_time_ns,
+        end_time_ns=status.end_time_ns,
+        staged=by_table,
+        index_rows=index,
+        bytes_read=status.bytes_read,
+        chunks_decompressed=status.chunks_decompressed,
+    )
+
+
+def _stage_folder(unit: IngestUnit) -> Path:
+    """``<staging>/<hash of path>``: deterministic per source file."""
+    return Path(unit.staging_dir) / hashlib.sha256(unit.path.encode()).hexdigest()[:24]
 
 
 def _read_window(unit: IngestUnit) -> tuple[int | None, int | None]:
@@ -254,63 +338,30 @@ def _in_window(name: str, table: pa.Table, start_ns: int, end_ns: int) -> pa.Tab
     return table.filter(keep)
 
 
-def _manifest(
-    unit: IngestUnit,
-    size: int,
-    sha: str,
-    status: ReadStatus,
-    decoder: FileDecoder,
-    tables: dict[str, pa.Table],
-) -> FileManifest:
-    rejects = tables["rejects"]
-    reasons = Counter(rejects["reason_code"].to_pylist()) if rejects.num_rows else Counter()
-    return FileManifest(
-        source_file=unit.path,
-        size_bytes=size,
-        sha256=sha,
-        status=status.status,
-        error=status.error,
-        message_count=status.messages_read,
-        rows={n: t.num_rows for n, t in tables.items()},
-        rejects_by_reason=dict(reasons),
-        not_stored={f"ais_type_{k}": v for k, v in sorted(decoder.not_stored.items())},
-        start_time_ns=status.start_time_ns,
-        end_time_ns=status.end_time_ns,
-        staged=_stage(unit, tables),
-    )
-
-
-def _stage(unit: IngestUnit, tables: dict[str, pa.Table]) -> dict[str, str]:
-    """Write non-empty tables to ``<staging>/<hash of path>/<table>.parquet``."""
-    key = hashlib.sha256(unit.path.encode()).hexdigest()[:24]
-    folder = Path(unit.staging_dir) / key
-    folder.mkdir(parents=True, exist_ok=True)
-    staged = {}
-    for name, table in tables.items():
-        if not table.num_rows:
-            continue
-        target = folder / f"{name}.parquet"
-        tmp = folder / f".{name}.parquet.tmp-{os.getpid()}"
-        pq.write_table(table, tmp, compression="zstd")
-        os.replace(tmp, target)
-        staged[name] = str(target)
-    return staged
-
-
 # -- driver ------------------------------------------------------------------------------
 
 
 def commit_file(
     warehouse: Path, m: FileManifest, *, start_ns: int | None = None, end_ns: int | None = None
 ) -> None:
-    """Replace the file's rows in every raw table, then (whole-file runs) its ledger row."""
-    for name in RAW_TABLES:
-        staged = m.staged.get(name)
-        table = pq.read_table(staged) if staged else empty(name)
-        replace_source_file(
-            warehouse, name, table, source_file=m.source_file, start_ns=start_ns, end_ns=end_ns
-        )
+    """Replace the file's rows in every raw table (one commit per table that changes),
+    then (whole-file runs) its ``mcap_index`` rows and its ledger row."""
+    for name in dict.fromkeys((*RAW_TABLES, *m.staged)):
+        staged = m.staged.get(name, [])
+        if start_ns is None:
+            commit_staged(warehouse, name, staged, source_file=m.source_file)
+        else:
+            replace_source_file(
+                warehouse,
+                name,
+                read_staged(name, staged),
+                source_file=m.source_file,
+                start_ns=start_ns,
+                end_ns=end_ns,
+            )
     if start_ns is None:
+        index = m.index_rows if m.index_rows is not None else empty("mcap_index")
+        replace_source_file(warehouse, "mcap_index", index, source_file=m.source_file)
         entry = ledger_entry(
             m.source_file,
             size_bytes=m.size_bytes,
@@ -380,7 +431,10 @@ def _executor(executor: Executor | str | None, cfg: Config, n_units: int) -> Exe
         return executor
     ex = cfg.execution
     kind = executor or ex.executor
-    return make_executor(kind, min(ex.max_workers, n_units), ex.threads_per_worker)
+    workers = max(1, min(ex.max_workers, n_units))
+    # fewer files than workers: the idle workers' thread budget goes to the busy ones
+    threads = max(ex.threads_per_worker, ex.max_workers * ex.threads_per_worker // workers)
+    return make_executor(kind, workers, threads)
 
 
 def _handle(
@@ -404,8 +458,8 @@ def _handle(
         summary.failed.append((m.source_file, f"commit failed: {type(exc).__name__}: {exc}"))
         return True
     finally:
-        for p in m.staged.values():
+        for sf in (sf for files in m.staged.values() for sf in files):
             with contextlib.suppress(OSError):
-                os.remove(p)
+                os.remove(sf.path)  # still there only when the commit did not take it
     summary.add(m)
     return True

@@ -1,9 +1,10 @@
 """Simulated ground truth (JSON, ``surveil.TruthState``) -> ``truth`` table + rejects.
 
-Parsed in bulk like the radar reports (``pipeline.decode.radar.parse_json_payloads``).
-Validation (reason_code ``out_of_range``): a missing required field, NaN/inf, latitude
-outside [-90, 90] deg, longitude outside [-180, 180] deg, speed < 0. ``mmsi`` may be null
-(the vessel carries no AIS). Units: deg, rad, m/s, ns.
+Parsed in bulk like the radar reports (:mod:`pipeline.decode.json_bulk`; radar and truth
+channels of the same chunks share one parse). Validation (reason_code ``out_of_range``):
+a missing required field, NaN/inf, latitude outside [-90, 90] deg, longitude outside
+[-180, 180] deg, speed < 0. ``mmsi`` may be null (the vessel carries no AIS). Units: deg,
+rad, m/s, ns.
 """
 
 from __future__ import annotations
@@ -12,16 +13,8 @@ import numpy as np
 import polars as pl
 import pyarrow as pa
 
-from pipeline.decode.radar import (
-    missing_reasons,
-    nonfinite_reasons,
-    outside,
-    parse_json_payloads,
-    rejects_for,
-    split_valid,
-    with_provenance,
-)
-from pipeline.tables import conform
+from pipeline.config import ValidationConfig
+from pipeline.decode.json_bulk import Check, JsonKind, decode_payloads, missing, nonfinite, outside
 
 TRUTH_FIELDS: dict[str, pl.DataType] = {
     "vessel_id": pl.Int64(),
@@ -36,22 +29,33 @@ _REQUIRED = ["vessel_id", "time_ns", "lat_deg", "lon_deg", "course_rad", "speed_
 _NUMERIC = ["lat_deg", "lon_deg", "course_rad", "speed_mps"]
 
 
-def decode_truth_states(
-    payloads: list[bytes], log_time_ns: np.ndarray, *, source_file: str, topic: str
-) -> tuple[pa.Table, pa.Table]:
-    """``(truth rows, rejects rows)`` of a batch of truth-state payloads.
-
-    ``log_time_ns``: int64 MCAP log times of the payloads, ns.
-    """
-    parsed = parse_json_payloads(payloads, TRUTH_FIELDS)
-    reasons = [
-        *missing_reasons(_REQUIRED),
-        *nonfinite_reasons(_NUMERIC),
+def truth_checks(_validation: ValidationConfig) -> list[Check]:
+    """Validation checks of a truth state (see module docstring)."""
+    return [
+        *missing(_REQUIRED),
+        *nonfinite(_NUMERIC),
         outside("lat_deg", -90.0, 90.0),
         outside("lon_deg", -180.0, 180.0),
         outside("speed_mps", 0.0, None),
     ]
-    good, bad = split_valid(parsed.frame, reasons)
-    rows = with_provenance(good, log_time_ns, source_file=source_file, topic=topic)
-    rejects = rejects_for(parsed, bad, payloads, log_time_ns, source_file=source_file, topic=topic)
-    return conform("truth", rows.to_arrow()), rejects
+
+
+TRUTH = JsonKind("truth", TRUTH_FIELDS, truth_checks, {})
+"""Truth states as a JSON kind of :mod:`pipeline.decode.json_bulk`."""
+
+
+def decode_truth_states(
+    payloads: list[bytes], log_time_ns: np.ndarray, *, source_file: str, topic: str
+) -> tuple[pa.Table, pa.Table]:
+    """``(truth rows, rejects rows)`` of a list of truth-state payloads.
+
+    ``log_time_ns``: int64 MCAP log times of the payloads, ns.
+    """
+    return decode_payloads(
+        TRUTH,
+        payloads,
+        log_time_ns,
+        source_file=source_file,
+        topic=topic,
+        validation=ValidationConfig(),
+    )

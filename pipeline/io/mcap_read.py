@@ -1,29 +1,32 @@
 """Read an MCAP file as per-channel column batches, chunk by chunk, surviving damage.
 
 ``read_mcap_batches(path)`` yields one :class:`ChannelBatch` per (chunk, channel): the
-channel's encodings and schema, ``log_time_ns`` as an int64 numpy array and the raw
-payloads. Memory holds one chunk at a time (about 1 MiB uncompressed with the default
-writer), not the file. When the iteration ends, ``.status`` says what was read and lost.
+channel's encodings, schema and metadata, ``log_time_ns`` as an int64 numpy array and the
+payloads as byte spans ``[start, end)`` into the chunk's decompressed buffer (no Python
+object per message; ``batch.payloads`` builds the ``list[bytes]`` on demand for decoders
+that work message by message). Memory holds a few chunks at a time (about 1 MiB
+uncompressed each with the default writer), not the file. When the iteration ends,
+``.status`` says what was read and lost and ``.summary`` what the file's summary declares.
 
 How a file is read (see ``research/mcap.md`` §1 for how ``mcap.reader`` behaves on damage):
 
 - **bad magic** (not an MCAP file, empty file): nothing is yielded; status problem
   ``not_mcap``.
-- **summary present** (writer finished): the chunk index is walked; each chunk is read,
-  decompressed, CRC-checked and its records parsed on its own. A chunk that fails (bad
-  zstd/lz4 data, CRC mismatch, a record running past the chunk end) is skipped and reported
-  as ``corrupt_chunk`` with the number of messages lost (from its message index, when the
-  file has one). With a time window only chunks whose index range overlaps are read.
+- **summary present** (writer finished): the chunk index is walked
+  (:mod:`pipeline.io.mcap_chunks`): each chunk is read with its MessageIndex records,
+  decompressed and CRC-checked in a background thread, and its messages located with
+  numpy from the index. A chunk that fails (bad zstd/lz4 data, CRC mismatch, a record
+  running past the chunk end) is skipped and reported as ``corrupt_chunk`` with the number
+  of messages lost (from its message index, when the file has one).
+- **time window** ``[start_ns, end_ns)``: only chunks whose index range overlaps are read
+  and decompressed; a file whose summary statistics lie wholly outside is not read beyond
+  its footer and summary (``status.bytes_read`` counts what was read).
 - **no summary** (writer never finished, file cut off, summary damaged): a linear scan with
   ``mcap.stream_reader.StreamReader`` that keeps every record before the first framing
   error, reported as ``truncated``. Chunks whose header time range misses the window are
   not decompressed.
 
-Records inside a chunk are parsed with ``struct.unpack_from`` on the decompressed buffer,
-without a Python object per message (the ``mcap`` reader builds one per message and
-heap-merges chunks: ~10x slower, measured in ``research/mcap.md`` §3). Batches come in file
-order, which is log-time order for files written by one recorder.
-
+Batches come in file order, which is log-time order for files written by one recorder.
 Times are int64 ns (MCAP ``log_time``); windows are half-open ``[start_ns, end_ns)``.
 """
 
@@ -35,71 +38,157 @@ import zlib
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import BinaryIO
 
 import numpy as np
 from mcap.data_stream import ReadDataStream
 from mcap.opcode import Opcode
-from mcap.records import Channel, Chunk, ChunkIndex, Footer, Message, Schema
+from mcap.records import Channel, Chunk, ChunkIndex, Footer, Message, Schema, Statistics
 from mcap.stream_reader import StreamReader
 
-try:
-    import zstandard
-except ImportError:  # pragma: no cover - zstandard is a dependency of mcap
-    zstandard = None
-try:
-    import lz4.frame as lz4_frame
-except ImportError:  # pragma: no cover - lz4 is a dependency of mcap
-    lz4_frame = None
+from pipeline.io.mcap_chunks import (
+    OP_CHANNEL,
+    OP_SCHEMA,
+    ChunkData,
+    ChunkFetcher,
+    CorruptChunkError,
+    FetchedChunk,
+    Positions,
+    decompress,
+    indexed_positions,
+    iter_records,
+    message_index_entries,
+    parse_chunk,
+    walked_positions,
+)
+
+__all__ = [
+    "ChannelBatch",
+    "ChannelInfo",
+    "ChunkData",
+    "CorruptChunkError",
+    "McapBatches",
+    "McapSummary",
+    "ReadProblem",
+    "ReadStatus",
+    "read_mcap_batches",
+    "read_mcap_summary",
+]
 
 MAGIC = b"\x89MCAP0\r\n"
 _FOOTER_RECORD_SIZE = 1 + 8 + 20  # opcode, length, summary_start/offset_start/crc
-_REC_HEAD = struct.Struct("<BQ")  # opcode, record length
-_MSG_HEAD = struct.Struct("<HIQQ")  # channel_id, sequence, log_time, publish_time
-_MSG_HEAD_SIZE = _MSG_HEAD.size  # 22
 _LINEAR_FLUSH = 8192  # un-chunked messages per batch in a linear scan
+_T_MIN, _T_MAX = -(2**63), 2**64  # an open window bound, as a comparable int
 
-OP_SCHEMA = int(Opcode.SCHEMA)
-OP_CHANNEL = int(Opcode.CHANNEL)
-OP_MESSAGE = int(Opcode.MESSAGE)
-OP_CHUNK = int(Opcode.CHUNK)
-OP_MESSAGE_INDEX = int(Opcode.MESSAGE_INDEX)
 OP_CHUNK_INDEX = int(Opcode.CHUNK_INDEX)
+OP_STATISTICS = int(Opcode.STATISTICS)
 OP_FOOTER = int(Opcode.FOOTER)
-
-
-class CorruptChunkError(ValueError):
-    """A chunk's bytes cannot be turned into records."""
 
 
 @dataclass(frozen=True)
 class ChannelInfo:
-    """What a channel carries: its topic, message encoding and schema (may be empty)."""
+    """What a channel carries: its topic, message encoding, schema (may be empty) and the
+    channel record's metadata."""
 
     topic: str
     message_encoding: str
     schema_name: str
     schema_encoding: str
     schema_data: bytes
+    metadata: dict[str, str] = field(default_factory=dict)
 
 
-@dataclass(frozen=True)
+_NO_SPANS = np.empty(0, dtype=np.int64)
+
+
 class ChannelBatch:
     """Messages of one channel from one chunk, in file order.
 
-    ``log_time_ns``: int64 array of MCAP log times, ns; ``payloads``: raw message bytes.
+    ``log_time_ns``: int64 array of MCAP log times, ns; ``metadata``: the channel record's
+    metadata (e.g. ``sensor_id``, ``platform_id``). The payloads are either spans
+    ``chunk.raw[start[i]:end[i]]`` of a decompressed chunk (what the reader yields) or a
+    ``list[bytes]`` given to the constructor. ``payloads`` always answers a
+    ``list[bytes]`` (built once, on first use); bulk decoders use :meth:`spans`.
     """
 
-    channel_id: int
-    topic: str
-    message_encoding: str
-    schema_name: str
-    schema_encoding: str
-    schema_data: bytes
-    log_time_ns: np.ndarray
-    payloads: list[bytes]
+    __slots__ = (
+        "_payloads",
+        "channel_id",
+        "chunk",
+        "end",
+        "log_time_ns",
+        "message_encoding",
+        "metadata",
+        "schema_data",
+        "schema_encoding",
+        "schema_name",
+        "start",
+        "topic",
+    )
+
+    def __init__(
+        self,
+        channel_id: int,
+        topic: str,
+        message_encoding: str,
+        schema_name: str,
+        schema_encoding: str,
+        schema_data: bytes,
+        log_time_ns: np.ndarray,
+        payloads: list[bytes] | None = None,
+        metadata: dict[str, str] | None = None,
+        *,
+        chunk: ChunkData | None = None,
+        start: np.ndarray | None = None,
+        end: np.ndarray | None = None,
+    ):
+        if payloads is None and chunk is None:
+            raise ValueError("a ChannelBatch needs payloads or a chunk with spans")
+        self.channel_id = channel_id
+        self.topic = topic
+        self.message_encoding = message_encoding
+        self.schema_name = schema_name
+        self.schema_encoding = schema_encoding
+        self.schema_data = schema_data
+        self.log_time_ns = np.asarray(log_time_ns, dtype=np.int64)
+        self.metadata = dict(metadata or {})
+        self._payloads = payloads
+        self.chunk = chunk
+        self.start = _NO_SPANS if start is None else start
+        self.end = _NO_SPANS if end is None else end
 
     def __len__(self) -> int:
-        return len(self.payloads)
+        return len(self.log_time_ns)
+
+    def __repr__(self) -> str:
+        return f"ChannelBatch(channel_id={self.channel_id}, topic={self.topic!r}, n={len(self)})"
+
+    @property
+    def payloads(self) -> list[bytes]:
+        """The raw message bytes (a Python object per message: built on first use)."""
+        if self._payloads is None:
+            raw = self.chunk.raw  # type: ignore[union-attr]
+            self._payloads = [
+                raw[a:b] for a, b in zip(self.start.tolist(), self.end.tolist(), strict=True)
+            ]
+        return self._payloads
+
+    def spans(self) -> tuple[ChunkData, np.ndarray, np.ndarray]:
+        """``(chunk, start, end)``: payload ``i`` is ``chunk.raw[start[i]:end[i]]``. A batch
+        built from a payload list gets a buffer of the payloads, each after a newline."""
+        if self.chunk is None:
+            payloads = self._payloads or []
+            lengths = np.fromiter((len(p) for p in payloads), dtype=np.int64, count=len(payloads))
+            starts = 1 + np.concatenate([[0], np.cumsum(lengths + 1)[:-1]]).astype(np.int64)
+            self.chunk = ChunkData(b"\n" + b"\n".join(payloads))
+            self.start, self.end = starts, starts + lengths
+        return self.chunk, self.start, self.end
+
+    def payload_lengths(self) -> np.ndarray:
+        """Bytes per payload, int64."""
+        if self.chunk is not None:
+            return self.end - self.start
+        return np.fromiter((len(p) for p in self.payloads), dtype=np.int64, count=len(self))
 
 
 @dataclass(frozen=True)
@@ -119,6 +208,20 @@ class ReadProblem:
     messages_lost: int | None = None
 
 
+@dataclass(frozen=True)
+class McapSummary:
+    """What a finished file's summary section declares.
+
+    ``statistics``: the Statistics record (``None`` when the writer left it out);
+    ``channels``: channel id -> :class:`ChannelInfo`; ``chunk_indexes``: in file order.
+    """
+
+    size_bytes: int
+    statistics: Statistics | None
+    channels: dict[int, ChannelInfo]
+    chunk_indexes: list[ChunkIndex]
+
+
 @dataclass
 class ReadStatus:
     """Outcome of reading one file, complete once the batch iterator is exhausted.
@@ -126,7 +229,10 @@ class ReadStatus:
     ``mode``: ``indexed`` (chunk index walk), ``linear`` (stream scan) or ``none`` (not
     read); ``messages_read``: messages yielded (inside the window);
     ``chunks_read``/``chunks_skipped``: chunks decoded / skipped as corrupt;
-    ``start_time_ns``/``end_time_ns``: min/max log time yielded.
+    ``chunks_decompressed``: chunks actually decompressed; ``bytes_read``: bytes read
+    from the file; ``start_time_ns``/``end_time_ns``: min/max log time yielded;
+    ``channel_counts``/``channel_spans``: messages and (first, last) log time yielded per
+    channel id.
     """
 
     path: str
@@ -135,9 +241,13 @@ class ReadStatus:
     chunks_total: int = 0
     chunks_read: int = 0
     chunks_skipped: int = 0
+    chunks_decompressed: int = 0
+    bytes_read: int = 0
     start_time_ns: int | None = None
     end_time_ns: int | None = None
     problems: list[ReadProblem] = field(default_factory=list)
+    channel_counts: dict[int, int] = field(default_factory=dict)
+    channel_spans: dict[int, tuple[int, int]] = field(default_factory=dict)
     finished: bool = False
 
     @property
@@ -170,26 +280,61 @@ class ReadStatus:
             f"; ... {len(self.problems) - 5} more" if len(self.problems) > 5 else ""
         )
 
-    def _note_times(self, times: np.ndarray) -> None:
+    def note(self, channel_id: int, times: np.ndarray) -> None:
+        """Count a batch of ``times`` (int64 ns) read from ``channel_id``."""
         if not len(times):
             return
         lo, hi = int(times.min()), int(times.max())
+        self.messages_read += len(times)
         self.start_time_ns = lo if self.start_time_ns is None else min(self.start_time_ns, lo)
         self.end_time_ns = hi if self.end_time_ns is None else max(self.end_time_ns, hi)
+        self.channel_counts[channel_id] = self.channel_counts.get(channel_id, 0) + len(times)
+        old = self.channel_spans.get(channel_id)
+        self.channel_spans[channel_id] = (
+            (lo, hi) if old is None else (min(old[0], lo), max(old[1], hi))
+        )
+
+
+class _CountingFile:
+    """A read-only binary file that counts the bytes it hands out."""
+
+    def __init__(self, f: BinaryIO):
+        self._f = f
+        self.read_bytes = 0
+
+    def read(self, n: int = -1) -> bytes:
+        data = self._f.read(n)
+        self.read_bytes += len(data)
+        return data
+
+    def seek(self, offset: int, whence: int = io.SEEK_SET) -> int:
+        return self._f.seek(offset, whence)
+
+    def tell(self) -> int:
+        return self._f.tell()
 
 
 class McapBatches(Iterator[ChannelBatch]):
-    """Iterator of :class:`ChannelBatch`; ``status`` is final once it is exhausted."""
+    """Iterator of :class:`ChannelBatch`; ``status`` is final once it is exhausted.
 
-    def __init__(self, path: str | Path, start_ns: int | None, end_ns: int | None):
+    ``prefetch``: read and decompress chunks in a background thread (default on).
+    """
+
+    def __init__(
+        self, path: str | Path, start_ns: int | None, end_ns: int | None, *, prefetch: bool = True
+    ):
         if start_ns is not None and end_ns is not None and end_ns <= start_ns:
             raise ValueError(f"empty time window [{start_ns}, {end_ns})")
         self.path = Path(path)
         self.start_ns = start_ns
         self.end_ns = end_ns
+        self.prefetch = prefetch
         self.status = ReadStatus(path=str(path))
+        self.summary: McapSummary | None = None
         self._channels: dict[int, ChannelInfo] = {}
         self._schemas: dict[int, Schema] = {}
+        self._lo = _T_MIN if start_ns is None else start_ns
+        self._hi = _T_MAX if end_ns is None else end_ns
         self._gen = self._run()
 
     def __iter__(self) -> McapBatches:
@@ -198,39 +343,54 @@ class McapBatches(Iterator[ChannelBatch]):
     def __next__(self) -> ChannelBatch:
         return next(self._gen)
 
+    @property
+    def channels(self) -> dict[int, ChannelInfo]:
+        """Every channel met so far (summary and in-file records), by id."""
+        return dict(self._channels)
+
     # -- top level ---------------------------------------------------------------------
 
     def _run(self) -> Iterator[ChannelBatch]:
         size = self.path.stat().st_size
-        with open(self.path, "rb") as f:
-            head = f.read(len(MAGIC))
-            if head != MAGIC:
-                self.status.problems.append(
-                    ReadProblem("not_mcap", f"bad magic {head[:8]!r} (file size {size} B)", 0)
-                )
-            else:
-                chunk_indexes, why = self._read_summary(f, size)
-                if chunk_indexes:
-                    yield from self._indexed(f, size, chunk_indexes)
+        with open(self.path, "rb") as raw:
+            f = _CountingFile(raw)
+            try:
+                head = f.read(len(MAGIC))
+                if head != MAGIC:
+                    self.status.problems.append(
+                        ReadProblem("not_mcap", f"bad magic {head[:8]!r} (file size {size} B)", 0)
+                    )
                 else:
-                    f.seek(len(MAGIC))
-                    yield from self._linear(f, size, why)
+                    chunk_indexes, why = self._read_summary(f, size)
+                    if chunk_indexes:
+                        yield from self._indexed(f, size, chunk_indexes)
+                    elif self.summary is not None and self._summary_outside():
+                        self.status.mode = "indexed"  # no chunks, nothing in the window
+                    else:
+                        f.seek(len(MAGIC))
+                        yield from self._linear(f, size, why)
+            finally:
+                self.status.bytes_read += f.read_bytes
         self.status.finished = True
 
     def _overlaps(self, t0: int, t1: int) -> bool:
         """Does the closed range [t0, t1] of a chunk meet the window [start, end)?"""
-        if self.start_ns is not None and t1 < self.start_ns:
-            return False
-        return not (self.end_ns is not None and t0 >= self.end_ns)
+        return t1 >= self._lo and t0 < self._hi
 
     def _inside(self, t0: int, t1: int) -> bool:
         """Is the closed range [t0, t1] entirely inside the window?"""
-        lo_ok = self.start_ns is None or t0 >= self.start_ns
-        return lo_ok and (self.end_ns is None or t1 < self.end_ns)
+        return t0 >= self._lo and t1 < self._hi
+
+    def _summary_outside(self) -> bool:
+        """Do the summary statistics put every message of the file outside the window?"""
+        st = self.summary.statistics if self.summary else None
+        if st is None or st.message_count == 0:
+            return st is not None  # an empty file has nothing in any window
+        return not self._overlaps(st.message_start_time, st.message_end_time)
 
     # -- summary -----------------------------------------------------------------------
 
-    def _read_summary(self, f: io.BufferedReader, size: int) -> tuple[list[ChunkIndex], str]:
+    def _read_summary(self, f: _CountingFile, size: int) -> tuple[list[ChunkIndex], str]:
         """Chunk indexes from the summary section (schemas and channels are registered on
         the way), or ``([], why)`` when there is no usable summary."""
         tail = len(MAGIC) + _FOOTER_RECORD_SIZE
@@ -251,20 +411,32 @@ class McapBatches(Iterator[ChannelBatch]):
         if summary_crc and zlib.crc32(section + end[: 1 + 8 + 16]) != summary_crc:
             return [], "summary CRC mismatch"
         try:
-            return self._parse_summary(section), ""
+            indexes, stats = self._parse_summary(section)
         except Exception as exc:  # any damage in the summary -> fall back to a scan
             return [], f"summary unreadable ({type(exc).__name__}: {exc})"
+        self.summary = McapSummary(size, stats, dict(self._channels), indexes)
+        if not indexes and not self._summary_outside():
+            return [], "summary has no chunk index"
+        return indexes, ""
 
-    def _parse_summary(self, section: bytes) -> list[ChunkIndex]:
+    def _parse_summary(self, section: bytes) -> tuple[list[ChunkIndex], Statistics | None]:
         indexes: list[ChunkIndex] = []
-        for op, body in _iter_records(section):
-            if op == OP_SCHEMA:
-                self._add_schema(Schema.read(_stream(body)))
-            elif op == OP_CHANNEL:
-                self._add_channel(Channel.read(_stream(body)))
+        stats = None
+        for op, body in iter_records(section):
+            if op in (OP_SCHEMA, OP_CHANNEL):
+                self._on_record(op, body)
             elif op == OP_CHUNK_INDEX:
                 indexes.append(ChunkIndex.read(_stream(body)))
-        return sorted(indexes, key=lambda c: c.chunk_start_offset)
+            elif op == OP_STATISTICS:
+                stats = Statistics.read(_stream(body))
+        return sorted(indexes, key=lambda c: c.chunk_start_offset), stats
+
+    def _on_record(self, op: int, body: memoryview | bytes) -> None:
+        """Register a Schema or Channel record met in the summary or inside a chunk."""
+        if op == OP_SCHEMA:
+            self._add_schema(Schema.read(_stream(bytes(body))))
+        elif op == OP_CHANNEL:
+            self._add_channel(Channel.read(_stream(bytes(body))))
 
     def _add_schema(self, schema: Schema) -> None:
         self._schemas[schema.id] = schema
@@ -277,31 +449,63 @@ class McapBatches(Iterator[ChannelBatch]):
             schema_name=schema.name if schema else "",
             schema_encoding=schema.encoding if schema else "",
             schema_data=bytes(schema.data) if schema else b"",
+            metadata=dict(ch.metadata or {}),
         )
 
     # -- indexed walk ------------------------------------------------------------------
 
     def _indexed(
-        self, f: io.BufferedReader, size: int, indexes: list[ChunkIndex]
+        self, f: _CountingFile, size: int, indexes: list[ChunkIndex]
     ) -> Iterator[ChannelBatch]:
         self.status.mode = "indexed"
         self.status.chunks_total = len(indexes)
-        for ci in indexes:
-            if not self._overlaps(ci.message_start_time, ci.message_end_time):
-                continue
-            try:
-                if ci.chunk_start_offset + ci.chunk_length > size:
-                    raise CorruptChunkError("chunk index points past the end of the file")
-                f.seek(ci.chunk_start_offset)
-                chunk = _parse_chunk_record(f.read(ci.chunk_length))
-                per_channel = self._chunk_messages(chunk)
-            except Exception as exc:  # skip this chunk only; see module docstring
-                self._skip_chunk(f, ci, exc)
-                continue
-            self.status.chunks_read += 1
-            yield from self._emit(per_channel)
+        if self._summary_outside():
+            return  # the whole file lies outside the window: footer + summary only
+        wanted = [
+            ci for ci in indexes if self._overlaps(ci.message_start_time, ci.message_end_time)
+        ]
+        fetcher = ChunkFetcher(f, size, wanted, threaded=self.prefetch and len(wanted) > 1)
+        try:
+            for got in fetcher:
+                yield from self._indexed_chunk(got)
+        finally:
+            self.status.chunks_decompressed += fetcher.decompressed
 
-    def _skip_chunk(self, f: io.BufferedReader, ci: ChunkIndex, exc: Exception) -> None:
+    def _indexed_chunk(self, got: FetchedChunk) -> Iterator[ChannelBatch]:
+        ci = got.index
+        if got.data is None:
+            self._skip_chunk(ci, got.error or CorruptChunkError("unreadable"), got.message_index)
+            return
+        chunk = ChunkData(got.data)
+        try:
+            positions = self._chunk_positions(chunk, ci, got.message_index)
+        except Exception as exc:  # skip this chunk only; see module docstring
+            self._skip_chunk(ci, exc, got.message_index)
+            return
+        self.status.chunks_read += 1
+        yield from self._emit(chunk, positions)
+
+    def _chunk_positions(self, chunk: ChunkData, ci: ChunkIndex, mi: bytes) -> Positions:
+        lo, hi = (
+            (_T_MIN, _T_MAX)
+            if self._inside(ci.message_start_time, ci.message_end_time)
+            else (
+                self._lo,
+                self._hi,
+            )
+        )
+        positions = None
+        if mi:
+            try:
+                entries = message_index_entries(mi)
+            except CorruptChunkError:
+                entries = {}
+            positions = indexed_positions(chunk, entries, lo, hi, self._on_record)
+        if positions is None:
+            positions = walked_positions(chunk, lo, hi, self._on_record)
+        return positions
+
+    def _skip_chunk(self, ci: ChunkIndex, exc: Exception, mi: bytes) -> None:
         self.status.chunks_skipped += 1
         self.status.problems.append(
             ReadProblem(
@@ -309,109 +513,82 @@ class McapBatches(Iterator[ChannelBatch]):
                 f"chunk at byte {ci.chunk_start_offset} skipped ({type(exc).__name__}: {exc})",
                 offset=ci.chunk_start_offset,
                 log_time_ns=ci.message_start_time,
-                messages_lost=self._count_indexed(f, ci),
+                messages_lost=self._count_indexed(mi),
             )
         )
 
-    def _count_indexed(self, f: io.BufferedReader, ci: ChunkIndex) -> int | None:
+    def _count_indexed(self, mi: bytes) -> int | None:
         """Messages of a chunk inside the window, from its MessageIndex records."""
-        if not ci.message_index_offsets or ci.message_index_length == 0:
+        if not mi:
             return None
         try:
-            f.seek(min(ci.message_index_offsets.values()))
-            buf = f.read(ci.message_index_length)
-            n = 0
-            for op, body in _iter_records(buf):
-                if op != OP_MESSAGE_INDEX:
-                    continue
-                (rec_len,) = struct.unpack_from("<I", body, 2)
-                times = np.frombuffer(body, dtype="<u8", count=rec_len // 8, offset=6)[::2]
-                n += int(np.count_nonzero(self._mask(times.astype(np.int64))))
-            return n
+            entries = message_index_entries(mi)
         except Exception:  # an unreadable index only makes the loss uncounted
             return None
+        if not entries:
+            return None
+        return sum(
+            int(np.count_nonzero((t >= self._lo) & (t < self._hi))) for t, _ in entries.values()
+        )
 
-    def _mask(self, times: np.ndarray) -> np.ndarray:
-        mask = np.ones(len(times), dtype=bool)
-        if self.start_ns is not None:
-            mask &= times >= self.start_ns
-        if self.end_ns is not None:
-            mask &= times < self.end_ns
-        return mask
+    # -- batches -----------------------------------------------------------------------
 
-    # -- chunk contents ----------------------------------------------------------------
+    def _info(self, ch_id: int) -> ChannelInfo:
+        return self._channels.get(ch_id) or ChannelInfo(
+            f"<unknown channel {ch_id}>", "", "", "", b""
+        )
 
-    def _chunk_messages(self, chunk: Chunk) -> dict[int, tuple[list[int], list[bytes]]]:
-        """Decompress and parse a chunk: ``{channel_id: (log_times, payloads)}`` in the
-        window. Schema/Channel records inside the chunk are registered."""
-        data = _decompress(chunk)
-        window = None
-        if not self._inside(chunk.message_start_time, chunk.message_end_time):
-            lo = -(2**63) if self.start_ns is None else self.start_ns
-            hi = 2**63 if self.end_ns is None else self.end_ns
-            window = (lo, hi)
-        return self._walk_records(data, window)
+    def _emit(self, chunk: ChunkData, positions: Positions) -> Iterator[ChannelBatch]:
+        for ch_id in sorted(positions):
+            times, start, end = positions[ch_id]
+            if not len(times):
+                continue
+            info = self._info(ch_id)
+            self.status.note(ch_id, times)
+            yield ChannelBatch(
+                ch_id,
+                info.topic,
+                info.message_encoding,
+                info.schema_name,
+                info.schema_encoding,
+                info.schema_data,
+                times,
+                metadata=info.metadata,
+                chunk=chunk,
+                start=start,
+                end=end,
+            )
 
-    def _walk_records(
-        self, data: bytes, window: tuple[int, int] | None
-    ) -> dict[int, tuple[list[int], list[bytes]]]:
-        out: dict[int, tuple[list[int], list[bytes]]] = {}
-        unpack_rec, unpack_msg = _REC_HEAD.unpack_from, _MSG_HEAD.unpack_from
-        pos, n = 0, len(data)
-        while pos < n:
-            if pos + 9 > n:
-                raise CorruptChunkError(f"record header cut at chunk byte {pos}")
-            op, length = unpack_rec(data, pos)
-            body, end = pos + 9, pos + 9 + length
-            if end > n:
-                raise CorruptChunkError(f"record at chunk byte {pos} runs past the chunk end")
-            if op == OP_MESSAGE:
-                if length < _MSG_HEAD_SIZE:
-                    raise CorruptChunkError(f"message record too short at chunk byte {pos}")
-                ch, _seq, t, _pub = unpack_msg(data, body)
-                if window is None or window[0] <= t < window[1]:
-                    lists = out.get(ch)
-                    if lists is None:
-                        lists = out[ch] = ([], [])
-                    lists[0].append(t)
-                    lists[1].append(data[body + _MSG_HEAD_SIZE : end])
-            elif op == OP_SCHEMA:
-                self._add_schema(Schema.read(_stream(data[body:end])))
-            elif op == OP_CHANNEL:
-                self._add_channel(Channel.read(_stream(data[body:end])))
-            pos = end
-        return out
-
-    def _emit(
-        self, per_channel: dict[int, tuple[list[int], list[bytes]]]
+    def _emit_lists(
+        self, pending: dict[int, tuple[list[int], list[bytes]]]
     ) -> Iterator[ChannelBatch]:
-        for ch_id in sorted(per_channel):
-            times_list, payloads = per_channel[ch_id]
+        """Batches of un-chunked messages collected by the linear scan."""
+        for ch_id in sorted(pending):
+            times_list, payloads = pending[ch_id]
             if not payloads:
                 continue
             times = np.asarray(times_list, dtype=np.uint64).astype(np.int64)
-            info = self._channels.get(ch_id) or ChannelInfo(
-                f"<unknown channel {ch_id}>", "", "", "", b""
-            )
-            self.status.messages_read += len(payloads)
-            self.status._note_times(times)
+            info = self._info(ch_id)
+            self.status.note(ch_id, times)
             yield ChannelBatch(
-                channel_id=ch_id,
-                topic=info.topic,
-                message_encoding=info.message_encoding,
-                schema_name=info.schema_name,
-                schema_encoding=info.schema_encoding,
-                schema_data=info.schema_data,
-                log_time_ns=times,
-                payloads=payloads,
+                ch_id,
+                info.topic,
+                info.message_encoding,
+                info.schema_name,
+                info.schema_encoding,
+                info.schema_data,
+                times,
+                payloads,
+                info.metadata,
             )
+        pending.clear()
 
     # -- linear scan -------------------------------------------------------------------
 
-    def _linear(self, f: io.BufferedReader, size: int, why: str) -> Iterator[ChannelBatch]:
+    def _linear(self, f: _CountingFile, size: int, why: str) -> Iterator[ChannelBatch]:
         """Scan records from the start until the footer or the first framing error."""
         self.status.mode = "linear"
-        reader = StreamReader(f, skip_magic=True, emit_chunks=True, record_size_limit=size)
+        reader = StreamReader(f, skip_magic=True, emit_chunks=True, record_size_limit=size)  # type: ignore[arg-type]
         pending: dict[int, tuple[list[int], list[bytes]]] = {}
         records = reader.records
         while True:
@@ -420,17 +597,17 @@ class McapBatches(Iterator[ChannelBatch]):
             except StopIteration:
                 break
             except Exception as exc:  # damaged bytes: any parse error is the stop point
-                yield from self._emit(pending)
+                yield from self._emit_lists(pending)
                 self._truncated(f, why, exc)
                 return
             if isinstance(record, Footer):
                 break
             yield from self._linear_record(f, record, pending)
-        yield from self._emit(pending)
+        yield from self._emit_lists(pending)
 
     def _linear_record(
         self,
-        f: io.BufferedReader,
+        f: _CountingFile,
         record: object,
         pending: dict[int, tuple[list[int], list[bytes]]],
     ) -> Iterator[ChannelBatch]:
@@ -439,33 +616,42 @@ class McapBatches(Iterator[ChannelBatch]):
         elif isinstance(record, Channel):
             self._add_channel(record)
         elif isinstance(record, Message):
-            if self._overlaps(record.log_time, record.log_time):
+            # un-chunked messages only (rare): one object per message from StreamReader
+            if self._lo <= record.log_time < self._hi:
                 lists = pending.setdefault(record.channel_id, ([], []))
                 lists[0].append(record.log_time)
                 lists[1].append(bytes(record.data))
                 if len(lists[1]) >= _LINEAR_FLUSH:
-                    yield from self._emit({record.channel_id: pending.pop(record.channel_id)})
+                    yield from self._emit_lists({record.channel_id: pending.pop(record.channel_id)})
         elif isinstance(record, Chunk):
-            self.status.chunks_total += 1
-            if not self._overlaps(record.message_start_time, record.message_end_time):
-                return
-            try:
-                per_channel = self._chunk_messages(record)
-            except Exception as exc:  # skip this chunk only
-                self.status.chunks_skipped += 1
-                self.status.problems.append(
-                    ReadProblem(
-                        "corrupt_chunk",
-                        f"chunk before byte {f.tell()} skipped ({type(exc).__name__}: {exc})",
-                        offset=f.tell(),
-                        log_time_ns=record.message_start_time,
-                    )
-                )
-                return
-            self.status.chunks_read += 1
-            yield from self._emit(per_channel)
+            yield from self._linear_chunk(f, record)
 
-    def _truncated(self, f: io.BufferedReader, why: str, exc: Exception) -> None:
+    def _linear_chunk(self, f: _CountingFile, record: Chunk) -> Iterator[ChannelBatch]:
+        self.status.chunks_total += 1
+        if not self._overlaps(record.message_start_time, record.message_end_time):
+            return
+        try:
+            data = decompress(parse_chunk(_chunk_body(record)))
+            self.status.chunks_decompressed += 1
+            chunk = ChunkData(data)
+            inside = self._inside(record.message_start_time, record.message_end_time)
+            lo, hi = (_T_MIN, _T_MAX) if inside else (self._lo, self._hi)
+            positions = walked_positions(chunk, lo, hi, self._on_record)
+        except Exception as exc:  # skip this chunk only
+            self.status.chunks_skipped += 1
+            self.status.problems.append(
+                ReadProblem(
+                    "corrupt_chunk",
+                    f"chunk before byte {f.tell()} skipped ({type(exc).__name__}: {exc})",
+                    offset=f.tell(),
+                    log_time_ns=record.message_start_time,
+                )
+            )
+            return
+        self.status.chunks_read += 1
+        yield from self._emit(chunk, positions)
+
+    def _truncated(self, f: _CountingFile, why: str, exc: Exception) -> None:
         at = f.tell()
         self.status.problems.append(
             ReadProblem(
@@ -479,15 +665,32 @@ class McapBatches(Iterator[ChannelBatch]):
 
 
 def read_mcap_batches(
-    path: str | Path, *, start_ns: int | None = None, end_ns: int | None = None
+    path: str | Path,
+    *,
+    start_ns: int | None = None,
+    end_ns: int | None = None,
+    prefetch: bool = True,
 ) -> McapBatches:
     """Per-channel batches of the messages with log time in ``[start_ns, end_ns)``.
 
     Iterate the result; afterwards ``result.status`` (:class:`ReadStatus`) holds messages
-    read, chunks skipped and what was lost. Never raises on damaged content (only on an
-    unreadable path, e.g. ``FileNotFoundError``).
+    read, chunks skipped and what was lost, and ``result.summary`` the file's summary
+    (``None`` when it has none). Never raises on damaged content (only on an unreadable
+    path, e.g. ``FileNotFoundError``).
     """
-    return McapBatches(path, start_ns, end_ns)
+    return McapBatches(path, start_ns, end_ns, prefetch=prefetch)
+
+
+def read_mcap_summary(path: str | Path) -> McapSummary | None:
+    """The summary of a finished MCAP file (footer and summary section only), or ``None``
+    when the file has none (or is not MCAP)."""
+    scan = McapBatches(path, 0, 1)  # a window no chunk is read for: summary only
+    with open(path, "rb") as raw:
+        f = _CountingFile(raw)
+        if f.read(len(MAGIC)) != MAGIC:
+            return None
+        scan._read_summary(f, Path(path).stat().st_size)
+    return scan.summary
 
 
 # -- record helpers ----------------------------------------------------------------------
@@ -497,50 +700,16 @@ def _stream(body: bytes) -> ReadDataStream:
     return ReadDataStream(io.BytesIO(body))
 
 
-def _iter_records(buf: bytes) -> Iterator[tuple[int, bytes]]:
-    """``(opcode, body)`` of consecutive records in ``buf``; raises on a cut record."""
-    pos, n = 0, len(buf)
-    while pos < n:
-        if pos + 9 > n:
-            raise CorruptChunkError(f"record header cut at byte {pos}")
-        op, length = _REC_HEAD.unpack_from(buf, pos)
-        end = pos + 9 + length
-        if end > n:
-            raise CorruptChunkError(f"record at byte {pos} runs past the end")
-        yield op, buf[pos + 9 : end]
-        pos = end
-
-
-def _parse_chunk_record(buf: bytes) -> Chunk:
-    """A Chunk record (opcode, length, fields) from its raw bytes."""
-    if len(buf) < 9 or buf[0] != OP_CHUNK:
-        raise CorruptChunkError("no chunk record at the indexed offset")
-    (length,) = struct.unpack_from("<Q", buf, 1)
-    if 9 + length > len(buf):
-        raise CorruptChunkError("chunk record longer than its index says")
-    return Chunk.read(_stream(buf[9 : 9 + length]))
-
-
-def _decompress(chunk: Chunk) -> bytes:
-    """Uncompressed records of a chunk, size- and CRC-checked."""
-    if chunk.compression == "zstd":
-        if zstandard is None:
-            raise CorruptChunkError("zstd chunk but the zstandard module is missing")
-        data = zstandard.ZstdDecompressor().decompress(
-            chunk.data, max_output_size=chunk.uncompressed_size
-        )
-    elif chunk.compression == "lz4":
-        if lz4_frame is None:
-            raise CorruptChunkError("lz4 chunk but the lz4 module is missing")
-        data = lz4_frame.decompress(chunk.data)
-    elif chunk.compression == "":
-        data = bytes(chunk.data)
-    else:
-        raise CorruptChunkError(f"unknown compression {chunk.compression!r}")
-    if len(data) != chunk.uncompressed_size:
-        raise CorruptChunkError(
-            f"decompressed {len(data)} B, chunk header says {chunk.uncompressed_size} B"
-        )
-    if chunk.uncompressed_crc and zlib.crc32(data) != chunk.uncompressed_crc:
-        raise CorruptChunkError("uncompressed CRC mismatch")
-    return data
+def _chunk_body(record: Chunk) -> bytes:
+    """Re-pack a Chunk read by ``StreamReader`` into the record body :func:`parse_chunk`
+    reads (the stream reader has already split it into fields)."""
+    comp = record.compression.encode()
+    head = struct.pack(
+        "<QQQII",
+        record.message_start_time,
+        record.message_end_time,
+        record.uncompressed_size,
+        record.uncompressed_crc,
+        len(comp),
+    )
+    return head + comp + struct.pack("<Q", len(record.data)) + bytes(record.data)

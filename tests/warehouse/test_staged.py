@@ -1,0 +1,104 @@
+"""Staged Parquet files committed to Delta in one transaction: create, swap, no-op, and the
+rewrite fallback when a data file mixes source files."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+from deltalake import DeltaTable
+from mcap_fixtures import DAY, T0_NS, truth_rows
+
+from pipeline.warehouse.delta import read_table, replace_source_file, table_path
+from pipeline.warehouse.staged import TableStager, commit_staged, read_staged
+
+
+def stage(folder: Path, source: str, t_ns: np.ndarray, *, rows_per_group: int = 1000):
+    st = TableStager(folder, row_group_rows=rows_per_group)
+    half = len(t_ns) // 2
+    st.add("truth", truth_rows(t_ns[half:], source=source))  # out of order on purpose
+    st.add("truth", truth_rows(t_ns[:half], source=source))
+    return st.close()
+
+
+def test_stager_writes_sorted_row_groups_per_day_with_stats(tmp_path):
+    t = T0_NS + np.arange(5000, dtype=np.int64) * 10**9 * 30  # crosses a day boundary
+    files = stage(tmp_path / "s", "/a.mcap", t, rows_per_group=300)
+    days = sorted(f.partition["date"] for f in files)
+    assert days == ["2026-01-01", "2026-01-02"]
+    assert sum(f.rows for f in files) == 5000
+    groups = 0
+    for f in files:
+        pf = pq.ParquetFile(f.path)
+        assert "date" not in pf.schema_arrow.names
+        groups += pf.metadata.num_row_groups
+        for g in range(pf.metadata.num_row_groups):
+            ts = pf.read_row_group(g, columns=["time_ns"])["time_ns"].to_numpy()
+            assert np.all(np.diff(ts) > 0)
+        stats = json.loads(f.stats_json)
+        got = pq.read_table(f.path)["time_ns"].to_numpy()
+        assert stats["numRecords"] == f.rows == len(got)
+        assert (
+            stats["minValues"]["time_ns"] == got.min()
+            and stats["maxValues"]["time_ns"] == got.max()
+        )
+        assert stats["minValues"]["source_file"] == stats["maxValues"]["source_file"] == "/a.mcap"
+        assert stats["nullCount"]["mmsi"] == f.rows
+    assert groups == 3  # day 1: 380 rows, then 2500; day 2: 2120 rows in one add
+    back = read_staged("truth", files)
+    assert sorted(back["time_ns"].to_pylist()) == t.tolist()
+
+
+def test_create_swap_and_noop(tmp_path):
+    wh = tmp_path / "wh"
+    t = T0_NS + np.arange(300, dtype=np.int64) * 10**9
+    assert commit_staged(wh, "truth", [], source_file="/a.mcap") == "noop"
+    assert (
+        commit_staged(wh, "truth", stage(tmp_path / "1", "/a.mcap", t), source_file="/a.mcap")
+        == "create"
+    )
+    assert (
+        commit_staged(wh, "truth", stage(tmp_path / "2", "/b.mcap", t + DAY), source_file="/b.mcap")
+        == "swap"
+    )
+    v = DeltaTable(str(table_path(wh, "truth"))).version()
+    # a changed /a.mcap: its rows are replaced, /b.mcap's stay
+    how = commit_staged(
+        wh, "truth", stage(tmp_path / "3", "/a.mcap", t[:100]), source_file="/a.mcap"
+    )
+    assert how == "swap" and DeltaTable(str(table_path(wh, "truth"))).version() == v + 1
+    got = read_table(wh, "truth")
+    per_file = dict(
+        zip(
+            *np.unique(got["source_file"].to_numpy(zero_copy_only=False), return_counts=True),
+            strict=True,
+        )
+    )
+    assert per_file == {"/a.mcap": 100, "/b.mcap": 300}
+    # a file that now has no rows for the table: removed in one commit; then nothing to do
+    assert commit_staged(wh, "truth", [], source_file="/a.mcap") == "swap"
+    assert commit_staged(wh, "truth", [], source_file="/a.mcap") == "noop"
+    assert set(read_table(wh, "truth")["source_file"].to_pylist()) == {"/b.mcap"}
+    # the old version still reads the old rows (time travel: nothing was overwritten)
+    old = DeltaTable(str(table_path(wh, "truth")), version=v).to_pyarrow_dataset().to_table()
+    assert old.num_rows == 600
+
+
+def test_mixed_source_files_fall_back_to_a_rewrite(tmp_path):
+    wh = tmp_path / "wh"
+    t = T0_NS + np.arange(50, dtype=np.int64) * 10**9
+    both = pa.concat_tables([truth_rows(t, source="/a.mcap"), truth_rows(t + 1, source="/c.mcap")])
+    replace_source_file(wh, "truth", both.slice(0, 0), source_file="/none")  # create the table
+    from deltalake import write_deltalake
+
+    write_deltalake(str(table_path(wh, "truth")), both, mode="append", partition_by=["date"])
+    how = commit_staged(
+        wh, "truth", stage(tmp_path / "s", "/a.mcap", t[:10]), source_file="/a.mcap"
+    )
+    assert how == "rewrite"
+    got = read_table(wh, "truth")
+    assert got.filter(pa.compute.equal(got["source_file"], "/a.mcap")).num_rows == 10
+    assert got.filter(pa.compute.equal(got["source_file"], "/c.mcap")).num_rows == 50
