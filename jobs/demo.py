@@ -45,7 +45,7 @@ def run_demo(
     echo(ingest.render())
     start_ns = DEFAULT_START_NS
     end_ns = start_ns + int(duration_s * 1e9)
-    echo("3/4 batch: align, synchronise, associate, fuse, identify, score")
+    echo("3/4 batch: every sensor family (maritime: align, sync, associate, fuse, identify, score)")
     batch = run_batch(cfg, warehouse, start_ns=start_ns, end_ns=end_ns, executor_kind=executor_kind)
     echo(batch.render())
     echo("4/4 reports")
