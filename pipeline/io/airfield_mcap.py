@@ -20,18 +20,15 @@ temp file + ``os.replace``; the bytes depend only on the inputs.
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 import polars as pl
-from mcap.writer import CompressionType, Writer
 
 from pipeline.airfield.config import AirfieldConfig, airfield_config
 from pipeline.config import Config
 from pipeline.io import asterix_encode as cat010
-from pipeline.io.mcap_write import MCAP_LIBRARY, MCAP_PROFILE, archive_file_name
+from pipeline.io.mcap_write import archive_file_name, write_mcap_file
 from pipeline.resources import resource_path
 from pipeline.simulate.airfield import AirfieldScenario, simulate_airfield
 
@@ -153,53 +150,9 @@ def write_airfield_archive(
     paths = []
     for (file_index,), df in messages.group_by(["file_index"], maintain_order=True):
         path = out_dir / archive_file_name("airfield", int(file_index) * period_ns)
-        _write(path, channels, schemas, meta, df)
+        write_mcap_file(path, channels, schemas, meta, df)
         paths.append(path)
     return paths
-
-
-def _write(
-    path: Path,
-    channels: list,
-    schemas: dict[str, bytes],
-    metadata: dict[str, str],
-    df: pl.DataFrame,
-) -> None:
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            w = Writer(f, compression=CompressionType.ZSTD)
-            w.start(profile=MCAP_PROFILE, library=MCAP_LIBRARY)
-            schema_ids: dict[str, int] = {}
-            ids = []
-            for topic, encoding, schema_name, meta in channels:
-                sid = 0
-                if schema_name is not None:
-                    if schema_name not in schema_ids:
-                        schema_ids[schema_name] = w.register_schema(
-                            schema_name, "jsonschema", schemas[schema_name]
-                        )
-                    sid = schema_ids[schema_name]
-                ids.append(w.register_channel(topic, encoding, sid, metadata=meta))
-            w.add_metadata("surveil.scenario", metadata)
-            seq = [0] * len(channels)
-            # one call per message: the mcap writer has no bulk API
-            for t, ch, payload in zip(
-                df["log_time_ns"].to_list(),
-                df["channel"].to_list(),
-                df["payload"].to_list(),
-                strict=True,
-            ):
-                w.add_message(ids[ch], t, payload, t, seq[ch])
-                seq[ch] += 1
-            w.finish()
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
 
 
 def simulate_airfield_archive(

@@ -162,26 +162,34 @@ def write_channel_archive(
             "file_start_ns": str(period_start),
             "file_end_ns": str(period_start + period_ns),
         }
-        _write_file(path, channels, schemas, meta, df)
+        write_mcap_file(path, channels, schemas, meta, df)
         paths.append(path)
     return paths
 
 
-def _write_file(
+def write_mcap_file(
     path: Path,
-    channels: list[tuple[str, str, str | None]],
+    channels: list[tuple],
     schemas: dict[str, bytes],
     metadata: dict[str, str],
     df: pl.DataFrame,
+    *,
+    library: str = MCAP_LIBRARY,
 ) -> None:
+    """Write one zstd-chunked MCAP file atomically (temp file, fsync, rename).
+
+    ``channels``: (topic, message encoding, JSON-schema name or None[, channel metadata])
+    per channel id; ``df``: log_time_ns, channel (index into ``channels``), payload (bytes),
+    in log-time order. Deterministic for the same inputs (no wall-clock anywhere).
+    """
     fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(fd, "wb") as f:
             writer = Writer(f, compression=CompressionType.ZSTD)
-            writer.start(profile=MCAP_PROFILE, library=MCAP_LIBRARY)
+            writer.start(profile=MCAP_PROFILE, library=library)
             schema_ids: dict[str, int] = {}
             channel_ids = []
-            for topic, encoding, schema_name in channels:
+            for topic, encoding, schema_name, *channel_meta in channels:
                 sid = 0
                 if schema_name is not None:
                     if schema_name not in schema_ids:
@@ -189,10 +197,12 @@ def _write_file(
                             schema_name, "jsonschema", schemas[schema_name]
                         )
                     sid = schema_ids[schema_name]
-                channel_ids.append(writer.register_channel(topic, encoding, sid))
+                meta = channel_meta[0] if channel_meta else {}
+                channel_ids.append(writer.register_channel(topic, encoding, sid, metadata=meta))
             writer.add_metadata("surveil.scenario", metadata)
             sequence = [0] * len(channels)
             add = writer.add_message
+            # one call per message: the mcap writer has no bulk API
             for t, ch, payload in zip(
                 df["log_time_ns"].to_list(),
                 df["channel"].to_list(),

@@ -33,19 +33,17 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import tempfile
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
 import polars as pl
-from mcap.writer import CompressionType, Writer
 
 from pipeline import frames
 from pipeline.filters import kalman
 from pipeline.filters.gyro_gnss_log import EARTH_RATE_RADPS, G_MPS2, GyroModel, RollModel
+from pipeline.io.mcap_write import write_mcap_file
 from pipeline.resources import resource_path
 
 NS = 1_000_000_000
@@ -499,37 +497,8 @@ def write_ownship_archive(sc: OwnshipScenario, out_dir: Path, *, sample_period_s
 
 def _write_mcap(path: Path, schemas: dict[str, bytes], metadata: dict[str, str],
                 platform_id: str, df: pl.DataFrame) -> None:
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            w = Writer(f, compression=CompressionType.ZSTD)
-            w.start(profile="", library=MCAP_LIBRARY)
-            sids: dict[str, int] = {}
-            cids = []
-            for topic, encoding, schema_name in CHANNELS:
-                sid = 0
-                if schema_name is not None:
-                    if schema_name not in sids:
-                        sids[schema_name] = w.register_schema(
-                            schema_name, "jsonschema", schemas[schema_name])
-                    sid = sids[schema_name]
-                cids.append(w.register_channel(topic, encoding, sid,
-                                               metadata={"platform_id": platform_id}))
-            w.add_metadata("surveil.scenario", metadata)
-            seq = [0] * len(CHANNELS)
-            # one add_message per message: the mcap writer's API is per record
-            for t, ch, payload in zip(df["log_time_ns"].to_list(), df["channel"].to_list(),
-                                      df["payload"].to_list(), strict=True):
-                w.add_message(cids[ch], t, payload, t, seq[ch])
-                seq[ch] += 1
-            w.finish()
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    channels = [(*ch, {"platform_id": platform_id}) for ch in CHANNELS]
+    write_mcap_file(path, channels, schemas, metadata, df, library=MCAP_LIBRARY)
 
 
 def simulate_ownship_archive(cfg, start_ns: int, duration_s: float, seed: int,
