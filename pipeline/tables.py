@@ -98,10 +98,10 @@ def with_date(table: pa.Table, time_column: str) -> pa.Table:
     return table.append_column("date", date)
 
 
-def conform(name: str, data: pa.Table | pl.DataFrame) -> pa.Table:
-    """Cast ``data`` to table ``name``'s schema: select and order columns, add ``date``,
-    sort by the table's sort key. Missing nullable columns are filled with nulls;
-    a missing non-nullable column raises ``KeyError``."""
+def shape(name: str, data: pa.Table | pl.DataFrame) -> pa.Table:
+    """Cast ``data`` to table ``name``'s schema: select and order columns, add ``date``.
+    Missing nullable columns are filled with nulls; a missing non-nullable column
+    raises ``KeyError``. Row order is kept (see :func:`conform` to sort)."""
     s = spec(name)
     table = data.to_arrow() if isinstance(data, pl.DataFrame) else data
     if "date" in s.schema.names:
@@ -114,7 +114,13 @@ def conform(name: str, data: pa.Table | pl.DataFrame) -> pa.Table:
             cols.append(pa.nulls(table.num_rows, f.type))
         else:
             raise KeyError(f"table {name}: missing required column {f.name!r}")
-    out = pa.Table.from_arrays(cols, schema=s.schema)
-    if out.num_rows and s.sort_by:
-        out = out.sort_by([(c, "ascending") for c in s.sort_by])
+    return pa.Table.from_arrays(cols, schema=s.schema)
+
+
+def conform(name: str, data: pa.Table | pl.DataFrame) -> pa.Table:
+    """:func:`shape`, then sort by the table's sort key."""
+    out = shape(name, data)
+    sort_by = spec(name).sort_by
+    if out.num_rows and sort_by:
+        out = out.sort_by([(c, "ascending") for c in sort_by])
     return out

@@ -34,7 +34,7 @@ import pyarrow as pa
 
 from pipeline.config import ValidationConfig
 from pipeline.io.mcap_read import ChannelBatch, ChunkData
-from pipeline.tables import conform, empty, spec, with_date
+from pipeline.tables import conform, empty, shape
 
 NEWLINE, SPACE = 10, 32
 _SHORT_GAP = 64  # gaps up to this many bytes are blanked by one scatter per length
@@ -412,24 +412,6 @@ def _rejects(
         reason=list(reasons),
         raw=order.payloads(idx),
     )
-
-
-def shape(name: str, frame: pl.DataFrame) -> pa.Table:
-    """``frame`` with table ``name``'s columns, types and ``date``, NOT sorted (the
-    stager sorts each row group; :func:`pipeline.tables.conform` would sort here too)."""
-    target = spec(name)
-    table = frame.to_arrow()
-    if "date" in target.schema.names:
-        table = with_date(table, target.time_column)
-    cols = []
-    for f in target.schema:
-        if f.name in table.column_names:
-            cols.append(table[f.name].cast(f.type))
-        elif f.nullable:
-            cols.append(pa.nulls(table.num_rows, f.type))
-        else:
-            raise KeyError(f"table {name}: missing required column {f.name!r}")
-    return pa.Table.from_arrays(cols, schema=target.schema)
 
 
 def with_provenance(

@@ -49,11 +49,12 @@ import polars as pl
 import pyarrow as pa
 
 from pipeline.config import ValidationConfig
-from pipeline.decode.json_bulk import JsonKind, shape, split_valid, with_provenance
+from pipeline.decode.json_bulk import JsonKind, split_valid, with_provenance
 from pipeline.decode.radar import RADAR
 from pipeline.io.mcap_chunks import PAD
 from pipeline.io.mcap_read import ChannelBatch
 from pipeline.resources import resource_path
+from pipeline.tables import shape
 
 PROTO_SCHEMA = "surveil.RadarTrackReport"
 ROS2_SCHEMA = "surveil_msgs/msg/RadarTrackReport"

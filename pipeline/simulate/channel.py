@@ -75,6 +75,7 @@ from scipy.special import ndtr
 
 from pipeline.bias import SiteBias, radar_bias_config
 from pipeline.config import Config, RadarSite
+from pipeline.decode.radar import RADAR_FIELDS
 from pipeline.frames import (
     TWO_PI,
     enu_to_geodetic,
@@ -116,21 +117,7 @@ SCAN_END_AZIMUTH_RAD = TWO_PI
 _FLEET, _ARRIVALS, _FERRIES, _IDENTITY, _RADAR_PHASE, _RADAR, _AIS = range(1, 8)
 
 RADAR_REPORT_SCHEMA: dict[str, pl.DataType] = {
-    "site_id": pl.String(),
-    "track_id": pl.Int64(),
-    "time_ns": pl.Int64(),
-    "range_m": pl.Float64(),
-    "azimuth_rad": pl.Float64(),
-    "x_m": pl.Float64(),
-    "y_m": pl.Float64(),
-    "course_rad": pl.Float64(),
-    "speed_mps": pl.Float64(),
-    "sigma_range_m": pl.Float64(),
-    "sigma_azimuth_rad": pl.Float64(),
-    "sigma_course_rad": pl.Float64(),
-    "sigma_speed_mps": pl.Float64(),
-    "scan_period_s": pl.Float64(),
-    "scan_end_azimuth_rad": pl.Float64(),
+    **RADAR_FIELDS,  # the message fields of schemas/radar_track_report.schema.json
     "status": pl.String(),
     "log_time_ns": pl.Int64(),
 }
