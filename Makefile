@@ -5,7 +5,10 @@ BIN    := $(VENV)/bin
 
 .PHONY: demo test setup lint bench clean
 
-$(BIN)/surveil: pyproject.toml
+NATIVE := pipeline/decode/_json_columns.c pipeline/decode/_pow5_128.h pipeline/io/_mcap_records.c
+
+# pip builds the two C extensions (optional: skipped without a C compiler)
+$(BIN)/surveil: pyproject.toml $(NATIVE)
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
 	$(BIN)/pip install --quiet -e '.[dev]'
@@ -21,7 +24,8 @@ test: setup
 	$(BIN)/pytest
 
 bench: setup
-	$(BIN)/python bench/batch.py
+	$(BIN)/python bench/pipeline.py
+	$(BIN)/python bench/ingest.py
 
 clean:
 	rm -rf $(VENV) warehouse/tables warehouse/*.duckdb

@@ -21,6 +21,7 @@ conditions are evaluated for every row, the reason strings only for the failing 
 
 from __future__ import annotations
 
+import functools
 import io
 import json
 import math
@@ -33,6 +34,7 @@ import polars as pl
 import pyarrow as pa
 
 from pipeline.config import ValidationConfig
+from pipeline.decode.json_columns import native_kinds, parse_spans
 from pipeline.io.mcap_read import ChannelBatch, ChunkData
 from pipeline.tables import conform, empty, shape
 
@@ -172,6 +174,12 @@ def _type_error(payload: bytes, schema: dict[str, pl.DataType]) -> str:
     return "payload could not be parsed"
 
 
+def _one_line(payload: bytes) -> bytes:
+    if b"\n" in payload or b"\r" in payload:
+        return payload.replace(b"\n", b" ").replace(b"\r", b" ")
+    return payload
+
+
 def _with_idx(df: pl.DataFrame) -> pl.DataFrame:
     return df.with_columns(pl.Series("_idx", np.arange(df.height, dtype=np.int64)))
 
@@ -192,7 +200,10 @@ def parse_json_payloads(payloads: Sequence[bytes], schema: dict[str, pl.DataType
             out.bad_idx.append(i)
             out.bad_code.append(why[0])
             out.bad_reason.append(why[1])
-    frames = _bisect(payloads, candidates, schema, out) if candidates else []
+    # json.loads accepted the candidates, so a raw CR/LF in them lies between tokens (not in
+    # a string): a space there means the same and keeps each payload on one NDJSON line
+    flat = [_one_line(p) for p in payloads]
+    frames = _bisect(flat, candidates, schema, out) if candidates else []
     blank = pl.DataFrame(schema={**schema, "_idx": pl.Int64()})
     frame = pl.concat(frames) if frames else blank
     return JsonParse(frame, out.bad_idx, out.bad_code, out.bad_reason)
@@ -317,19 +328,50 @@ def _blank(out: np.ndarray, starts: np.ndarray, stops: np.ndarray) -> None:
 def parse_json_batches(
     batches: Sequence[ChannelBatch], schema: dict[str, pl.DataType]
 ) -> tuple[JsonParse, MessageOrder]:
-    """Parse the payloads of ``batches`` (any channels, any chunks) with ``schema``: one
-    ``read_ndjson`` over a buffer built with numpy (:func:`ndjson_buffer`), and only when
-    that fails, payload by payload (:func:`parse_json_payloads`).
+    """Parse the payloads of ``batches`` (any channels, any chunks) with ``schema``.
+
+    With the compiled parser (:mod:`pipeline.decode.json_columns`): the payloads are read
+    where they lie in the chunks, and only the rows it flags go payload by payload
+    (:func:`parse_json_payloads`). Without it (no C compiler at install time), or for a
+    schema with other than float/int/string/bool fields: one ``read_ndjson`` over a
+    buffer built with numpy (:func:`ndjson_buffer`), payload by payload when that fails.
 
     Row ``_idx`` of the result is message ``_idx`` of the returned order."""
     order = message_order(batches)
     if len(order) == 0:
         return JsonParse(pl.DataFrame(schema={**schema, "_idx": pl.Int64()}), [], [], []), order
+    native = parse_columns(order, schema)
+    if native is not None:
+        return native, order
     buf = ndjson_buffer(order)
     df = None if buf is None else read_ndjson_exact(buf, schema, len(order))
     if df is not None:
         return JsonParse(_with_idx(df), [], [], []), order
     return parse_json_payloads(order.payloads(np.arange(len(order))), schema), order
+
+
+def parse_columns(order: MessageOrder, schema: dict[str, pl.DataType]) -> JsonParse | None:
+    """The compiled parser over ``order`` (``None`` when it is not built or ``schema`` has
+    a field type it does not decode); its flagged rows go through
+    :func:`parse_json_payloads`, which gives the same rows or the exact reject reasons."""
+    kinds = native_kinds(schema)
+    if kinds is None:
+        return None
+    frame, flagged = parse_spans(
+        [c.raw for c in order.chunks], order.chunk, order.start, order.end, schema, kinds
+    )
+    frame = frame.with_columns(pl.Series("_idx", np.arange(len(order), dtype=np.int64)))
+    if len(flagged) == 0:
+        return JsonParse(frame, [], [], [])
+    good = np.ones(len(order), dtype=bool)
+    good[flagged] = False
+    slow = parse_json_payloads(order.payloads(flagged), schema)
+    again = slow.frame.with_columns(
+        pl.Series("_idx", flagged[slow.frame["_idx"].to_numpy()], dtype=pl.Int64)
+    )
+    merged = pl.concat([frame.filter(pl.Series(good)), again]).sort("_idx")
+    bad_idx = flagged[np.asarray(slow.bad_idx, dtype=np.int64)].tolist()
+    return JsonParse(merged, bad_idx, slow.bad_code, slow.bad_reason)
 
 
 # -- kinds of JSON channels ---------------------------------------------------------------
@@ -381,7 +423,7 @@ def decode_json_batches(
         frame = parsed.frame if single else parsed.frame.filter(pl.Series(row_channel == ch))
         if frame.height == 0:
             continue
-        good, bad = split_valid(frame.select([*kind.fields, "_idx"]), kind.checks(validation))
+        good, bad = split_valid(frame.select([*kind.fields, "_idx"]), _checks(kind, validation))
         rows = with_provenance(good, order.log_time_ns, source_file=source_file, topic=topic[ch])
         out.setdefault(kind.table, []).append(shape(kind.table, rows.rename(kind.rename)))
         if bad.height:
@@ -391,6 +433,13 @@ def decode_json_batches(
                 _rejects(order, idx, codes, bad["_reason"].to_list(), topic, source_file)
             )
     return {name: pa.concat_tables(parts) for name, parts in out.items()}
+
+
+@functools.lru_cache(maxsize=64)
+def _checks(kind: JsonKind, validation: ValidationConfig) -> list[Check]:
+    """``kind.checks(validation)``, built once per kind and configuration (polars
+    expressions: ~40 per kind, rebuilt per group they cost more than evaluating them)."""
+    return kind.checks(validation)
 
 
 def _rejects(

@@ -101,8 +101,9 @@ CHANNEL_DECODERS["gyro_signals"] = "pipeline.decode.ownship:GyroSignalsChannelDe
 CHANNEL_DECODERS["ownship_truth"] = "pipeline.decode.ownship:OwnshipTruthChannelDecoder"
 _KINDS[("json", "jsonschema", "surveil.GyroSignals")] = "gyro_signals"
 _KINDS[("json", "jsonschema", "surveil.OwnshipTruth")] = "ownship_truth"
-JSON_BATCH = 50_000  # JSON messages per bulk parse (~20 MB of payload)
-JSON_MAX_CHUNKS = 32  # chunks a pending JSON parse may hold (bounds memory: ~32 MiB)
+JSON_BATCH = 100_000  # JSON messages per bulk parse (~44 MB of radar payload)
+JSON_MAX_CHUNKS = 64  # chunks a pending JSON parse may hold (bounds memory: ~64 MiB)
+JSON_RAMP_STEPS = 3  # the first parses take 1/8, 1/4, 1/2 of these limits
 
 
 def decoder_kind(message_encoding: str, schema_encoding: str, schema_name: str) -> str | None:
@@ -183,6 +184,7 @@ class FileDecoder:
     _unknown: dict[int, _UnknownChannel] = field(default_factory=dict)
     _json: list[ChannelBatch] = field(default_factory=list)
     _json_count: int = 0
+    _json_flushes: int = 0
     _channels: dict[int, Any] = field(default_factory=dict)
 
     def _add(self, name: str, table: pa.Table) -> None:
@@ -196,8 +198,11 @@ class FileDecoder:
         if kind in ("radar", "truth"):
             self._json.append(batch)
             self._json_count += len(batch)
+            # the first parses are smaller (1/8, 1/4, 1/2 of the batch): decoding starts
+            # while the reader still fetches, instead of after a whole batch of chunks
+            ramp = max(0, JSON_RAMP_STEPS - self._json_flushes)
             chunks = len({id(b.chunk) for b in self._json})
-            if self._json_count >= JSON_BATCH or chunks > JSON_MAX_CHUNKS:
+            if self._json_count >= JSON_BATCH >> ramp or chunks > JSON_MAX_CHUNKS >> ramp:
                 self._flush_json()
         elif kind in CHANNEL_DECODERS:
             dec = self._channels.get(batch.channel_id)
@@ -219,6 +224,7 @@ class FileDecoder:
         batches, self._json, self._json_count = self._json, [], 0
         if not batches:
             return
+        self._json_flushes += 1
         kinds = {}
         for b in batches:
             kind = decoder_kind(b.message_encoding, b.schema_encoding, b.schema_name)

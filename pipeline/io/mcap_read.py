@@ -58,6 +58,7 @@ from pipeline.io.mcap_chunks import (
     indexed_positions,
     iter_records,
     message_index_entries,
+    native_positions,
     parse_chunk,
     walked_positions,
 )
@@ -494,8 +495,8 @@ class McapBatches(Iterator[ChannelBatch]):
                 self._hi,
             )
         )
-        positions = None
-        if mi:
+        positions = native_positions(chunk, lo, hi, self._on_record)
+        if positions is None and mi:
             try:
                 entries = message_index_entries(mi)
             except CorruptChunkError:
@@ -636,7 +637,9 @@ class McapBatches(Iterator[ChannelBatch]):
             chunk = ChunkData(data)
             inside = self._inside(record.message_start_time, record.message_end_time)
             lo, hi = (_T_MIN, _T_MAX) if inside else (self._lo, self._hi)
-            positions = walked_positions(chunk, lo, hi, self._on_record)
+            positions = native_positions(chunk, lo, hi, self._on_record)
+            if positions is None:
+                positions = walked_positions(chunk, lo, hi, self._on_record)
         except Exception as exc:  # skip this chunk only
             self.status.chunks_skipped += 1
             self.status.problems.append(

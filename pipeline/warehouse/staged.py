@@ -32,7 +32,6 @@ import os
 import shutil
 import time
 import uuid
-from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -49,6 +48,7 @@ from pipeline.tables import conform, spec
 from pipeline.warehouse.delta import replace_source_file, table_exists, table_path
 
 ROW_GROUP_ROWS = 128 * 1024
+MAX_FILES_PER_SLOT = 2  # staged files (and writer threads) per (table, date) of a source
 PARTITION = "date"
 
 
@@ -81,13 +81,29 @@ class _ColumnStats:
         self.nulls += col.null_count
         if not self.usable or col.null_count == len(col):
             return
-        if pa.types.is_floating(col.type) and pc.any(pc.is_nan(col)).as_py():
-            self.usable = False  # NaN has no place in min/max statistics
-            return
-        mm = pc.min_max(col).as_py()
-        lo, hi = mm["min"], mm["max"]
+        numeric = pa.types.is_integer(col.type) or pa.types.is_floating(col.type)
+        if numeric and col.null_count == 0:  # numpy: one pass each, NaN propagates
+            v = col.to_numpy()
+            lo, hi = v.min().item(), v.max().item()
+            if lo != lo or hi != hi:
+                self.usable = False  # NaN has no place in min/max statistics
+                return
+        else:
+            if pa.types.is_floating(col.type) and pc.any(pc.is_nan(col)).as_py():
+                self.usable = False
+                return
+            mm = pc.min_max(col).as_py()
+            lo, hi = mm["min"], mm["max"]
         self.lo = lo if self.lo is None else min(self.lo, lo)
         self.hi = hi if self.hi is None else max(self.hi, hi)
+
+
+def _write_group(f: _OpenFile, group: pa.Table) -> None:
+    """Statistics, then one row group (in the stage thread: Arrow releases the GIL; jobs
+    of one stager run one at a time, in order)."""
+    for col, st in f.stats.items():
+        st.update(group[col])
+    f.writer.write_table(group, row_group_size=group.num_rows)
 
 
 def _sorted_by_first(table: pa.Table, key: str) -> bool:
@@ -120,12 +136,38 @@ def _stats_json(rows: int, stats: dict[str, _ColumnStats]) -> str:
 
 @dataclass
 class _OpenFile:
+    """One staged Parquet file of a (table, partition) slot, and the thread writing it."""
+
     table: str
     partition: dict[str, str]
     path: Path
     writer: pq.ParquetWriter
+    pool: ThreadPoolExecutor | None
     rows: int = 0
     stats: dict[str, _ColumnStats] = field(default_factory=dict)
+    inflight: list[Future] = field(default_factory=list)
+
+    def busy(self) -> bool:
+        return any(not fut.done() for fut in self.inflight)
+
+    def submit(self, group: pa.Table) -> None:
+        """Write ``group`` as the file's next row group (in order), at most two behind."""
+        self.rows += group.num_rows
+        if self.pool is None:
+            _write_group(self, group)
+            return
+        while self.inflight and (self.inflight[0].done() or len(self.inflight) >= 2):
+            self.inflight.pop(0).result()  # re-raises a failed write here
+        self.inflight.append(self.pool.submit(_write_group, self, group))
+
+
+@dataclass
+class _Slot:
+    """The rows of one (table, partition) not yet written, and the files they go to."""
+
+    table: str
+    partition: dict[str, str]
+    files: list[_OpenFile] = field(default_factory=list)
     pending: list[pa.Table] = field(default_factory=list)
     pending_rows: int = 0
 
@@ -135,7 +177,10 @@ class TableStager:
 
     ``add(name, table)`` takes rows of raw table ``name`` (any column order: they are
     conformed); ``close()`` flushes and returns the :class:`StagedFile` list. Parquet
-    encoding runs in one background thread, at most two row groups behind.
+    encoding runs in a background thread per file, at most two row groups behind. A row
+    group that finds its slot's file still busy goes to a second file of the slot, with
+    its own thread (``MAX_FILES_PER_SLOT``): a big table is then written on two cores, which
+    shortens the tail of a file's ingest when decoding has kept both cores busy.
     """
 
     def __init__(
@@ -143,10 +188,9 @@ class TableStager:
     ):
         self.folder = Path(folder)
         self.row_group_rows = row_group_rows
+        self.threaded = threaded
         self.rows: dict[str, int] = {}
-        self._files: dict[tuple[str, str], _OpenFile] = {}
-        self._pool = ThreadPoolExecutor(1, thread_name_prefix="stage") if threaded else None
-        self._inflight: list[Future] = []
+        self._slots: dict[tuple[str, str], _Slot] = {}
 
     def add(self, name: str, table: pa.Table) -> None:
         if table.num_rows == 0:
@@ -165,58 +209,63 @@ class TableStager:
             self._append(name, day.isoformat(), {PARTITION: day.isoformat()}, part)
 
     def _append(self, name: str, key: str, partition: dict[str, str], data: pa.Table) -> None:
-        f = self._files.get((name, key))
-        if f is None:
-            f = self._files[(name, key)] = self._open(name, partition, data)
-        f.pending.append(data.drop_columns([PARTITION]) if partition else data)
-        f.pending_rows += data.num_rows
-        if f.pending_rows >= self.row_group_rows:
-            self._flush(f)
+        slot = self._slots.get((name, key))
+        if slot is None:
+            slot = self._slots[(name, key)] = _Slot(name, partition)
+        slot.pending.append(data.drop_columns([PARTITION]) if partition else data)
+        slot.pending_rows += data.num_rows
+        if slot.pending_rows >= self.row_group_rows:
+            self._flush(slot)
 
-    def _open(self, name: str, partition: dict[str, str], data: pa.Table) -> _OpenFile:
-        sub = self.folder / name / "/".join(f"{k}={v}" for k, v in partition.items())
+    def _open(self, slot: _Slot, schema: pa.Schema) -> _OpenFile:
+        sub = self.folder / slot.table / "/".join(f"{k}={v}" for k, v in slot.partition.items())
         sub.mkdir(parents=True, exist_ok=True)
         path = sub / f"part-{uuid.uuid4().hex}.parquet"
-        schema = (
-            data.schema.remove(data.schema.get_field_index(PARTITION)) if partition else data.schema
-        )
         strings = [f.name for f in schema if pa.types.is_string(f.type)]
-        writer = pq.ParquetWriter(path, schema, compression="zstd", use_dictionary=strings)
+        floats = [f.name for f in schema if pa.types.is_floating(f.type)]
+        writer = pq.ParquetWriter(
+            path,
+            schema,
+            compression="zstd",
+            use_dictionary=strings,
+            use_byte_stream_split=floats or False,  # -6% size and CPU on sensor floats
+        )
         stats = {f.name: _ColumnStats() for f in schema if not pa.types.is_binary(f.type)}
-        return _OpenFile(name, partition, path, writer, stats=stats)
+        pool = ThreadPoolExecutor(1, thread_name_prefix="stage") if self.threaded else None
+        return _OpenFile(slot.table, slot.partition, path, writer, pool, stats=stats)
 
-    def _flush(self, f: _OpenFile) -> None:
-        if not f.pending:
+    def _flush(self, slot: _Slot) -> None:
+        if not slot.pending:
             return
-        parts, f.pending, f.pending_rows = f.pending, [], 0
+        parts, slot.pending, slot.pending_rows = slot.pending, [], 0
         group = pa.concat_tables(parts)
-        keys = [k for k in spec(f.table).sort_by if k in group.column_names]
+        keys = [k for k in spec(slot.table).sort_by if k in group.column_names]
         if keys and not _sorted_by_first(group, keys[0]):  # each row group sorted
             group = group.sort_by([(k, "ascending") for k in keys])
-        f.rows += group.num_rows
-        for col, st in f.stats.items():
-            st.update(group[col])
-        self._submit(lambda: f.writer.write_table(group, row_group_size=group.num_rows))
-
-    def _submit(self, job: Callable[[], None]) -> None:
-        if self._pool is None:
-            job()
-            return
-        while self._inflight and (self._inflight[0].done() or len(self._inflight) >= 2):
-            self._inflight.pop(0).result()  # re-raises a failed write here
-        self._inflight.append(self._pool.submit(job))
+        idle = [f for f in slot.files if not f.busy()]
+        if idle:
+            target = idle[0]
+        elif not slot.files or (self.threaded and len(slot.files) < MAX_FILES_PER_SLOT):
+            target = self._open(slot, group.schema)
+            slot.files.append(target)
+        else:
+            target = min(slot.files, key=lambda f: len(f.inflight))
+        target.submit(group)
 
     def close(self) -> list[StagedFile]:
         """Write what is pending, close every file, return their descriptions."""
+        files = []
         try:
-            for f in self._files.values():
-                self._flush(f)
-            for fut in self._inflight:
-                fut.result()
+            for slot in self._slots.values():
+                self._flush(slot)
+            files = [f for slot in self._slots.values() for f in slot.files]
+            for f in files:
+                for fut in f.inflight:
+                    fut.result()
         finally:
-            if self._pool is not None:
-                self._pool.shutdown(wait=True)
-            for f in self._files.values():
+            for f in (f for slot in self._slots.values() for f in slot.files):
+                if f.pool is not None:
+                    f.pool.shutdown(wait=True)
                 f.writer.close()
         return [
             StagedFile(
@@ -227,7 +276,7 @@ class TableStager:
                 f.path.stat().st_size,
                 _stats_json(f.rows, f.stats),
             )
-            for f in self._files.values()
+            for f in files
         ]
 
 

@@ -1,0 +1,715 @@
+/*
+ * Schema-specialised JSON object parser: payload spans of decompressed MCAP chunks ->
+ * typed columns, without a Python object per message.
+ *
+ * Why: polars.read_ndjson costs ~2-2.5 CPU-s per million 440-byte radar reports and
+ * needs the payloads copied into one newline-delimited buffer first (docs/ingest_speed.md).
+ * This parser reads the payloads where they lie (in the decompressed chunks), knows the
+ * wanted keys and their types in advance, and releases the GIL, so two threads parse two
+ * halves of a group.
+ *
+ * It is strict and conservative: it accepts only what it can decode exactly and flags
+ * every other row (status != 0) for the Python fallback (json_bulk.parse_json_payloads),
+ * which gives the exact reject reasons. Flagged: invalid JSON, a value of the wrong JSON
+ * type for its field (a fraction or exponent for an integer field, a string for a number,
+ * ...), a string with an escape or a non-ASCII byte (UTF-8 is checked by the fallback), a
+ * duplicate key, nesting deeper than 32, an integer out of int64, a number with more than
+ * 19 significant digits, an exponent beyond +-999, or one whose double is subnormal,
+ * infinite or zero by underflow, bytes after the object. Values of unknown keys are
+ * skipped but checked the same way (a string with an escape or a non-ASCII byte, a
+ * number the fallback would call non-finite or refuse: the row is flagged). A missing key
+ * or a null value gives a null. Whitespace between tokens may include newlines (valid
+ * JSON; the fallback accepts them too).
+ *
+ * Numbers: a decimal significand w (<= 19 digits, exact in uint64) and exponent q are
+ * converted to the correctly rounded double by Clinger's fast path (w <= 2^53 and
+ * |q| <= 22: one exact IEEE operation) or else by the Eisel-Lemire algorithm (D. Lemire,
+ * "Number Parsing at a Gigabyte per Second", Softw. Pract. Exper. 51(8), 2021; the
+ * 128-bit product is always sufficient for an exact 19-digit w: N. Mushtak, D. Lemire,
+ * "Fast Number Parsing Without Fallback", Softw. Pract. Exper. 53(6), 2023). The tests
+ * check the result against Python's float() bit for bit.
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+
+#include <stdint.h>
+#include <string.h>
+
+#include "_pow5_128.h"
+
+enum { ST_OK = 0, ST_SYNTAX = 1, ST_TYPE = 2, ST_STRING = 3, ST_DUPLICATE = 4,
+       ST_NUMBER = 5, ST_DEPTH = 6 };
+
+#define MAX_FIELDS 64
+#define MAX_DEPTH 32
+
+typedef struct {
+    int nfields;
+    const char *key[MAX_FIELDS];
+    Py_ssize_t key_len[MAX_FIELDS];
+    char kind[MAX_FIELDS]; /* 'f' float64, 'i' int64, 's' string span, 'b' bool */
+    char *out[MAX_FIELDS];
+    uint8_t *valid;        /* nfields x n, field-major */
+    uint8_t *status;       /* n */
+    Py_ssize_t n;
+} Spec;
+
+static inline const uint8_t *skip_ws(const uint8_t *p, const uint8_t *e)
+{
+    while (p < e && (*p == ' ' || *p == '\n' || *p == '\r' || *p == '\t'))
+        p++;
+    return p;
+}
+
+/* -- numbers ------------------------------------------------------------------------- */
+
+typedef struct {
+    uint64_t w;   /* significand, at most 19 digits */
+    int64_t q;    /* decimal exponent: value = w * 10^q */
+    int neg;
+    int is_int;   /* no fraction, no exponent */
+    int exact;    /* no significant digit was dropped */
+} Number;
+
+/* Eight ASCII digits at once (SWAR; the fast_float library's parse_eight_digits). */
+static inline uint64_t load8(const uint8_t *p)
+{
+    uint64_t v;
+    memcpy(&v, p, 8);
+    return v;
+}
+
+static inline int eight_digits(uint64_t v)
+{
+    return (((v & UINT64_C(0xF0F0F0F0F0F0F0F0)) |
+             (((v + UINT64_C(0x0606060606060606)) & UINT64_C(0xF0F0F0F0F0F0F0F0)) >> 4)) ==
+            UINT64_C(0x3333333333333333));
+}
+
+static inline uint64_t eight_digits_value(uint64_t v)
+{
+    const uint64_t mask = UINT64_C(0x000000FF000000FF);
+    const uint64_t mul1 = UINT64_C(0x000F424000000064); /* 100 + (1000000 << 32) */
+    const uint64_t mul2 = UINT64_C(0x0000271000000001); /* 1 + (10000 << 32) */
+    v -= UINT64_C(0x3030303030303030);
+    v = (v * 10) + (v >> 8);
+    return (((v & mask) * mul1) + (((v >> 16) & mask) * mul2)) >> 32;
+}
+
+static inline uint32_t load4(const uint8_t *p)
+{
+    uint32_t v;
+    memcpy(&v, p, 4);
+    return v;
+}
+
+static inline int four_digits(uint32_t v)
+{
+    return (((v & 0xF0F0F0F0u) | (((v + 0x06060606u) & 0xF0F0F0F0u) >> 4)) == 0x33333333u);
+}
+
+static inline uint64_t four_digits_value(uint32_t v)
+{
+    v -= 0x30303030u;
+    v = (v * 10) + (v >> 8);                           /* pairs: d0d1 in byte 0, d2d3 in 2 */
+    return (uint64_t)((v & 0xFF) * 100 + ((v >> 16) & 0xFF));
+}
+
+/* JSON number grammar: -?(0|[1-9][0-9]*)(\.[0-9]+)?([eE][+-]?[0-9]+)?; NULL if none.
+ * Locals, not n->..., in the loops: stores through n could alias the uint8_t input. */
+static const uint8_t *scan_number(const uint8_t *p, const uint8_t *e, Number *n)
+{
+    uint64_t w = 0;
+    int64_t q = 0;
+    int sig = 0, neg = 0, is_int = 1, exact = 1;
+    if (p < e && *p == '-') { neg = 1; p++; }
+    if (p >= e) return NULL;
+    if (*p == '0') {
+        p++;
+    } else if (*p >= '1' && *p <= '9') {
+        while (sig <= 11 && e - p >= 8 && eight_digits(load8(p))) {
+            w = w * 100000000 + eight_digits_value(load8(p));
+            sig += 8;
+            p += 8;
+        }
+        for (; p < e && (unsigned)(*p - '0') < 10; p++) {
+            if (sig < 19) { w = w * 10 + (uint64_t)(*p - '0'); sig++; }
+            else { q++; exact = 0; }
+        }
+    } else {
+        return NULL;
+    }
+    if (p < e && *p == '.') {
+        const uint8_t *f0 = ++p;
+        is_int = 0;
+        if (w == 0)
+            while (p < e && *p == '0') { q--; p++; } /* leading zeros: not significant */
+        while (sig <= 11 && e - p >= 8 && eight_digits(load8(p))) {
+            w = w * 100000000 + eight_digits_value(load8(p));
+            sig += 8;
+            q -= 8;
+            p += 8;
+        }
+        if (sig <= 15 && e - p >= 4 && four_digits(load4(p))) {
+            w = w * 10000 + four_digits_value(load4(p));
+            sig += 4;
+            q -= 4;
+            p += 4;
+        }
+        for (; p < e && (unsigned)(*p - '0') < 10; p++) {
+            if (sig < 19) { w = w * 10 + (uint64_t)(*p - '0'); sig++; q--; }
+            else { exact = 0; }
+        }
+        if (p == f0) return NULL;
+    }
+    if (p < e && (*p == 'e' || *p == 'E')) {
+        int eneg = 0;
+        int64_t ev = 0;
+        const uint8_t *e0;
+        is_int = 0;
+        p++;
+        if (p < e && (*p == '+' || *p == '-')) { eneg = (*p == '-'); p++; }
+        e0 = p;
+        for (; p < e && (unsigned)(*p - '0') < 10; p++)
+            if (ev < 100000) ev = ev * 10 + (*p - '0');
+        if (p == e0) return NULL;
+        if (ev > 999) exact = 0; /* no double needs it; polars refuses very long ones */
+        q += eneg ? -ev : ev;
+    }
+    n->w = w; n->q = q; n->neg = neg; n->is_int = is_int; n->exact = exact;
+    return p;
+}
+
+static const double POW10[23] = {1e0,  1e1,  1e2,  1e3,  1e4,  1e5,  1e6,  1e7,
+                                 1e8,  1e9,  1e10, 1e11, 1e12, 1e13, 1e14, 1e15,
+                                 1e16, 1e17, 1e18, 1e19, 1e20, 1e21, 1e22};
+
+/* Eisel-Lemire: w * 10^q correctly rounded, w != 0 exact. 0 when the result is
+ * subnormal, underflows or overflows (left to the fallback). */
+static int eisel_lemire(int64_t q, uint64_t w, double *out)
+{
+    const uint64_t *t;
+    unsigned __int128 p1;
+    uint64_t hi, lo, mantissa, bits;
+    int lz, upperbit, shift;
+    int64_t power2;
+    if (q < POW5_SMALLEST || q > POW5_LARGEST) return 0;
+    lz = __builtin_clzll(w);
+    w <<= lz;
+    t = &POW5_128[2 * (q - POW5_SMALLEST)];
+    p1 = (unsigned __int128)w * t[0];
+    hi = (uint64_t)(p1 >> 64);
+    lo = (uint64_t)p1;
+    if ((hi & 0x1FF) == 0x1FF) { /* 55 bits of precision wanted: look at the next word */
+        uint64_t hi2 = (uint64_t)(((unsigned __int128)w * t[1]) >> 64);
+        lo += hi2;
+        if (hi2 > lo) hi++;
+    }
+    upperbit = (int)(hi >> 63);
+    shift = upperbit + 9;
+    mantissa = hi >> shift;
+    power2 = ((((152170 + 65536) * q) >> 16) + 63) + upperbit - lz + 1023;
+    if (power2 <= 0) return 0;
+    if (lo <= 1 && q >= -4 && q <= 23 && (mantissa & 3) == 1 && (mantissa << shift) == hi)
+        mantissa &= ~(uint64_t)1; /* exactly halfway: round to even */
+    mantissa += mantissa & 1;
+    mantissa >>= 1;
+    if (mantissa >= (UINT64_C(2) << 52)) { mantissa = UINT64_C(1) << 52; power2++; }
+    mantissa &= ~(UINT64_C(1) << 52);
+    if (power2 >= 0x7FF) return 0;
+    bits = mantissa | ((uint64_t)power2 << 52);
+    memcpy(out, &bits, sizeof bits);
+    return 1;
+}
+
+static int number_to_double(const Number *n, double *out)
+{
+    double d;
+    if (!n->exact) return 0;
+    if (n->w == 0) {
+        d = 0.0;
+    } else if (n->w <= (UINT64_C(1) << 53) && n->q >= -22 && n->q <= 22) {
+        d = (double)n->w;
+        d = n->q < 0 ? d / POW10[-n->q] : d * POW10[n->q];
+    } else if (!eisel_lemire(n->q, n->w, &d)) {
+        return 0;
+    }
+    *out = n->neg ? -d : d;
+    return 1;
+}
+
+/* -- values -------------------------------------------------------------------------- */
+
+/* A string starting at p (after the opening quote); *plain = no escape, all ASCII. */
+static const uint8_t *scan_string(const uint8_t *p, const uint8_t *e, int *plain)
+{
+    *plain = 1;
+    while (p < e) {
+        uint8_t c = *p;
+        if (c == '"') return p;
+        if (c < 0x20) return NULL;
+        if (c == '\\') {
+            *plain = 0;
+            if (++p >= e) return NULL;
+        } else if (c >= 0x80) {
+            *plain = 0;
+        }
+        p++;
+    }
+    return NULL;
+}
+
+static const uint8_t *match_literal(const uint8_t *p, const uint8_t *e, const char *lit, size_t len)
+{
+    return ((size_t)(e - p) >= len && memcmp(p, lit, len) == 0) ? p + len : NULL;
+}
+
+/* Skip any JSON value; NULL (and *st) on error. */
+static const uint8_t *skip_value(const uint8_t *p, const uint8_t *e, int depth, int *st)
+{
+    Number num;
+    int plain;
+    if (p >= e) { *st = ST_SYNTAX; return NULL; }
+    switch (*p) {
+    case '"':
+        p = scan_string(p + 1, e, &plain);
+        if (!p) { *st = ST_SYNTAX; return NULL; }
+        if (!plain) { *st = ST_STRING; return NULL; } /* escapes and UTF-8: fallback */
+        return p + 1;
+    case 't': p = match_literal(p, e, "true", 4); break;
+    case 'f': p = match_literal(p, e, "false", 5); break;
+    case 'n': p = match_literal(p, e, "null", 4); break;
+    case '{':
+    case '[': {
+        uint8_t close = *p == '{' ? '}' : ']';
+        int object = *p == '{';
+        if (depth >= MAX_DEPTH) { *st = ST_DEPTH; return NULL; }
+        p = skip_ws(p + 1, e);
+        if (p < e && *p == close) return p + 1;
+        for (;;) {
+            if (object) {
+                if (p >= e || *p != '"') { *st = ST_SYNTAX; return NULL; }
+                p = scan_string(p + 1, e, &plain);
+                if (!p) { *st = ST_SYNTAX; return NULL; }
+                if (!plain) { *st = ST_STRING; return NULL; }
+                p = skip_ws(p + 1, e);
+                if (p >= e || *p != ':') { *st = ST_SYNTAX; return NULL; }
+                p = skip_ws(p + 1, e);
+            }
+            p = skip_value(p, e, depth + 1, st);
+            if (!p) return NULL;
+            p = skip_ws(p, e);
+            if (p < e && *p == ',') { p = skip_ws(p + 1, e); continue; }
+            if (p < e && *p == close) return p + 1;
+            *st = ST_SYNTAX;
+            return NULL;
+        }
+    }
+    default: {
+        double ignored;
+        p = scan_number(p, e, &num);
+        if (p && !number_to_double(&num, &ignored)) { *st = ST_NUMBER; return NULL; }
+    }
+    }
+    if (!p) *st = ST_SYNTAX;
+    return p;
+}
+
+/* Read the value of field f for row r into its column; NULL (and *st) on error. */
+static const uint8_t *read_field(const Spec *s, int f, Py_ssize_t r, const uint8_t *base,
+                                 const uint8_t *p, const uint8_t *e, int *st)
+{
+    Number num;
+    const uint8_t *q;
+    int plain;
+    char kind = s->kind[f];
+    if (p < e && *p == 'n') {
+        q = match_literal(p, e, "null", 4);
+        if (!q) *st = ST_SYNTAX;
+        return q; /* valid stays 0 */
+    }
+    if (kind == 's') {
+        if (p >= e || *p != '"') { *st = (p < e) ? ST_TYPE : ST_SYNTAX; return NULL; }
+        q = scan_string(p + 1, e, &plain);
+        if (!q) { *st = ST_SYNTAX; return NULL; }
+        if (!plain) { *st = ST_STRING; return NULL; }
+        ((int64_t *)s->out[f])[2 * r] = (p + 1) - base;
+        ((int64_t *)s->out[f])[2 * r + 1] = q - base;
+        s->valid[(Py_ssize_t)f * s->n + r] = 1;
+        return q + 1;
+    }
+    if (kind == 'b') {
+        uint8_t v;
+        if ((q = match_literal(p, e, "true", 4)) != NULL) v = 1;
+        else if ((q = match_literal(p, e, "false", 5)) != NULL) v = 0;
+        else { *st = ST_TYPE; return NULL; }
+        ((uint8_t *)s->out[f])[r] = v;
+        s->valid[(Py_ssize_t)f * s->n + r] = 1;
+        return q;
+    }
+    /* a number */
+    if (p >= e || !(*p == '-' || (*p >= '0' && *p <= '9'))) { *st = ST_TYPE; return NULL; }
+    q = scan_number(p, e, &num);
+    if (!q) { *st = ST_SYNTAX; return NULL; }
+    if (kind == 'i') {
+        int64_t v;
+        if (!num.is_int) { *st = ST_TYPE; return NULL; }
+        if (!num.exact || num.q != 0) { *st = ST_NUMBER; return NULL; }
+        if (num.neg) {
+            if (num.w > (UINT64_C(1) << 63)) { *st = ST_NUMBER; return NULL; }
+            v = (int64_t)(UINT64_C(0) - num.w);
+        } else {
+            if (num.w > (uint64_t)INT64_MAX) { *st = ST_NUMBER; return NULL; }
+            v = (int64_t)num.w;
+        }
+        ((int64_t *)s->out[f])[r] = v;
+    } else {
+        double d;
+        if (!number_to_double(&num, &d)) { *st = ST_NUMBER; return NULL; }
+        if (num.is_int && num.w == 0) d = 0.0; /* "-0" is the integer 0, as in json.loads */
+        ((double *)s->out[f])[r] = d;
+    }
+    s->valid[(Py_ssize_t)f * s->n + r] = 1;
+    return q;
+}
+
+/* memcmp(a, b, len) == 0 for short keys, without a library call. */
+static inline int same_bytes(const uint8_t *a, const char *b, Py_ssize_t len)
+{
+    Py_ssize_t i = 0;
+    for (; i + 8 <= len; i += 8)
+        if (load8(a + i) != load8((const uint8_t *)b + i)) return 0;
+    for (; i < len; i++)
+        if (a[i] != (uint8_t)b[i]) return 0;
+    return 1;
+}
+
+static inline int find_key(const Spec *s, const uint8_t *k, Py_ssize_t len, int hint)
+{
+    int i;
+    if (hint < s->nfields && s->key_len[hint] == len && memcmp(s->key[hint], k, len) == 0)
+        return hint;
+    for (i = 0; i < s->nfields; i++)
+        if (s->key_len[i] == len && memcmp(s->key[i], k, len) == 0) return i;
+    return -1;
+}
+
+/* One payload [p, e) of row r; base: start of its chunk (spans are chunk offsets). */
+static int parse_object(const Spec *s, Py_ssize_t r, const uint8_t *base, const uint8_t *p,
+                        const uint8_t *e)
+{
+    uint64_t seen = 0;
+    int hint = 0, st = ST_OK, plain;
+    p = skip_ws(p, e);
+    if (p >= e || *p != '{') return ST_SYNTAX;
+    p = skip_ws(p + 1, e);
+    if (p < e && *p == '}') { p++; goto end; }
+    for (;;) {
+        const uint8_t *k0, *k1;
+        int f;
+        if (p >= e || *p != '"') return ST_SYNTAX;
+        k0 = p + 1;
+        if (hint < s->nfields && e - k0 > s->key_len[hint] && k0[s->key_len[hint]] == '"' &&
+            same_bytes(k0, s->key[hint], s->key_len[hint])) {
+            /* the expected next key, byte for byte (wanted keys hold no quote/escape) */
+            k1 = k0 + s->key_len[hint];
+            plain = 1;
+        } else {
+            k1 = scan_string(k0, e, &plain);
+        }
+        if (!k1) return ST_SYNTAX;
+        p = skip_ws(k1 + 1, e);
+        if (p >= e || *p != ':') return ST_SYNTAX;
+        p = skip_ws(p + 1, e);
+        f = plain ? find_key(s, k0, k1 - k0, hint) : -2;
+        if (f == -2) return ST_STRING; /* an escaped key might spell a wanted one */
+        if (f < 0) {
+            p = skip_value(p, e, 1, &st);
+        } else {
+            if (seen & (UINT64_C(1) << f)) return ST_DUPLICATE;
+            seen |= UINT64_C(1) << f;
+            hint = f + 1;
+            p = read_field(s, f, r, base, p, e, &st);
+        }
+        if (!p) return st;
+        p = skip_ws(p, e);
+        if (p < e && *p == ',') { p = skip_ws(p + 1, e); continue; }
+        if (p < e && *p == '}') { p++; break; }
+        return ST_SYNTAX;
+    }
+end:
+    p = skip_ws(p, e);
+    return p == e ? ST_OK : ST_SYNTAX;
+}
+
+/* -- Python glue --------------------------------------------------------------------- */
+
+typedef struct {
+    Py_ssize_t count;
+    Py_buffer *views;
+} Buffers;
+
+static void release(Buffers *b)
+{
+    Py_ssize_t i;
+    for (i = 0; i < b->count; i++) PyBuffer_Release(&b->views[i]);
+    PyMem_Free(b->views);
+    b->views = NULL;
+    b->count = 0;
+}
+
+static int acquire(PyObject *seq, int flags, Buffers *b)
+{
+    PyObject *fast = PySequence_Fast(seq, "expected a sequence of buffers");
+    Py_ssize_t i, n;
+    if (!fast) return -1;
+    n = PySequence_Fast_GET_SIZE(fast);
+    b->count = 0;
+    b->views = PyMem_Calloc(n > 0 ? n : 1, sizeof(Py_buffer));
+    if (!b->views) { Py_DECREF(fast); PyErr_NoMemory(); return -1; }
+    for (i = 0; i < n; i++) {
+        if (PyObject_GetBuffer(PySequence_Fast_GET_ITEM(fast, i), &b->views[i], flags) < 0) {
+            Py_DECREF(fast);
+            release(b);
+            return -1;
+        }
+        b->count++;
+    }
+    Py_DECREF(fast);
+    return 0;
+}
+
+static int get_array(PyObject *obj, Py_buffer *view, Py_ssize_t itemsize, Py_ssize_t n,
+                     int writable, const char *what)
+{
+    if (PyObject_GetBuffer(obj, view, writable ? PyBUF_WRITABLE | PyBUF_C_CONTIGUOUS
+                                               : PyBUF_C_CONTIGUOUS) < 0)
+        return -1;
+    if (view->len < itemsize * n) {
+        PyBuffer_Release(view);
+        PyErr_Format(PyExc_ValueError, "%s: buffer of %zd bytes, need %zd", what, view->len,
+                     itemsize * n);
+        return -1;
+    }
+    return 0;
+}
+
+PyDoc_STRVAR(parse_doc,
+"parse_objects(chunks, chunk, start, end, keys, kinds, outputs, valid, status, row0, row1)\n"
+"\n"
+"Parse the JSON-object payloads chunks[chunk[r]][start[r]:end[r]] for rows r in\n"
+"[row0, row1) into the columns ``outputs`` (one per key; kinds: 'f' float64[n],\n"
+"'i' int64[n], 's' int64[2n] span (start, end) in the chunk, 'b' uint8[n]).\n"
+"``valid``: uint8[len(keys) * n], 1 where field k of row r has a value (field-major);\n"
+"``status``: uint8[n], 0 for a row decoded exactly, else why the row is left to the\n"
+"fallback (1 syntax, 2 type, 3 string, 4 duplicate, 5 number, 6 depth). Returns the\n"
+"number of flagged rows. The GIL is released while parsing.");
+
+static PyObject *parse_objects(PyObject *self, PyObject *args)
+{
+    PyObject *chunks, *o_chunk, *o_start, *o_end, *keys, *outputs, *o_valid, *o_status;
+    const char *kinds;
+    Py_ssize_t nkinds, row0, row1, n, i, flagged = 0;
+    Buffers cb = {0, NULL}, kb = {0, NULL}, ob = {0, NULL};
+    Py_buffer vchunk, vstart, vend, vvalid, vstatus;
+    int got = 0;
+    Spec s;
+    (void)self;
+    if (!PyArg_ParseTuple(args, "OOOOOs#OOOnn", &chunks, &o_chunk, &o_start, &o_end, &keys,
+                          &kinds, &nkinds, &outputs, &o_valid, &o_status, &row0, &row1))
+        return NULL;
+    if (nkinds > MAX_FIELDS) {
+        PyErr_Format(PyExc_ValueError, "at most %d fields", MAX_FIELDS);
+        return NULL;
+    }
+    if (get_array(o_status, &vstatus, 1, 0, 1, "status") < 0) return NULL;
+    n = vstatus.len;
+    if (row0 < 0 || row1 > n || row0 > row1) {
+        PyBuffer_Release(&vstatus);
+        PyErr_SetString(PyExc_ValueError, "rows out of range");
+        return NULL;
+    }
+    if (get_array(o_chunk, &vchunk, 8, n, 0, "chunk") < 0) goto fail0;
+    got = 1;
+    if (get_array(o_start, &vstart, 8, n, 0, "start") < 0) goto fail;
+    got = 2;
+    if (get_array(o_end, &vend, 8, n, 0, "end") < 0) goto fail;
+    got = 3;
+    if (get_array(o_valid, &vvalid, 1, nkinds * n, 1, "valid") < 0) goto fail;
+    got = 4;
+    if (acquire(chunks, PyBUF_SIMPLE, &cb) < 0) goto fail;
+    if (acquire(keys, PyBUF_SIMPLE, &kb) < 0) goto fail;
+    if (acquire(outputs, PyBUF_WRITABLE | PyBUF_C_CONTIGUOUS, &ob) < 0) goto fail;
+    if (kb.count != nkinds || ob.count != nkinds) {
+        PyErr_SetString(PyExc_ValueError, "keys, kinds and outputs differ in length");
+        goto fail;
+    }
+    s.nfields = (int)nkinds;
+    s.n = n;
+    s.valid = vvalid.buf;
+    s.status = vstatus.buf;
+    for (i = 0; i < nkinds; i++) {
+        Py_ssize_t need;
+        s.key[i] = kb.views[i].buf;
+        s.key_len[i] = kb.views[i].len;
+        s.kind[i] = kinds[i];
+        s.out[i] = ob.views[i].buf;
+        need = kinds[i] == 'f' || kinds[i] == 'i' ? 8 * n
+             : kinds[i] == 's' ? 16 * n
+             : kinds[i] == 'b' ? n : -1;
+        if (need < 0 || ob.views[i].len < need) {
+            PyErr_Format(PyExc_ValueError, "field %zd: bad kind or output too small", i);
+            goto fail;
+        }
+    }
+    {
+        const int64_t *ck = vchunk.buf, *st = vstart.buf, *en = vend.buf;
+        int bad_span = 0;
+        for (i = row0; i < row1; i++) {
+            if (ck[i] < 0 || ck[i] >= cb.count || st[i] < 0 || en[i] < st[i] ||
+                en[i] > cb.views[ck[i]].len) {
+                bad_span = 1;
+                break;
+            }
+        }
+        if (bad_span) {
+            PyErr_SetString(PyExc_ValueError, "a payload span lies outside its chunk");
+            goto fail;
+        }
+        Py_BEGIN_ALLOW_THREADS
+        memset(s.status + row0, 0, (size_t)(row1 - row0));
+        for (i = 0; i < nkinds; i++) memset(s.valid + i * n + row0, 0, (size_t)(row1 - row0));
+        for (i = row0; i < row1; i++) {
+            const uint8_t *base = cb.views[ck[i]].buf;
+            int code = parse_object(&s, i, base, base + st[i], base + en[i]);
+            s.status[i] = (uint8_t)code;
+            flagged += code != ST_OK;
+        }
+        Py_END_ALLOW_THREADS
+    }
+    release(&cb);
+    release(&kb);
+    release(&ob);
+    PyBuffer_Release(&vvalid);
+    PyBuffer_Release(&vend);
+    PyBuffer_Release(&vstart);
+    PyBuffer_Release(&vchunk);
+    PyBuffer_Release(&vstatus);
+    return PyLong_FromSsize_t(flagged);
+fail:
+    release(&cb);
+    release(&kb);
+    release(&ob);
+    if (got >= 4) PyBuffer_Release(&vvalid);
+    if (got >= 3) PyBuffer_Release(&vend);
+    if (got >= 2) PyBuffer_Release(&vstart);
+    if (got >= 1) PyBuffer_Release(&vchunk);
+fail0:
+    PyBuffer_Release(&vstatus);
+    return NULL;
+}
+
+PyDoc_STRVAR(gather_doc,
+"gather_spans(chunks, chunk, spans) -> (offsets, data)\n"
+"\n"
+"Concatenate chunks[chunk[r]][spans[2r]:spans[2r+1]] for every row r (int64 arrays;\n"
+"an empty span gives an empty string): ``offsets`` int32[n+1] and ``data`` as bytes,\n"
+"the two buffers of an Arrow string array.");
+
+static PyObject *gather_spans(PyObject *self, PyObject *args)
+{
+    PyObject *chunks, *o_chunk, *o_spans, *offsets = NULL, *data = NULL;
+    Buffers cb = {0, NULL};
+    Py_buffer vchunk, vspans;
+    Py_ssize_t n, i, total = 0;
+    (void)self;
+    if (!PyArg_ParseTuple(args, "OOO", &chunks, &o_chunk, &o_spans)) return NULL;
+    if (get_array(o_chunk, &vchunk, 8, 0, 0, "chunk") < 0) return NULL;
+    n = vchunk.len / 8;
+    if (get_array(o_spans, &vspans, 16, n, 0, "spans") < 0) {
+        PyBuffer_Release(&vchunk);
+        return NULL;
+    }
+    if (acquire(chunks, PyBUF_SIMPLE, &cb) < 0) goto done;
+    {
+        const int64_t *ck = vchunk.buf, *sp = vspans.buf;
+        for (i = 0; i < n; i++) {
+            if (ck[i] < 0 || ck[i] >= cb.count || sp[2 * i] < 0 || sp[2 * i + 1] < sp[2 * i] ||
+                sp[2 * i + 1] > cb.views[ck[i]].len) {
+                PyErr_SetString(PyExc_ValueError, "a span lies outside its chunk");
+                goto done;
+            }
+            total += sp[2 * i + 1] - sp[2 * i];
+        }
+        if (total > INT32_MAX) {
+            PyErr_SetString(PyExc_OverflowError, "more than 2 GiB of strings");
+            goto done;
+        }
+        offsets = PyBytes_FromStringAndSize(NULL, 4 * (n + 1));
+        data = PyBytes_FromStringAndSize(NULL, total);
+        if (!offsets || !data) goto done;
+        {
+            int32_t *off = (int32_t *)PyBytes_AS_STRING(offsets);
+            char *out = PyBytes_AS_STRING(data);
+            int32_t pos = 0;
+            off[0] = 0;
+            for (i = 0; i < n; i++) {
+                int32_t len = (int32_t)(sp[2 * i + 1] - sp[2 * i]);
+                memcpy(out + pos, (const char *)cb.views[ck[i]].buf + sp[2 * i], (size_t)len);
+                pos += len;
+                off[i + 1] = pos;
+            }
+        }
+    }
+done:
+    release(&cb);
+    PyBuffer_Release(&vspans);
+    PyBuffer_Release(&vchunk);
+    if (PyErr_Occurred()) {
+        Py_XDECREF(offsets);
+        Py_XDECREF(data);
+        return NULL;
+    }
+    return Py_BuildValue("(NN)", offsets, data);
+}
+
+PyDoc_STRVAR(to_double_doc,
+"to_double(token: bytes) -> float | None\n"
+"\n"
+"The double of one JSON number token as the parser converts it; None when the parser\n"
+"would leave it to the fallback (for tests).");
+
+static PyObject *to_double(PyObject *self, PyObject *arg)
+{
+    Py_buffer v;
+    Number num;
+    const uint8_t *p, *e;
+    double d;
+    int ok;
+    (void)self;
+    if (PyObject_GetBuffer(arg, &v, PyBUF_SIMPLE) < 0) return NULL;
+    p = v.buf;
+    e = p + v.len;
+    p = scan_number(p, e, &num);
+    ok = p == e && number_to_double(&num, &d);
+    PyBuffer_Release(&v);
+    if (!ok) Py_RETURN_NONE;
+    return PyFloat_FromDouble(d);
+}
+
+static PyMethodDef methods[] = {
+    {"parse_objects", parse_objects, METH_VARARGS, parse_doc},
+    {"gather_spans", gather_spans, METH_VARARGS, gather_doc},
+    {"to_double", to_double, METH_O, to_double_doc},
+    {NULL, NULL, 0, NULL},
+};
+
+static struct PyModuleDef module = {
+    PyModuleDef_HEAD_INIT, "_json_columns",
+    "Schema-specialised JSON object parser (see _json_columns.c).", -1, methods, NULL, NULL, NULL, NULL,
+};
+
+PyMODINIT_FUNC PyInit__json_columns(void)
+{
+    return PyModule_Create(&module);
+}
