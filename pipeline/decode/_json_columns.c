@@ -117,7 +117,8 @@ static inline uint64_t four_digits_value(uint32_t v)
 
 /* JSON number grammar: -?(0|[1-9][0-9]*)(\.[0-9]+)?([eE][+-]?[0-9]+)?; NULL if none.
  * Locals, not n->..., in the loops: stores through n could alias the uint8_t input. */
-static const uint8_t *scan_number(const uint8_t *p, const uint8_t *e, Number *n)
+static inline __attribute__((always_inline)) const uint8_t *
+scan_number(const uint8_t *p, const uint8_t *e, Number *n)
 {
     uint64_t w = 0;
     int64_t q = 0;
@@ -186,7 +187,7 @@ static const double POW10[23] = {1e0,  1e1,  1e2,  1e3,  1e4,  1e5,  1e6,  1e7,
 
 /* Eisel-Lemire: w * 10^q correctly rounded, w != 0 exact. 0 when the result is
  * subnormal, underflows or overflows (left to the fallback). */
-static int eisel_lemire(int64_t q, uint64_t w, double *out)
+static inline __attribute__((always_inline)) int eisel_lemire(int64_t q, uint64_t w, double *out)
 {
     const uint64_t *t;
     unsigned __int128 p1;
@@ -222,7 +223,7 @@ static int eisel_lemire(int64_t q, uint64_t w, double *out)
     return 1;
 }
 
-static int number_to_double(const Number *n, double *out)
+static inline __attribute__((always_inline)) int number_to_double(const Number *n, double *out)
 {
     double d;
     if (!n->exact) return 0;
@@ -682,7 +683,7 @@ PyDoc_STRVAR(to_double_doc,
 static PyObject *to_double(PyObject *self, PyObject *arg)
 {
     Py_buffer v;
-    Number num;
+    Number num = {0, 0, 0, 0, 0};
     const uint8_t *p, *e;
     double d;
     int ok;

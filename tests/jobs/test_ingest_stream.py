@@ -247,10 +247,13 @@ def test_peak_memory_does_not_grow_with_the_file(tmp_path):
     bench = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(bench)
     peaks = {}
-    for n in (100_000, 400_000):
+    # both sizes past the start-up of the pipeline (JSON groups ramp up to JSON_BATCH; the
+    # stager's row groups and second file): only the steady state is bounded
+    for n in (300_000, 1_200_000):
         path = bench.make_files(tmp_path, n, ["json"])["json"]
         cmd = [sys.executable, "-c", _PEAK_SCRIPT, str(path), str(tmp_path / f"wh{n}"), str(n)]
         res = subprocess.run(cmd, capture_output=True, text=True, check=True, cwd=repo)
         peaks[n] = int(res.stdout.split()[-1])
-    # 4x the messages (44 -> 176 MB of JSON), about the same peak resident set
-    assert peaks[400_000] < 1.25 * peaks[100_000], peaks
+    # 4x the messages (132 -> 528 MB of JSON), about the same peak resident set
+    assert peaks[1_200_000] < 1.15 * peaks[300_000], peaks
+    print("peak RSS kB", peaks)
