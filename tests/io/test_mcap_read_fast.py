@@ -55,6 +55,20 @@ def test_prefetch_thread_and_inline_reads_agree(tmp_path):
     assert a == b
 
 
+@pytest.mark.parametrize("window", [None, (T0_NS + 20 * NS, T0_NS + 60 * NS)])
+def test_reads_without_the_compiled_walker_agree(tmp_path, monkeypatch, window):
+    """An install without a C compiler (no ``_mcap_records``) locates the same messages
+    through the message index and the Python walk."""
+    import pipeline.io.mcap_chunks as mcap_chunks
+
+    p = mixed_file(tmp_path / "m.mcap", n_radar=400)
+    kw = {} if window is None else {"start_ns": window[0], "end_ns": window[1]}
+    native, _ = _all(p, **kw)
+    monkeypatch.setattr(mcap_chunks, "_mcap_records", None)
+    fallback, _ = _all(p, **kw)
+    assert native == fallback and len(native) > 0
+
+
 def test_batch_from_payload_list_has_spans():
     b = ChannelBatch(3, "/t", "json", "", "", b"", np.array([5, 6]), [b"ab", b"{}"])
     chunk, start, end = b.spans()
