@@ -1,7 +1,12 @@
 """Bulk decoding of JSON channels: many payloads, one parse, vectorised checks.
 
-The payloads of several chunks (and of every JSON channel in them) are turned into ONE
-newline-delimited buffer and parsed with ONE ``polars.read_ndjson`` call with the declared
+First choice, when the C extension is built and the fields are float/int/string/bool:
+:func:`parse_columns`, the compiled parser of :mod:`pipeline.decode.json_columns` over
+the payloads where they lie in the chunks; it flags every row it cannot decode exactly,
+and only those go through :func:`parse_json_payloads` (the reference path below).
+
+Otherwise the payloads of several chunks (and of every JSON channel in them) are turned
+into ONE newline-delimited buffer and parsed with ONE ``polars.read_ndjson`` call with the declared
 column types (``research/mcap.md`` §3: bulk parsing is 5-10x faster than ``json.loads``
 per message). The buffer is built with numpy, without a Python object per message: each
 chunk's decompressed records are copied once, every byte that is not a payload of a JSON

@@ -8,8 +8,8 @@ can be read). Here a chunk is handled as one buffer:
    follow it, decompresses (zstd / lz4 / none) and checks size and CRC, in
    ``FETCH_THREADS`` background thread(s) up to ``PREFETCH_BYTES`` ahead of the consumer
    (file reads, ``zstandard``, ``lz4`` and ``crc32`` release the GIL, so this overlaps
-   with decoding). The CRC-32 is
-   zlib-ng's (PCLMULQDQ folding, ~3.5x zlib's here: 0.04 vs 0.14 CPU-s per 471 MB).
+   with decoding). The CRC-32 is zlib-ng's (PCLMULQDQ folding, ~3.5x zlib's here: 0.04
+   vs 0.14 CPU-s per 471 MB).
 2. :func:`indexed_positions` turns the MessageIndex entries into per-channel arrays
    ``(log_time_ns, payload start, payload end)`` with numpy over all messages at once and
    checks them against the record headers in the buffer (opcode, channel id, log time,
@@ -472,8 +472,11 @@ class ChunkFetcher:
             while todo or pending:
                 while todo and (len(pending) < FETCH_THREADS or ahead < PREFETCH_BYTES):
                     ci = todo.popleft()
-                    pending.append((pool.submit(self._fetch, ci), ci.uncompressed_size))
-                    ahead += ci.uncompressed_size
+                    # what the chunk may occupy: its claimed size (decompress() holds it
+                    # to that) or the bytes read, whichever is larger
+                    nbytes = max(ci.uncompressed_size, ci.chunk_length, 1)
+                    pending.append((pool.submit(self._fetch, ci), nbytes))
+                    ahead += nbytes
                 fut, nbytes = pending.popleft()
                 ahead -= nbytes
                 yield fut.result()
