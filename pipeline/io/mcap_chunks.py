@@ -291,12 +291,20 @@ def native_positions(chunk: ChunkData, lo: int, hi: int, on_record: OnRecord) ->
         chans, times, starts, ends = chans[keep], times[keep], starts[keep], ends[keep]
         if len(chans) == 0:
             return {}
+    return _by_channel(chans, times, starts, ends)
+
+
+def _by_channel(
+    chans: np.ndarray, times: np.ndarray, starts: np.ndarray, ends: np.ndarray
+) -> Positions:
+    """Split message arrays (file order) per channel id."""
+    if len(chans) == 0:
+        return {}
     first = int(chans[0])
     if not (chans != first).any():  # the usual chunk: one channel
         return {first: (times, starts, ends)}
-    ids = np.unique(chans).tolist()
     out: Positions = {}
-    for c in ids:
+    for c in np.unique(chans).tolist():
         sel = chans == c
         out[c] = (times[sel], starts[sel], ends[sel])
     return out
@@ -347,10 +355,7 @@ def indexed_positions(
         return None
     extra = _walk_gaps(chunk, offs, ends, lo, hi, on_record)
     keep = (times >= lo) & (times < hi)
-    out: Positions = {}
-    for ch in np.unique(chans).tolist():
-        sel = keep & (chans == ch)
-        out[ch] = (times[sel], offs[sel] + PAYLOAD_OFFSET, ends[sel])
+    out = _by_channel(chans[keep], times[keep], offs[keep] + PAYLOAD_OFFSET, ends[keep])
     return _merge_positions(out, extra) if extra else out
 
 

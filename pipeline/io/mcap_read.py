@@ -38,7 +38,7 @@ import zlib
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import BinaryIO
+from typing import Any, BinaryIO
 
 import numpy as np
 from mcap.data_stream import ReadDataStream
@@ -539,26 +539,27 @@ class McapBatches(Iterator[ChannelBatch]):
             f"<unknown channel {ch_id}>", "", "", "", b""
         )
 
+    def _batch(self, ch_id: int, times: np.ndarray, **payloads: Any) -> ChannelBatch:
+        """A batch of channel ``ch_id`` (payloads as spans or as a list), counted."""
+        info = self._info(ch_id)
+        self.status.note(ch_id, times)
+        return ChannelBatch(
+            ch_id,
+            info.topic,
+            info.message_encoding,
+            info.schema_name,
+            info.schema_encoding,
+            info.schema_data,
+            times,
+            metadata=info.metadata,
+            **payloads,
+        )
+
     def _emit(self, chunk: ChunkData, positions: Positions) -> Iterator[ChannelBatch]:
         for ch_id in sorted(positions):
             times, start, end = positions[ch_id]
-            if not len(times):
-                continue
-            info = self._info(ch_id)
-            self.status.note(ch_id, times)
-            yield ChannelBatch(
-                ch_id,
-                info.topic,
-                info.message_encoding,
-                info.schema_name,
-                info.schema_encoding,
-                info.schema_data,
-                times,
-                metadata=info.metadata,
-                chunk=chunk,
-                start=start,
-                end=end,
-            )
+            if len(times):
+                yield self._batch(ch_id, times, chunk=chunk, start=start, end=end)
 
     def _emit_lists(
         self, pending: dict[int, tuple[list[int], list[bytes]]]
@@ -566,22 +567,9 @@ class McapBatches(Iterator[ChannelBatch]):
         """Batches of un-chunked messages collected by the linear scan."""
         for ch_id in sorted(pending):
             times_list, payloads = pending[ch_id]
-            if not payloads:
-                continue
-            times = np.asarray(times_list, dtype=np.uint64).astype(np.int64)
-            info = self._info(ch_id)
-            self.status.note(ch_id, times)
-            yield ChannelBatch(
-                ch_id,
-                info.topic,
-                info.message_encoding,
-                info.schema_name,
-                info.schema_encoding,
-                info.schema_data,
-                times,
-                payloads,
-                info.metadata,
-            )
+            if payloads:
+                times = np.asarray(times_list, dtype=np.uint64).astype(np.int64)
+                yield self._batch(ch_id, times, payloads=payloads)
         pending.clear()
 
     # -- linear scan -------------------------------------------------------------------
