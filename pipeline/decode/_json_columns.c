@@ -385,13 +385,12 @@ static inline int same_bytes(const uint8_t *a, const char *b, Py_ssize_t len)
     return 1;
 }
 
-static inline int find_key(const Spec *s, const uint8_t *k, Py_ssize_t len, int hint)
+/* The wanted field named by key [k, k + len), or -1 (a key out of the expected order). */
+static inline int find_key(const Spec *s, const uint8_t *k, Py_ssize_t len)
 {
     int i;
-    if (hint < s->nfields && s->key_len[hint] == len && memcmp(s->key[hint], k, len) == 0)
-        return hint;
     for (i = 0; i < s->nfields; i++)
-        if (s->key_len[i] == len && memcmp(s->key[i], k, len) == 0) return i;
+        if (s->key_len[i] == len && same_bytes(k, s->key[i], len)) return i;
     return -1;
 }
 
@@ -414,15 +413,15 @@ static int parse_object(const Spec *s, Py_ssize_t r, const uint8_t *base, const 
             same_bytes(k0, s->key[hint], s->key_len[hint])) {
             /* the expected next key, byte for byte (wanted keys hold no quote/escape) */
             k1 = k0 + s->key_len[hint];
-            plain = 1;
+            f = hint;
         } else {
             k1 = scan_string(k0, e, &plain);
+            if (!k1) return ST_SYNTAX;
+            f = plain ? find_key(s, k0, k1 - k0) : -2;
         }
-        if (!k1) return ST_SYNTAX;
         p = skip_ws(k1 + 1, e);
         if (p >= e || *p != ':') return ST_SYNTAX;
         p = skip_ws(p + 1, e);
-        f = plain ? find_key(s, k0, k1 - k0, hint) : -2;
         if (f == -2) return ST_STRING; /* an escaped key might spell a wanted one */
         if (f < 0) {
             p = skip_value(p, e, 1, &st);

@@ -7,14 +7,21 @@ folder would also read files that later commits replaced (double counting), so w
 glob. delta-rs keeps the ``date`` partition only in the path (``date=YYYY-MM-DD/``); the
 view casts it (and every other column) explicitly to the canonical type.
 
-``<warehouse>/surveil.duckdb`` holds these views for analysts. It is built into a temporary
-file and swapped in with ``os.replace``; the pipeline never keeps it open.
+``<warehouse>/surveil.duckdb`` holds these views for analysts. It is updated in a temporary
+copy and swapped in with ``os.replace``; the pipeline never keeps it open. Each view carries
+the digest of its statement as its comment (``duckdb_views().comment``), so an update
+rewrites only the views whose table changed since the file was written (an ingest changes
+three or four of ~30 tables); a missing or unreadable file is built from scratch. Ingest
+prepares the update in a thread while it decodes (:class:`ViewsUpdate`).
 """
 
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import os
+import shutil
+import uuid
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -88,28 +95,97 @@ def register_tables(
     return selected
 
 
-def rebuild_views_file(warehouse: Path, names: Iterable[str] | None = None) -> Path:
-    """Write ``<warehouse>/surveil.duckdb`` with the views of every table; atomic swap.
+def rebuild_views_file(warehouse: Path) -> Path:
+    """Bring ``<warehouse>/surveil.duckdb`` up to date with the views of every table
+    (:class:`ViewsUpdate` prepared and finished at once)."""
+    update = ViewsUpdate(warehouse)
+    update.prepare()
+    return update.finish()
 
-    The new database is built in a temporary file beside the target and moved over it
-    with ``os.replace``, so an analyst opening the file sees the old or the new views.
+
+class ViewsUpdate:
+    """An update of ``<warehouse>/surveil.duckdb`` in two steps.
+
+    :meth:`prepare` opens a temporary copy of the file (a new database when there is none
+    or it does not open) and brings every view to the tables' current snapshots;
+    :meth:`finish` rewrites the views whose statement changed since (the tables a job
+    committed to meanwhile, or a new schema), then swaps the copy in with ``os.replace``:
+    an analyst opening the file sees the old or the new views. A job can run ``prepare``
+    in a thread while it works, so that its end only pays for the tables it changed. The
+    result equals a build from scratch (tests/warehouse/test_views.py checks it).
     """
-    warehouse = Path(warehouse)
-    warehouse.mkdir(parents=True, exist_ok=True)
-    target = warehouse / VIEWS_FILE
-    tmp = warehouse / f".{VIEWS_FILE}.tmp-{os.getpid()}"
-    _remove_db_files(tmp)
-    try:
-        con = duckdb.connect(str(tmp))
+
+    def __init__(self, warehouse: Path) -> None:
+        self.warehouse = Path(warehouse)
+        self.target = self.warehouse / VIEWS_FILE
+        self._tmp = self.warehouse / f".{VIEWS_FILE}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}"
+        self._con: duckdb.DuckDBPyConnection | None = None
+        self._written: dict[str, str] = {}
+        self._changed = False
+
+    def prepare(self) -> None:
+        """Open the temporary copy and write the views of the current snapshots."""
+        self.warehouse.mkdir(parents=True, exist_ok=True)
+        self._con = _copy_or_new(self.target, self._tmp)
+        self._written = _view_digests(self._con)
+        self._sync()
+
+    def finish(self) -> Path:
+        """Write the views changed since :meth:`prepare`; swap the file in if any view
+        differs from the old file's (an unchanged file is left alone)."""
+        if self._con is None:
+            raise RuntimeError("ViewsUpdate.finish() before prepare()")
         try:
-            register_tables(con, warehouse, names)
-            con.execute("CHECKPOINT")
+            self._sync()
+            self._con.execute("CHECKPOINT")
+            self._con.close()
+            self._con = None
+            if self._changed or not self.target.exists():
+                os.replace(self._tmp, self.target)
         finally:
-            con.close()
-        os.replace(tmp, target)
-    finally:
-        _remove_db_files(tmp)
-    return target
+            self.discard()
+        return self.target
+
+    def discard(self) -> None:
+        """Close and delete the temporary copy (the file stays as it was)."""
+        if self._con is not None:
+            self._con.close()
+            self._con = None
+        _remove_db_files(self._tmp)
+
+    def _sync(self) -> None:
+        assert self._con is not None
+        for name in table_specs():
+            sql = view_sql(name, table_files(self.warehouse, name))
+            digest = _digest(sql)
+            if self._written.get(name) != digest:
+                self._con.execute(sql)
+                self._con.execute(f"COMMENT ON VIEW {_ident(name)} IS {sql_literal(digest)}")
+                self._written[name] = digest
+                self._changed = True
+
+
+def _digest(sql: str) -> str:
+    return hashlib.sha256(sql.encode()).hexdigest()[:32]
+
+
+def _copy_or_new(target: Path, tmp: Path) -> duckdb.DuckDBPyConnection:
+    """A connection to ``tmp``: a copy of ``target`` when that opens, else a new database."""
+    if target.exists():
+        try:
+            shutil.copyfile(target, tmp)
+            return duckdb.connect(str(tmp))
+        except (OSError, duckdb.Error):  # unreadable or not a database: build from scratch
+            _remove_db_files(tmp)
+    return duckdb.connect(str(tmp))
+
+
+def _view_digests(con: duckdb.DuckDBPyConnection) -> dict[str, str]:
+    """View name -> the digest its comment holds (views written by this module)."""
+    rows = con.execute(
+        "SELECT view_name, comment FROM duckdb_views() WHERE NOT internal AND comment IS NOT NULL"
+    ).fetchall()
+    return {name: comment for name, comment in rows}
 
 
 def _remove_db_files(db: Path) -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import datetime as dt
+from pathlib import Path
 
 import duckdb
 import pyarrow as pa
@@ -72,3 +73,45 @@ def test_rebuild_views_file_swaps_in_new_views(tmp_path):
         }
     assert views == set(table_specs())
     assert sorted(p.name for p in tmp_path.iterdir()) == [VIEWS_FILE, "tables"]
+
+
+def _view_sql(db: Path) -> dict[str, str]:
+    with duckdb.connect(str(db), read_only=True) as con:
+        rows = con.execute("SELECT view_name, sql FROM duckdb_views() WHERE NOT internal")
+        return dict(rows.fetchall())
+
+
+def test_views_update_equals_a_build_from_scratch(tmp_path):
+    target = rebuild_views_file(tmp_path)
+    replace_window(tmp_path, "truth", truth_rows(hours(0, 1)), start_ns=T0, end_ns=T0 + DAY)
+    rebuild_views_file(tmp_path)  # updates the truth view only
+    updated = _view_sql(target)
+    target.unlink()
+    rebuild_views_file(tmp_path)  # from scratch
+    assert updated == _view_sql(target)
+    assert "read_parquet" in updated["truth"] and "read_parquet" not in updated["ais_reports"]
+
+
+def test_views_unchanged_tables_leave_the_file_alone(tmp_path):
+    target = rebuild_views_file(tmp_path)
+    before = target.stat()
+    rebuild_views_file(tmp_path)
+    after = target.stat()
+    assert (after.st_ino, after.st_mtime_ns) == (before.st_ino, before.st_mtime_ns)
+
+
+def test_views_a_view_edited_by_hand_is_rewritten(tmp_path):
+    target = rebuild_views_file(tmp_path)
+    with duckdb.connect(str(target)) as con:
+        con.execute("CREATE OR REPLACE VIEW truth AS SELECT 1 AS x")
+    rebuild_views_file(tmp_path)
+    with duckdb.connect(str(target), read_only=True) as con:
+        assert con.sql("SELECT * FROM truth").columns == schema("truth").names
+
+
+def test_views_an_unreadable_file_is_built_again(tmp_path):
+    target = tmp_path / VIEWS_FILE
+    target.write_bytes(b"not a duckdb database" * 100)
+    rebuild_views_file(tmp_path)
+    assert set(_view_sql(target)) == set(table_specs())
+    assert sorted(p.name for p in tmp_path.iterdir()) == [VIEWS_FILE]
