@@ -70,7 +70,12 @@ class StagedFile:
 
 @dataclass
 class _ColumnStats:
-    """Running min / max / null count of one column (None: no usable stats)."""
+    """Min / max / null count of one column (``usable`` false: no min/max for Delta).
+
+    Float columns are tracked while the rows are written (:meth:`update`: a NaN makes the
+    min/max unusable, where Parquet's statistics would silently skip it); every other
+    column's come from the Parquet footer (:func:`_footer_stats`), which the writer
+    computes anyway."""
 
     lo: object = None
     hi: object = None
@@ -98,6 +103,30 @@ class _ColumnStats:
         self.hi = hi if self.hi is None else max(self.hi, hi)
 
 
+def _footer_stats(path: Path, columns: list[str]) -> dict[str, _ColumnStats]:
+    """Min / max / null count of ``columns`` over the row groups of a written Parquet file;
+    a row group with values but no min/max (a string over the writer's statistics size
+    limit) makes the column's min/max unusable."""
+    md = pq.read_metadata(path)
+    index = {md.schema.column(i).name: i for i in range(md.num_columns)}
+    out = {}
+    for name in columns:
+        st = _ColumnStats()
+        for rg in range(md.num_row_groups):
+            s = md.row_group(rg).column(index[name]).statistics
+            if s is None or not s.has_null_count:
+                st.usable = False
+                continue
+            st.nulls += s.null_count
+            if s.has_min_max:
+                st.lo = s.min if st.lo is None else min(st.lo, s.min)
+                st.hi = s.max if st.hi is None else max(st.hi, s.max)
+            elif s.num_values > 0:
+                st.usable = False
+        out[name] = st
+    return out
+
+
 def _write_group(f: _OpenFile, group: pa.Table) -> None:
     """Statistics, then one row group (in the stage thread: Arrow releases the GIL; jobs
     of one stager run one at a time, in order)."""
@@ -120,6 +149,13 @@ def _stat_value(v: object) -> object:
     if isinstance(v, float) and not math.isfinite(v):
         return None
     return v
+
+
+def _file_stats(f: _OpenFile) -> dict[str, _ColumnStats]:
+    """Every non-binary column's statistics of a closed staged file, in schema order."""
+    names = [c.name for c in f.writer.schema if not pa.types.is_binary(c.type)]
+    footer = _footer_stats(f.path, [n for n in names if n not in f.stats])
+    return {n: f.stats[n] if n in f.stats else footer[n] for n in names}
 
 
 def _stats_json(rows: int, stats: dict[str, _ColumnStats]) -> str:
@@ -223,14 +259,16 @@ class TableStager:
         path = sub / f"part-{uuid.uuid4().hex}.parquet"
         strings = [f.name for f in schema if pa.types.is_string(f.type)]
         floats = [f.name for f in schema if pa.types.is_floating(f.type)]
+        with_stats = [f.name for f in schema if not pa.types.is_binary(f.type)]
         writer = pq.ParquetWriter(
             path,
             schema,
             compression="zstd",
             use_dictionary=strings,
             use_byte_stream_split=floats or False,  # -6% size and CPU on sensor floats
+            write_statistics=with_stats,  # not of raw bytes (rejects.raw)
         )
-        stats = {f.name: _ColumnStats() for f in schema if not pa.types.is_binary(f.type)}
+        stats = {name: _ColumnStats() for name in floats}
         pool = ThreadPoolExecutor(1, thread_name_prefix="stage") if self.threaded else None
         return _OpenFile(slot.table, slot.partition, path, writer, pool, stats=stats)
 
@@ -274,7 +312,7 @@ class TableStager:
                 dict(f.partition),
                 f.rows,
                 f.path.stat().st_size,
-                _stats_json(f.rows, f.stats),
+                _stats_json(f.rows, _file_stats(f)),
             )
             for f in files
         ]

@@ -102,3 +102,59 @@ def test_mixed_source_files_fall_back_to_a_rewrite(tmp_path):
     got = read_table(wh, "truth")
     assert got.filter(pa.compute.equal(got["source_file"], "/a.mcap")).num_rows == 10
     assert got.filter(pa.compute.equal(got["source_file"], "/c.mcap")).num_rows == 50
+
+
+def test_stats_of_every_column_match_the_written_rows(tmp_path):
+    """Delta statistics from the Parquet footer (strings, ints) and from the rows (floats)
+    equal min / max / null count of what the file holds; a NaN or a string too long for
+    Parquet's statistics leaves that column without min/max; raw bytes have none."""
+    t = T0_NS + np.arange(600, dtype=np.int64) * 10**9
+    rows = truth_rows(t, source="/a.mcap")
+    speed = rows["speed_mps"].to_numpy().copy()
+    speed[7] = np.nan
+    topics = [f"/truth/{i % 11}" for i in range(600)]
+    topics[3] = "/" + "x" * 5000
+    rows = rows.set_column(rows.schema.get_field_index("speed_mps"), "speed_mps", pa.array(speed))
+    rows = rows.set_column(rows.schema.get_field_index("topic"), "topic", pa.array(topics))
+    st = TableStager(tmp_path / "s", row_group_rows=250, threaded=False)  # one file
+    st.add("truth", rows.slice(0, 300))
+    st.add("truth", rows.slice(300))
+    (f,) = st.close()
+    stats = json.loads(f.stats_json)
+    back = pq.read_table(f.path)
+    assert stats["numRecords"] == back.num_rows == 600
+    for name in back.column_names:
+        col = back[name]
+        assert stats["nullCount"][name] == col.null_count, name
+        if name in ("speed_mps", "topic") or col.null_count == len(col):
+            assert name not in stats["minValues"] and name not in stats["maxValues"], name
+            continue
+        mm = pa.compute.min_max(col).as_py()
+        assert (stats["minValues"][name], stats["maxValues"][name]) == (mm["min"], mm["max"])
+    assert set(stats["minValues"]) == {
+        "time_ns", "vessel_id", "lat_deg", "lon_deg", "course_rad", "source_file", "log_time_ns"
+    }  # fmt: skip
+
+    rej = TableStager(tmp_path / "r")
+    raw = [b"\x00\xff", None, b"abc"]
+    rej.add(
+        "rejects",
+        pa.table(
+            {
+                "log_time_ns": pa.array([T0_NS] * 3, pa.int64()),
+                "source_file": ["/a.mcap"] * 3,
+                "topic": ["/t", None, "/s"],
+                "stage": ["ingest"] * 3,
+                "reason_code": ["undecodable", "truncated", "bad_checksum"],
+                "reason": ["r"] * 3,
+                "raw": pa.array(raw, pa.binary()),
+            }
+        ),
+    )
+    (r,) = rej.close()
+    rstats = json.loads(r.stats_json)
+    assert "raw" not in rstats["nullCount"] and "raw" not in rstats["minValues"]
+    assert rstats["nullCount"]["topic"] == 1 and rstats["minValues"]["topic"] == "/s"
+    assert rstats["minValues"]["reason_code"] == "bad_checksum"
+    assert rstats["maxValues"]["reason_code"] == "undecodable"
+    assert not pq.read_metadata(r.path).row_group(0).column(6).is_stats_set
