@@ -11,8 +11,7 @@ view casts it (and every other column) explicitly to the canonical type.
 copy and swapped in with ``os.replace``; the pipeline never keeps it open. Each view carries
 the digest of its statement as its comment (``duckdb_views().comment``), so an update
 rewrites only the views whose table changed since the file was written (an ingest changes
-three or four of ~30 tables); a missing or unreadable file is built from scratch. Ingest
-prepares the update in a thread while it decodes (:class:`ViewsUpdate`).
+three or four of ~30 tables); a missing or unreadable file is built from scratch.
 """
 
 from __future__ import annotations
@@ -96,73 +95,36 @@ def register_tables(
 
 
 def rebuild_views_file(warehouse: Path) -> Path:
-    """Bring ``<warehouse>/surveil.duckdb`` up to date with the views of every table
-    (:class:`ViewsUpdate` prepared and finished at once)."""
-    update = ViewsUpdate(warehouse)
-    update.prepare()
-    return update.finish()
+    """Bring ``<warehouse>/surveil.duckdb`` up to date with the views of every table.
 
-
-class ViewsUpdate:
-    """An update of ``<warehouse>/surveil.duckdb`` in two steps.
-
-    :meth:`prepare` opens a temporary copy of the file (a new database when there is none
-    or it does not open) and brings every view to the tables' current snapshots;
-    :meth:`finish` rewrites the views whose statement changed since (the tables a job
-    committed to meanwhile, or a new schema), then swaps the copy in with ``os.replace``:
-    an analyst opening the file sees the old or the new views. A job can run ``prepare``
-    in a thread while it works, so that its end only pays for the tables it changed. The
-    result equals a build from scratch (tests/warehouse/test_views.py checks it).
+    The views whose statement changed (their table got new files, or the code a new
+    schema) are rewritten in a temporary copy of the file, which then replaces it with
+    ``os.replace``: an analyst opening the file sees the old or the new views. An
+    unchanged file is left alone. The result equals a build from scratch
+    (tests/warehouse/test_views.py checks it).
     """
-
-    def __init__(self, warehouse: Path) -> None:
-        self.warehouse = Path(warehouse)
-        self.target = self.warehouse / VIEWS_FILE
-        self._tmp = self.warehouse / f".{VIEWS_FILE}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}"
-        self._con: duckdb.DuckDBPyConnection | None = None
-        self._written: dict[str, str] = {}
-        self._changed = False
-
-    def prepare(self) -> None:
-        """Open the temporary copy and write the views of the current snapshots."""
-        self.warehouse.mkdir(parents=True, exist_ok=True)
-        self._con = _copy_or_new(self.target, self._tmp)
-        self._written = _view_digests(self._con)
-        self._sync()
-
-    def finish(self) -> Path:
-        """Write the views changed since :meth:`prepare`; swap the file in if any view
-        differs from the old file's (an unchanged file is left alone)."""
-        if self._con is None:
-            raise RuntimeError("ViewsUpdate.finish() before prepare()")
+    warehouse = Path(warehouse)
+    warehouse.mkdir(parents=True, exist_ok=True)
+    target = warehouse / VIEWS_FILE
+    statements = {name: view_sql(name, table_files(warehouse, name)) for name in table_specs()}
+    tmp = warehouse / f".{VIEWS_FILE}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}"
+    try:
+        con = _copy_or_new(target, tmp)
         try:
-            self._sync()
-            self._con.execute("CHECKPOINT")
-            self._con.close()
-            self._con = None
-            if self._changed or not self.target.exists():
-                os.replace(self._tmp, self.target)
+            written = _view_digests(con)
+            changed = {n: sql for n, sql in statements.items() if written.get(n) != _digest(sql)}
+            if not changed and target.exists():
+                return target
+            for name, sql in changed.items():
+                con.execute(sql)
+                con.execute(f"COMMENT ON VIEW {_ident(name)} IS {sql_literal(_digest(sql))}")
+            con.execute("CHECKPOINT")
         finally:
-            self.discard()
-        return self.target
-
-    def discard(self) -> None:
-        """Close and delete the temporary copy (the file stays as it was)."""
-        if self._con is not None:
-            self._con.close()
-            self._con = None
-        _remove_db_files(self._tmp)
-
-    def _sync(self) -> None:
-        assert self._con is not None
-        for name in table_specs():
-            sql = view_sql(name, table_files(self.warehouse, name))
-            digest = _digest(sql)
-            if self._written.get(name) != digest:
-                self._con.execute(sql)
-                self._con.execute(f"COMMENT ON VIEW {_ident(name)} IS {sql_literal(digest)}")
-                self._written[name] = digest
-                self._changed = True
+            con.close()
+        os.replace(tmp, target)
+    finally:
+        _remove_db_files(tmp)
+    return target
 
 
 def _digest(sql: str) -> str:

@@ -24,7 +24,7 @@ from pipeline.config import load_config
 from pipeline.executors import ExecutorError, UnitResult, make_executor
 from pipeline.io.mcap_read import read_mcap_batches
 from pipeline.warehouse.delta import read_table, table_version
-from pipeline.warehouse.views import VIEWS_FILE, ViewsUpdate
+from pipeline.warehouse.views import VIEWS_FILE
 
 NS = 10**9
 TABLES = ("radar_tracks", "ais_reports", "ais_static", "truth", "rejects", "ingest_ledger")
@@ -101,28 +101,6 @@ def test_changed_file_replaces_its_rows(tmp_path, cfg):
     n_view = con.execute("SELECT count(*) FROM radar_tracks").fetchall()[0][0]
     con.close()
     assert n_view == read_table(wh, "radar_tracks").num_rows == 90
-
-
-def test_views_prepared_during_ingest_match_the_tables(tmp_path, cfg, monkeypatch):
-    """The views file is prepared while the files decode; at the end it holds the new
-    files, no temporary copy is left, and a failed preparation is done again."""
-    wh = tmp_path / "wh"
-    ingest([write_mcap(tmp_path / "a.mcap", radar_messages(40))], cfg, wh)
-    calls = []
-    real_prepare = ViewsUpdate.prepare
-
-    def prepare_failing_once(self):
-        calls.append(1)
-        if len(calls) == 1:
-            raise OSError("disk hiccup")
-        real_prepare(self)
-
-    monkeypatch.setattr(ViewsUpdate, "prepare", prepare_failing_once)
-    s = ingest([write_mcap(tmp_path / "b.mcap", radar_messages(25, site="R2"))], cfg, wh)
-    assert s.exit_code == 0 and len(calls) == 2
-    with duckdb.connect(str(wh / VIEWS_FILE), read_only=True) as con:
-        assert con.execute("SELECT count(*) FROM radar_tracks").fetchall()[0][0] == 65
-    assert sorted(p.name for p in wh.iterdir()) == [VIEWS_FILE, "tables"]
 
 
 def test_not_mcap_quarantined_and_run_continues(tmp_path, cfg):
