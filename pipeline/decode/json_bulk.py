@@ -428,7 +428,7 @@ def decode_json_batches(
         frame = parsed.frame if single else parsed.frame.filter(pl.Series(row_channel == ch))
         if frame.height == 0:
             continue
-        good, bad = split_valid(frame.select([*kind.fields, "_idx"]), _checks(kind, validation))
+        good, bad = split_valid(frame.select([*kind.fields, "_idx"]), kind_checks(kind, validation))
         rows = with_provenance(good, order.log_time_ns, source_file=source_file, topic=topic[ch])
         out.setdefault(kind.table, []).append(shape(kind.table, rows.rename(kind.rename)))
         if bad.height:
@@ -441,7 +441,7 @@ def decode_json_batches(
 
 
 @functools.lru_cache(maxsize=64)
-def _checks(kind: JsonKind, validation: ValidationConfig) -> list[Check]:
+def kind_checks(kind: JsonKind, validation: ValidationConfig) -> list[Check]:
     """``kind.checks(validation)``, built once per kind and configuration (polars
     expressions: ~40 per kind, rebuilt per group they cost more than evaluating them)."""
     return kind.checks(validation)

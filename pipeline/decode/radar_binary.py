@@ -49,7 +49,7 @@ import polars as pl
 import pyarrow as pa
 
 from pipeline.config import ValidationConfig
-from pipeline.decode.json_bulk import JsonKind, split_valid, with_provenance
+from pipeline.decode.json_bulk import JsonKind, kind_checks, split_valid, with_provenance
 from pipeline.decode.radar import RADAR
 from pipeline.io.mcap_chunks import PAD
 from pipeline.io.mcap_read import ChannelBatch
@@ -604,7 +604,7 @@ class RadarBinaryChannelDecoder:
 
     def _validate(self, batches: list[ChannelBatch], frame: pl.DataFrame) -> dict[str, pa.Table]:
         times = np.concatenate([b.log_time_ns for b in batches])
-        good, bad = split_valid(frame, RADAR.checks(self.validation))
+        good, bad = split_valid(frame, kind_checks(RADAR, self.validation))
         rows = with_provenance(good, times, source_file=self.source_file, topic=self.topic)
         out = {"radar_tracks": shape("radar_tracks", rows.rename(RADAR.rename))}
         if bad.height:
