@@ -56,7 +56,8 @@ typedef struct {
 
 static inline const uint8_t *skip_ws(const uint8_t *p, const uint8_t *e)
 {
-    while (p < e && (*p == ' ' || *p == '\n' || *p == '\r' || *p == '\t'))
+    /* every byte that is not blank is > ' ': one compare for the usual case */
+    while (p < e && *p <= ' ' && (*p == ' ' || *p == '\n' || *p == '\r' || *p == '\t'))
         p++;
     return p;
 }
@@ -374,14 +375,21 @@ static const uint8_t *read_field(const Spec *s, int f, Py_ssize_t r, const uint8
     return q;
 }
 
-/* memcmp(a, b, len) == 0 for short keys, without a library call. */
+/* memcmp(a, b, len) == 0 for short keys, without a library call: 8-byte words, the last
+ * one overlapping the previous (no byte outside [a, a + len) or [b, b + len) is read). */
 static inline int same_bytes(const uint8_t *a, const char *b, Py_ssize_t len)
 {
+    const uint8_t *bb = (const uint8_t *)b;
     Py_ssize_t i = 0;
-    for (; i + 8 <= len; i += 8)
-        if (load8(a + i) != load8((const uint8_t *)b + i)) return 0;
+    if (len >= 8) {
+        for (; i + 8 <= len; i += 8)
+            if (load8(a + i) != load8(bb + i)) return 0;
+        return i == len || load8(a + len - 8) == load8(bb + len - 8);
+    }
+    if (len >= 4)
+        return load4(a) == load4(bb) && load4(a + len - 4) == load4(bb + len - 4);
     for (; i < len; i++)
-        if (a[i] != (uint8_t)b[i]) return 0;
+        if (a[i] != bb[i]) return 0;
     return 1;
 }
 

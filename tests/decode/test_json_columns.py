@@ -1007,3 +1007,31 @@ def test_simulated_archive_ingests_the_same_without_the_extension(tmp_path, monk
     for t in ("radar_tracks", "truth"):
         assert tables["native"][t].num_rows > 1000
         assert tables["native"][t].equals(tables["polars"][t]), t
+
+
+def test_keys_of_every_length_and_their_near_misses():
+    """Keys of 1..24 bytes are compared word by word (the last word overlapping): a key
+    that differs from a wanted one in its first, a middle or its last byte, or is one
+    byte shorter or longer, is an unknown key; the values land in the right columns."""
+    names = ["abcdefghijklmnopqrstuvwx"[:k] for k in range(1, 25)]
+    schema = {name: pl.Float64() for name in names}
+    rng = np.random.default_rng(11)
+    payloads = []
+    for i in range(400):
+        obj: dict[str, float] = {}
+        for k, name in enumerate(names):
+            near = {
+                0: name,
+                1: "Z" + name[1:],
+                2: name[:-1] + "Z",
+                3: name[: len(name) // 2] + "Z" + name[len(name) // 2 + 1 :],
+                4: name + "Z",
+            }[int(rng.integers(0, 5))]
+            obj.setdefault(near, float(i * 100 + k) + 0.25)
+        payloads.append(dumps(_shuffled(obj, rng) if i % 3 else obj, separators=(",", ":")))
+    order = make_order(payloads)
+    got = json_bulk.parse_columns(order, schema)
+    want = json_bulk.parse_json_payloads(payloads, schema)
+    assert got is not None and got.bad_idx == want.bad_idx == []
+    assert_frame_equal(got.frame, want.frame)
+    assert 0 < got.frame.select(pl.all().exclude("_idx").null_count()).row(0)[5] < 400
