@@ -134,6 +134,11 @@ scan_number(const uint8_t *p, const uint8_t *e, Number *n)
             sig += 8;
             p += 8;
         }
+        if (sig <= 15 && e - p >= 4 && four_digits(load4(p))) {
+            w = w * 10000 + four_digits_value(load4(p));
+            sig += 4;
+            p += 4;
+        }
         for (; p < e && (unsigned)(*p - '0') < 10; p++) {
             if (sig < 19) { w = w * 10 + (uint64_t)(*p - '0'); sig++; }
             else { q++; exact = 0; }
