@@ -84,20 +84,25 @@ class _ColumnStats:
 
     def update(self, col: pa.ChunkedArray) -> None:
         self.nulls += col.null_count
-        if not self.usable or col.null_count == len(col):
-            return
-        numeric = pa.types.is_integer(col.type) or pa.types.is_floating(col.type)
-        if numeric and col.null_count == 0:  # numpy: one pass each, NaN propagates
-            v = col.to_numpy()
+        for chunk in col.chunks:
+            if not self.usable:
+                return
+            if chunk.null_count < len(chunk):
+                self._update_chunk(chunk)
+
+    def _update_chunk(self, chunk: pa.Array) -> None:
+        numeric = pa.types.is_integer(chunk.type) or pa.types.is_floating(chunk.type)
+        if numeric and chunk.null_count == 0:  # numpy, zero-copy: one pass each, NaN propagates
+            v = chunk.to_numpy(zero_copy_only=False)
             lo, hi = v.min().item(), v.max().item()
             if lo != lo or hi != hi:
                 self.usable = False  # NaN has no place in min/max statistics
                 return
         else:
-            if pa.types.is_floating(col.type) and pc.any(pc.is_nan(col)).as_py():
+            if pa.types.is_floating(chunk.type) and pc.any(pc.is_nan(chunk)).as_py():
                 self.usable = False
                 return
-            mm = pc.min_max(col).as_py()
+            mm = pc.min_max(chunk).as_py()
             lo, hi = mm["min"], mm["max"]
         self.lo = lo if self.lo is None else min(self.lo, lo)
         self.hi = hi if self.hi is None else max(self.hi, hi)

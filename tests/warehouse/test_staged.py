@@ -111,14 +111,14 @@ def test_stats_of_every_column_match_the_written_rows(tmp_path):
     t = T0_NS + np.arange(600, dtype=np.int64) * 10**9
     rows = truth_rows(t, source="/a.mcap")
     speed = rows["speed_mps"].to_numpy().copy()
-    speed[7] = np.nan
+    speed[407] = np.nan
     topics = [f"/truth/{i % 11}" for i in range(600)]
     topics[3] = "/" + "x" * 5000
     rows = rows.set_column(rows.schema.get_field_index("speed_mps"), "speed_mps", pa.array(speed))
     rows = rows.set_column(rows.schema.get_field_index("topic"), "topic", pa.array(topics))
     st = TableStager(tmp_path / "s", row_group_rows=250, threaded=False)  # one file
-    st.add("truth", rows.slice(0, 300))
-    st.add("truth", rows.slice(300))
+    for a in range(0, 600, 100):  # row groups of three chunks each
+        st.add("truth", rows.slice(a, 100))
     (f,) = st.close()
     stats = json.loads(f.stats_json)
     back = pq.read_table(f.path)
