@@ -254,6 +254,9 @@ def test_peak_memory_does_not_grow_with_the_file(tmp_path):
         cmd = [sys.executable, "-c", _PEAK_SCRIPT, str(path), str(tmp_path / f"wh{n}"), str(n)]
         res = subprocess.run(cmd, capture_output=True, text=True, check=True, cwd=repo)
         peaks[n] = int(res.stdout.split()[-1])
-    # 4x the messages (132 -> 528 MB of JSON), about the same peak resident set
-    assert peaks[1_200_000] < 1.15 * peaks[300_000], peaks
+    # 4x the messages (132 -> 528 MB of JSON), about the same peak resident set: measured
+    # 1.06x on a quiet machine, up to 1.15x on a busy one (slower writers keep more of
+    # their bounded queues full); a pipeline that held the file would show ~3x (the
+    # baseline: 700 -> 2,468 MB for 250 k -> 1 M reports)
+    assert peaks[1_200_000] < 1.25 * peaks[300_000], peaks
     print("peak RSS kB", peaks)
