@@ -12,6 +12,7 @@ that leaves the previous data of the window untouched.
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import logging
 import shutil
@@ -309,6 +310,8 @@ def run_batch(
         return summary
     _commit(warehouse, manifests, summary)
     shutil.rmtree(staging, ignore_errors=True)
+    with contextlib.suppress(OSError):  # only when empty: another job may be staging
+        (warehouse / "_staging").rmdir()
     rebuild_views_file(warehouse)
     return summary
 

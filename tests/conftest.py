@@ -55,4 +55,5 @@ def e2e(tmp_path_factory: pytest.TempPathFactory, cfg: Config) -> E2E:
     end_ns = E2E_START_NS + int(E2E_DURATION_S * NS)
     batch = run_batch(cfg, warehouse, start_ns=E2E_START_NS, end_ns=end_ns, executor_kind="serial")
     assert batch.exit_code == 0, batch.render()
+    assert sorted(p.name for p in warehouse.iterdir()) == ["surveil.duckdb", "tables"]
     return E2E(cfg, files, warehouse, E2E_START_NS, end_ns)
