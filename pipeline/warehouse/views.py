@@ -109,9 +109,9 @@ def rebuild_views_file(warehouse: Path) -> Path:
     statements = {name: view_sql(name, table_files(warehouse, name)) for name in table_specs()}
     tmp = warehouse / f".{VIEWS_FILE}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}"
     try:
-        con = _copy_or_new(target, tmp)
+        con, copied = _copy_or_new(target, tmp)
         try:
-            written = _view_digests(con)
+            written = _view_digests(con) if copied else {}  # (the query costs ~10 ms)
             changed = {n: sql for n, sql in statements.items() if written.get(n) != _digest(sql)}
             if not changed and target.exists():
                 return target
@@ -131,15 +131,16 @@ def _digest(sql: str) -> str:
     return hashlib.sha256(sql.encode()).hexdigest()[:32]
 
 
-def _copy_or_new(target: Path, tmp: Path) -> duckdb.DuckDBPyConnection:
-    """A connection to ``tmp``: a copy of ``target`` when that opens, else a new database."""
+def _copy_or_new(target: Path, tmp: Path) -> tuple[duckdb.DuckDBPyConnection, bool]:
+    """A connection to ``tmp``: a copy of ``target`` when that opens (True), else a new
+    database (False)."""
     if target.exists():
         try:
             shutil.copyfile(target, tmp)
-            return duckdb.connect(str(tmp))
+            return duckdb.connect(str(tmp)), True
         except (OSError, duckdb.Error):  # unreadable or not a database: build from scratch
             _remove_db_files(tmp)
-    return duckdb.connect(str(tmp))
+    return duckdb.connect(str(tmp)), False
 
 
 def _view_digests(con: duckdb.DuckDBPyConnection) -> dict[str, str]:
