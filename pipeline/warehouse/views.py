@@ -112,12 +112,16 @@ def rebuild_views_file(warehouse: Path) -> Path:
         con, copied = _copy_or_new(target, tmp)
         try:
             written = _view_digests(con) if copied else {}  # (the query costs ~10 ms)
-            changed = {n: sql for n, sql in statements.items() if written.get(n) != _digest(sql)}
-            if not changed and target.exists():
+            digests = {name: _digest(sql) for name, sql in statements.items()}
+            changed = [n for n in statements if written.get(n) != digests[n]]
+            stale = [n for n in written if n not in statements]  # a table no longer defined
+            if not changed and not stale and target.exists():
                 return target
-            for name, sql in changed.items():
-                con.execute(sql)
-                con.execute(f"COMMENT ON VIEW {_ident(name)} IS {sql_literal(_digest(sql))}")
+            for name in stale:
+                con.execute(f"DROP VIEW IF EXISTS {_ident(name)}")
+            for name in changed:
+                con.execute(statements[name])
+                con.execute(f"COMMENT ON VIEW {_ident(name)} IS {sql_literal(digests[name])}")
             con.execute("CHECKPOINT")
         finally:
             con.close()

@@ -100,13 +100,17 @@ def test_views_unchanged_tables_leave_the_file_alone(tmp_path):
     assert (after.st_ino, after.st_mtime_ns) == (before.st_ino, before.st_mtime_ns)
 
 
-def test_views_a_view_edited_by_hand_is_rewritten(tmp_path):
+def test_views_a_view_edited_by_hand_is_rewritten_and_a_gone_table_dropped(tmp_path):
     target = rebuild_views_file(tmp_path)
     with duckdb.connect(str(target)) as con:
         con.execute("CREATE OR REPLACE VIEW truth AS SELECT 1 AS x")
+        con.execute("CREATE VIEW old_table AS SELECT 1 AS x")  # as written by an older release
+        con.execute("COMMENT ON VIEW old_table IS 'digest of its statement'")
+        con.execute("CREATE VIEW my_view AS SELECT 2 AS y")  # an analyst's own, no comment
     rebuild_views_file(tmp_path)
     with duckdb.connect(str(target), read_only=True) as con:
         assert con.sql("SELECT * FROM truth").columns == schema("truth").names
+    assert set(_view_sql(target)) == {*table_specs(), "my_view"}
 
 
 def test_views_an_unreadable_file_is_built_again(tmp_path):
