@@ -83,15 +83,22 @@ def view_sql(name: str, files: list[str]) -> str:
     return f"CREATE OR REPLACE VIEW {_ident(name)} AS {body}"
 
 
+def view_statements(warehouse: Path, names: Iterable[str] | None = None) -> dict[str, str]:
+    """Table name -> its ``CREATE OR REPLACE VIEW`` over the current snapshot (all
+    canonical tables when ``names`` is None)."""
+    selected = list(names) if names is not None else list(table_specs())
+    return {name: view_sql(name, table_files(warehouse, name)) for name in selected}
+
+
 def register_tables(
     con: duckdb.DuckDBPyConnection, warehouse: Path, names: Iterable[str] | None = None
 ) -> list[str]:
     """Create one view per table (all canonical tables when ``names`` is None) in ``con``
     over the table's current snapshot; returns the view names."""
-    selected = list(names) if names is not None else list(table_specs())
-    for name in selected:
-        con.execute(view_sql(name, table_files(warehouse, name)))
-    return selected
+    statements = view_statements(warehouse, names)
+    for sql in statements.values():
+        con.execute(sql)
+    return list(statements)
 
 
 def rebuild_views_file(warehouse: Path) -> Path:
@@ -106,7 +113,7 @@ def rebuild_views_file(warehouse: Path) -> Path:
     warehouse = Path(warehouse)
     warehouse.mkdir(parents=True, exist_ok=True)
     target = warehouse / VIEWS_FILE
-    statements = {name: view_sql(name, table_files(warehouse, name)) for name in table_specs()}
+    statements = view_statements(warehouse)
     tmp = warehouse / f".{VIEWS_FILE}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}"
     try:
         con, copied = _copy_or_new(target, tmp)
