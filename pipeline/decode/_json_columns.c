@@ -80,13 +80,6 @@ static inline uint64_t load8(const uint8_t *p)
     return v;
 }
 
-static inline int eight_digits(uint64_t v)
-{
-    return (((v & UINT64_C(0xF0F0F0F0F0F0F0F0)) |
-             (((v + UINT64_C(0x0606060606060606)) & UINT64_C(0xF0F0F0F0F0F0F0F0)) >> 4)) ==
-            UINT64_C(0x3333333333333333));
-}
-
 static inline uint64_t eight_digits_value(uint64_t v)
 {
     const uint64_t mask = UINT64_C(0x000000FF000000FF);
@@ -104,16 +97,49 @@ static inline uint32_t load4(const uint8_t *p)
     return v;
 }
 
-static inline int four_digits(uint32_t v)
+/* Number of leading ASCII digits in the 8 bytes v (first byte lowest), 0-8: a byte is a
+ * digit when (byte ^ '0') < 10; bit 7 of each byte of m is set for a non-digit (no carry
+ * crosses bytes: (x & 0x7F) + 0x76 <= 0xF5). */
+static inline int leading_digits(uint64_t v)
 {
-    return (((v & 0xF0F0F0F0u) | (((v + 0x06060606u) & 0xF0F0F0F0u) >> 4)) == 0x33333333u);
+    uint64_t x = v ^ UINT64_C(0x3030303030303030);
+    uint64_t m = (((x & UINT64_C(0x7F7F7F7F7F7F7F7F)) + UINT64_C(0x7676767676767676)) | x) &
+                 UINT64_C(0x8080808080808080);
+    return m ? __builtin_ctzll(m) >> 3 : 8;
 }
 
-static inline uint64_t four_digits_value(uint32_t v)
+static const uint64_t POW10_U64[9] = {1, 10, 100, 1000, 10000, 100000, 1000000, 10000000,
+                                      100000000};
+
+/* Value of the first L (1-8) digits of v: shifted to the top and led by '0's, they are
+ * an eight-digit number. */
+static inline uint64_t first_digits_value(uint64_t v, int L)
 {
-    v -= 0x30303030u;
-    v = (v * 10) + (v >> 8);                           /* pairs: d0d1 in byte 0, d2d3 in 2 */
-    return (uint64_t)((v & 0xFF) * 100 + ((v >> 16) & 0xFF));
+    if (L == 8) return eight_digits_value(v);
+    return eight_digits_value((v << (64 - 8 * L)) |
+                              (UINT64_C(0x3030303030303030) >> (8 * L)));
+}
+
+/* The digit run at *pp into (w, sig), 8 bytes at a time while 8 bytes remain and the
+ * significand stays within 19 digits; returns how many digits were taken (the caller's
+ * byte loop does the rest: the end of the payload, a 20th digit). */
+static inline __attribute__((always_inline)) int
+take_digits(const uint8_t **pp, const uint8_t *e, uint64_t *w, int *sig)
+{
+    const uint8_t *p = *pp;
+    int taken = 0;
+    while (e - p >= 8) {
+        uint64_t v = load8(p);
+        int L = leading_digits(v);
+        if (L == 0 || *sig + L > 19) break;
+        *w = *w * POW10_U64[L] + first_digits_value(v, L);
+        *sig += L;
+        p += L;
+        taken += L;
+        if (L < 8) break;
+    }
+    *pp = p;
+    return taken;
 }
 
 /* JSON number grammar: -?(0|[1-9][0-9]*)(\.[0-9]+)?([eE][+-]?[0-9]+)?; NULL if none.
@@ -129,16 +155,7 @@ scan_number(const uint8_t *p, const uint8_t *e, Number *n)
     if (*p == '0') {
         p++;
     } else if (*p >= '1' && *p <= '9') {
-        while (sig <= 11 && e - p >= 8 && eight_digits(load8(p))) {
-            w = w * 100000000 + eight_digits_value(load8(p));
-            sig += 8;
-            p += 8;
-        }
-        if (sig <= 15 && e - p >= 4 && four_digits(load4(p))) {
-            w = w * 10000 + four_digits_value(load4(p));
-            sig += 4;
-            p += 4;
-        }
+        take_digits(&p, e, &w, &sig);
         for (; p < e && (unsigned)(*p - '0') < 10; p++) {
             if (sig < 19) { w = w * 10 + (uint64_t)(*p - '0'); sig++; }
             else { q++; exact = 0; }
@@ -151,18 +168,7 @@ scan_number(const uint8_t *p, const uint8_t *e, Number *n)
         is_int = 0;
         if (w == 0)
             while (p < e && *p == '0') { q--; p++; } /* leading zeros: not significant */
-        while (sig <= 11 && e - p >= 8 && eight_digits(load8(p))) {
-            w = w * 100000000 + eight_digits_value(load8(p));
-            sig += 8;
-            q -= 8;
-            p += 8;
-        }
-        if (sig <= 15 && e - p >= 4 && four_digits(load4(p))) {
-            w = w * 10000 + four_digits_value(load4(p));
-            sig += 4;
-            q -= 4;
-            p += 4;
-        }
+        q -= take_digits(&p, e, &w, &sig);
         for (; p < e && (unsigned)(*p - '0') < 10; p++) {
             if (sig < 19) { w = w * 10 + (uint64_t)(*p - '0'); sig++; q--; }
             else { exact = 0; }
@@ -323,8 +329,9 @@ static const uint8_t *skip_value(const uint8_t *p, const uint8_t *e, int depth, 
 }
 
 /* Read the value of field f for row r into its column; NULL (and *st) on error. */
-static const uint8_t *read_field(const Spec *s, int f, Py_ssize_t r, const uint8_t *base,
-                                 const uint8_t *p, const uint8_t *e, int *st)
+static inline __attribute__((always_inline)) const uint8_t *
+read_field(const Spec *s, int f, Py_ssize_t r, const uint8_t *base, const uint8_t *p,
+           const uint8_t *e, int *st)
 {
     Number num;
     const uint8_t *q;
@@ -407,15 +414,53 @@ static inline int find_key(const Spec *s, const uint8_t *k, Py_ssize_t len)
     return -1;
 }
 
-/* One payload [p, e) of row r; base: start of its chunk (spans are chunk offsets). */
+/* -- the shape of the rows ------------------------------------------------------------
+ *
+ * Archived reports of one channel are written by one encoder: the same keys in the same
+ * order, the same punctuation and blanks. A row's *shape* is what lies between its values:
+ * literal[0] value[0] literal[1] value[1] ... value[n-1] literal[n], where literal[0] is
+ * the opening brace and the first key with its colon (and any blanks), literal[k] the
+ * comma and the next key, literal[n] the closing brace. A row that matches the shape of
+ * the previous good row byte for byte, literal by literal, is an object with exactly
+ * those keys (so no duplicate, no escaped key), and its values are read by the same
+ * read_field/skip_value as in parse_object: one 8-byte-word compare per field replaces
+ * the blank skipping, the quote, key, colon and comma checks and the key lookup. A row
+ * that does not match (another shape, a bad value, any error) is parsed again from its
+ * start by parse_object, which gives its status and records its shape for the next rows.
+ */
+
+#define MAX_SLOTS 96  /* values per shape (wanted fields and skipped ones) */
+#define MAX_LITERAL 64
+
+typedef struct {
+    int ok;                                    /* a shape was recorded */
+    int nslots;
+    signed char field[MAX_SLOTS];              /* wanted field of value k, -1: skipped */
+    Py_ssize_t literal_len[MAX_SLOTS + 1];
+    uint8_t literal[MAX_SLOTS + 1][MAX_LITERAL];
+} Shape;
+
+/* Record literal[k] = [from, to) of the shape being recorded; too long: no shape. */
+static inline void record_literal(Shape *sh, int k, const uint8_t *from, const uint8_t *to)
+{
+    if (k > MAX_SLOTS || to - from > MAX_LITERAL) { sh->ok = 0; return; }
+    sh->literal_len[k] = to - from;
+    memcpy(sh->literal[k], from, (size_t)(to - from));
+}
+
+/* One payload [p, e) of row r; base: start of its chunk (spans are chunk offsets).
+ * Records the row's shape in *rec (rec->ok = 0 when the row is not OK or too long). */
 static int parse_object(const Spec *s, Py_ssize_t r, const uint8_t *base, const uint8_t *p,
-                        const uint8_t *e)
+                        const uint8_t *e, Shape *rec)
 {
     uint64_t seen = 0;
-    int hint = 0, st = ST_OK, plain;
+    int hint = 0, st = ST_OK, plain, k = 0;
+    const uint8_t *lit = p;
+    rec->ok = 0;
     p = skip_ws(p, e);
     if (p >= e || *p != '{') return ST_SYNTAX;
     p = skip_ws(p + 1, e);
+    rec->ok = 1;
     if (p < e && *p == '}') { p++; goto end; }
     for (;;) {
         const uint8_t *k0, *k1;
@@ -436,6 +481,9 @@ static int parse_object(const Spec *s, Py_ssize_t r, const uint8_t *base, const 
         if (p >= e || *p != ':') return ST_SYNTAX;
         p = skip_ws(p + 1, e);
         if (f == -2) return ST_STRING; /* an escaped key might spell a wanted one */
+        record_literal(rec, k, lit, p);
+        if (k < MAX_SLOTS) rec->field[k] = (signed char)(f < 0 ? -1 : f);
+        k++;
         if (f < 0) {
             p = skip_value(p, e, 1, &st);
         } else {
@@ -445,6 +493,7 @@ static int parse_object(const Spec *s, Py_ssize_t r, const uint8_t *base, const 
             p = read_field(s, f, r, base, p, e, &st);
         }
         if (!p) return st;
+        lit = p;
         p = skip_ws(p, e);
         if (p < e && *p == ',') { p = skip_ws(p + 1, e); continue; }
         if (p < e && *p == '}') { p++; break; }
@@ -452,7 +501,28 @@ static int parse_object(const Spec *s, Py_ssize_t r, const uint8_t *base, const 
     }
 end:
     p = skip_ws(p, e);
-    return p == e ? ST_OK : ST_SYNTAX;
+    if (p != e) return ST_SYNTAX;
+    record_literal(rec, k, lit, e);
+    rec->nslots = k;
+    return ST_OK;
+}
+
+/* Row r read along shape sh; ST_OK, or -1 when it does not match (or any error). */
+static inline int parse_shaped(const Spec *s, const Shape *sh, Py_ssize_t r,
+                               const uint8_t *base, const uint8_t *p, const uint8_t *e)
+{
+    int k, st = ST_OK;
+    Py_ssize_t len;
+    for (k = 0; k < sh->nslots; k++) {
+        int f = sh->field[k];
+        len = sh->literal_len[k];
+        if (e - p < len || !same_bytes(p, (const char *)sh->literal[k], len)) return -1;
+        p += len;
+        p = f >= 0 ? read_field(s, f, r, base, p, e, &st) : skip_value(p, e, 1, &st);
+        if (!p) return -1;
+    }
+    len = sh->literal_len[sh->nslots];
+    return e - p == len && same_bytes(p, (const char *)sh->literal[sh->nslots], len) ? ST_OK : -1;
 }
 
 /* -- Python glue --------------------------------------------------------------------- */
@@ -461,6 +531,31 @@ typedef struct {
     Py_ssize_t count;
     Py_buffer *views;
 } Buffers;
+
+/* Rows [row0, row1): along the shape of the previous good row while they match it. */
+static Py_ssize_t parse_rows(const Spec *s, const Buffers *cb, const int64_t *ck,
+                             const int64_t *st, const int64_t *en, Py_ssize_t row0,
+                             Py_ssize_t row1)
+{
+    Shape shapes[2];
+    Shape *shape = &shapes[0], *rec = &shapes[1], *tmp;
+    Py_ssize_t i, flagged = 0;
+    int f;
+    shape->ok = 0;
+    for (i = row0; i < row1; i++) {
+        const uint8_t *base = cb->views[ck[i]].buf;
+        int code = shape->ok ? parse_shaped(s, shape, i, base, base + st[i], base + en[i]) : -1;
+        if (code < 0) {
+            if (shape->ok) /* the failed attempt may have set some */
+                for (f = 0; f < s->nfields; f++) s->valid[(Py_ssize_t)f * s->n + i] = 0;
+            code = parse_object(s, i, base, base + st[i], base + en[i], rec);
+            if (code == ST_OK && rec->ok) { tmp = shape; shape = rec; rec = tmp; }
+        }
+        s->status[i] = (uint8_t)code;
+        flagged += code != ST_OK;
+    }
+    return flagged;
+}
 
 static void release(Buffers *b)
 {
@@ -592,12 +687,7 @@ static PyObject *parse_objects(PyObject *self, PyObject *args)
         Py_BEGIN_ALLOW_THREADS
         memset(s.status + row0, 0, (size_t)(row1 - row0));
         for (i = 0; i < nkinds; i++) memset(s.valid + i * n + row0, 0, (size_t)(row1 - row0));
-        for (i = row0; i < row1; i++) {
-            const uint8_t *base = cb.views[ck[i]].buf;
-            int code = parse_object(&s, i, base, base + st[i], base + en[i]);
-            s.status[i] = (uint8_t)code;
-            flagged += code != ST_OK;
-        }
+        flagged = parse_rows(&s, &cb, ck, st, en, row0, row1);
         Py_END_ALLOW_THREADS
     }
     release(&cb);

@@ -1035,3 +1035,26 @@ def test_keys_of_every_length_and_their_near_misses():
     assert got is not None and got.bad_idx == want.bad_idx == []
     assert_frame_equal(got.frame, want.frame)
     assert 0 < got.frame.select(pl.all().exclude("_idx").null_count()).row(0)[5] < 400
+
+
+@needs_ext
+def test_rows_that_differ_from_the_previous_shape_by_one_byte():
+    """Rows of one shape are read literal by literal; a row that differs from the shape
+    of the row before it by one byte anywhere (replaced, deleted or inserted: a blank, a
+    quote, an escape, a digit, a brace, a comma, a non-ASCII byte, ...) decodes exactly as
+    the reference decodes it, and so does the well-formed row after it."""
+    base = b'{"x":1.5,"u":"abc","y":-0.25e-1,"n":7,"name":"t1","ok":true,"v":[1,{"a":null}],"w":-3}'
+    assert json.loads(base)["v"] == [1, {"a": None}]
+    mutants = []
+    for i in range(len(base)):
+        for c in b' \n"\\x09-.e},:\xff':
+            b = bytes([c])
+            mutants.append(base[:i] + b + base[i + 1 :])
+            mutants.append(base[:i] + b + base[i:])
+        mutants.append(base[:i] + base[i + 1 :])
+    mutants = list(dict.fromkeys(m for m in mutants if m != base))
+    rows = [base, base]
+    for m in mutants:
+        rows += [m, base]
+    got = assert_native_matches_reference(rows, chunks=3, channels=1)
+    assert 0 < len(got.bad_idx) < len(mutants)  # some mutants are valid JSON, most are not
