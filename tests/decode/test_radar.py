@@ -105,3 +105,40 @@ def test_empty_batch():
 def test_unknown_fields_ignored():
     rows, rejects = decode([dumps(radar_report(0, extra={"a": [1, 2]}, status="lost"))])
     assert rows.num_rows == 1 and rejects.num_rows == 0
+
+
+def test_pruned_checks_give_the_same_rows_and_reasons():
+    """split_valid skips the null tests of columns without nulls and, for a frame known to
+    hold no NaN or infinity, the finiteness tests: same rows and reason texts as all
+    checks; only a frame that does hold them must not be called finite."""
+    import polars as pl
+
+    from pipeline.decode.json_bulk import applicable, split_valid
+    from pipeline.decode.radar import RADAR_FIELDS, radar_checks
+
+    rng = np.random.default_rng(5)
+    n = 2000
+    cols = {
+        c: rng.uniform(-0.01, 6.5, n) if t == pl.Float64() else rng.integers(0, 9, n)
+        for c, t in RADAR_FIELDS.items()
+        if c != "site_id"
+    }
+    frame = pl.DataFrame({"site_id": ["R1"] * n, **cols, "_idx": np.arange(n)})
+    frame = frame.with_columns(  # a few nulls in one column, none in the others
+        pl.when(pl.col("_idx") % 97 == 0)
+        .then(None)
+        .otherwise(pl.col("speed_mps"))
+        .alias("speed_mps")
+    )
+    checks = radar_checks(VAL)
+    pruned = applicable(frame, checks, finite=True)
+    assert len(pruned) < len(checks) // 2
+    assert [ck.null_of for ck in pruned if ck.null_of] == ["speed_mps"]
+    good_all, bad_all = split_valid(frame, checks)
+    good, bad = split_valid(frame, checks, finite=True)
+    assert 0 < bad.height < n
+    assert good.equals(good_all) and bad.equals(bad_all)
+
+    inf = frame.with_columns(pl.lit(math.inf).alias("range_m"))
+    assert split_valid(inf, checks)[0].height == 0
+    assert "non-finite value in 'range_m'" in split_valid(inf, checks)[1]["_reason"][0]
