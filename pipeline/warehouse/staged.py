@@ -137,7 +137,60 @@ def _write_group(f: _OpenFile, group: pa.Table) -> None:
     of one stager run one at a time, in order)."""
     for col, st in f.stats.items():
         st.update(group[col])
+    for name in f.dictionary_columns:
+        i = group.schema.get_field_index(name)
+        group = group.set_column(i, f.writer.schema.field(i), _as_dictionary(group[name]))
     f.writer.write_table(group, row_group_size=group.num_rows)
+
+
+def _constant_string(col: pa.ChunkedArray) -> str | None:
+    """The value of a string column whose rows all hold the same one (no null), else
+    None. Read off the Arrow buffers: offsets in equal steps, and data equal to itself
+    shifted by one value (8-byte words; ~0.5 ms per 128 Ki rows of 40-byte paths)."""
+    if not pa.types.is_string(col.type) or col.null_count or len(col) == 0:
+        return None
+    value = None
+    for chunk in col.chunks:
+        n = len(chunk)
+        if n == 0:
+            continue
+        _, offsets_buf, data = chunk.buffers()
+        off = np.frombuffer(offsets_buf, np.int32, n + 1, 4 * chunk.offset)
+        step, start = int(off[1] - off[0]), int(off[0])
+        if not np.array_equal(off, start + step * np.arange(n + 1, dtype=np.int32)):
+            return None
+        first = data[start : start + step].to_pybytes().decode()
+        if (value is not None and first != value) or not _periodic(data, start, n, step):
+            return None
+        value = first
+    return value
+
+
+def _periodic(data: pa.Buffer, start: int, n: int, step: int) -> bool:
+    """Bytes [start, start + n * step) of ``data`` are their first ``step`` bytes n times:
+    every byte equals the one ``step`` before it."""
+    total = (n - 1) * step
+    if step == 0 or total == 0:
+        return True
+    words, tail = divmod(total, 8)
+    later = np.frombuffer(data, np.uint64, words, start + step)
+    earlier = np.frombuffer(data, np.uint64, words, start)
+    end = start + 8 * words
+    return np.array_equal(later, earlier) and np.array_equal(
+        np.frombuffer(data, np.uint8, tail, end + step), np.frombuffer(data, np.uint8, tail, end)
+    )
+
+
+def _as_dictionary(col: pa.ChunkedArray) -> pa.DictionaryArray:
+    """A string column as one dictionary array (int32 indices): a constant column (the
+    provenance columns) without hashing, any other by ``dictionary_encode``. Parquet then
+    writes the dictionary and the indices as they are, and its statistics look at the
+    dictionary's values, not at every row's string."""
+    value = _constant_string(col)
+    if value is not None:
+        zeros = pa.array(np.zeros(len(col), np.int32))
+        return pa.DictionaryArray.from_arrays(zeros, pa.array([value], pa.string()))
+    return pc.dictionary_encode(col.combine_chunks())
 
 
 def _sorted_by_first(table: pa.Table, key: str) -> bool:
@@ -187,6 +240,7 @@ class _OpenFile:
     rows: int = 0
     stats: dict[str, _ColumnStats] = field(default_factory=dict)
     inflight: list[Future] = field(default_factory=list)
+    dictionary_columns: list[str] = field(default_factory=list)  # see _as_dictionary
 
     def busy(self) -> bool:
         return any(not fut.done() for fut in self.inflight)
@@ -258,24 +312,37 @@ class TableStager:
         if slot.pending_rows >= self.row_group_rows:
             self._flush(slot)
 
-    def _open(self, slot: _Slot, schema: pa.Schema) -> _OpenFile:
+    def _open(self, slot: _Slot, first: pa.Table) -> _OpenFile:
+        """A staged file for ``slot``; its first row group ``first`` decides which string
+        columns go to Parquet as Arrow dictionaries (those constant in it)."""
         sub = self.folder / slot.table / "/".join(f"{k}={v}" for k, v in slot.partition.items())
         sub.mkdir(parents=True, exist_ok=True)
         path = sub / f"part-{uuid.uuid4().hex}.parquet"
+        schema = first.schema
         strings = [f.name for f in schema if pa.types.is_string(f.type)]
-        floats = [f.name for f in schema if pa.types.is_floating(f.type)]
+        constant = [c for c in strings if _constant_string(first[c]) is not None]
+        for c in constant:
+            i = schema.get_field_index(c)
+            schema = schema.set(
+                i, schema.field(i).with_type(pa.dictionary(pa.int32(), pa.string()))
+            )
+        encoding = {f.name: "BYTE_STREAM_SPLIT" for f in schema if pa.types.is_floating(f.type)}
+        encoding |= {f.name: "DELTA_BINARY_PACKED" for f in schema if pa.types.is_integer(f.type)}
         with_stats = [f.name for f in schema if not pa.types.is_binary(f.type)]
         writer = pq.ParquetWriter(
             path,
             schema,
             compression="zstd",
             use_dictionary=strings,
-            use_byte_stream_split=floats or False,  # -6% size and CPU on sensor floats
+            column_encoding=encoding or None,
             write_statistics=with_stats,  # not of raw bytes (rejects.raw)
+            store_schema=False,  # readers see strings, not the dictionaries
         )
-        stats = {name: _ColumnStats() for name in floats}
+        stats = {f.name: _ColumnStats() for f in schema if pa.types.is_floating(f.type)}
         pool = ThreadPoolExecutor(1, thread_name_prefix="stage") if self.threaded else None
-        return _OpenFile(slot.table, slot.partition, path, writer, pool, stats=stats)
+        return _OpenFile(
+            slot.table, slot.partition, path, writer, pool, stats=stats, dictionary_columns=constant
+        )
 
     def _flush(self, slot: _Slot) -> None:
         if not slot.pending:
@@ -289,7 +356,7 @@ class TableStager:
         if idle:
             target = idle[0]
         elif not slot.files or (self.threaded and len(slot.files) < MAX_FILES_PER_SLOT):
-            target = self._open(slot, group.schema)
+            target = self._open(slot, group)
             slot.files.append(target)
         else:
             target = min(slot.files, key=lambda f: len(f.inflight))

@@ -158,3 +158,53 @@ def test_stats_of_every_column_match_the_written_rows(tmp_path):
     assert rstats["minValues"]["reason_code"] == "bad_checksum"
     assert rstats["maxValues"]["reason_code"] == "undecodable"
     assert not pq.read_metadata(r.path).row_group(0).column(6).is_stats_set
+
+
+def test_constant_string_read_off_the_buffers():
+    from pipeline.warehouse.staged import _constant_string
+
+    def col(*chunks):
+        return pa.chunked_array([pa.array(c, pa.string()) for c in chunks], pa.string())
+
+    path = "/archive/2026/01/radar_R1.mcap"
+    assert _constant_string(col([path] * 1000, [path] * 3)) == path
+    assert _constant_string(col([""] * 5)) == ""
+    assert _constant_string(col(["x"])) == "x"
+    assert _constant_string(col(["ab", "ab", "ba"])) is None  # same lengths, other bytes
+    assert _constant_string(col(["ab", "ab", "a", "bab"])) is None  # same bytes, other cuts
+    assert _constant_string(col(["abcdefghij"] * 9 + ["abcdefghiJ"])) is None  # last byte
+    assert _constant_string(col([path] * 4, [path + "x"] * 4)) is None  # chunk by chunk
+    assert _constant_string(col([path, None, path])) is None
+    sliced = pa.chunked_array([pa.array(["a", "bb", "bb", "bb", "c"]).slice(1, 3)])
+    assert _constant_string(sliced) == "bb"
+    assert _constant_string(pa.chunked_array([pa.array([1, 1])])) is None
+
+
+def test_dictionary_columns_written_as_strings(tmp_path):
+    """String columns constant in a file's first row group go to Parquet as dictionaries
+    (no hashing per row); later groups where they vary are still right, readers see
+    plain strings, and the statistics hold."""
+    t = T0_NS + np.arange(900, dtype=np.int64) * 10**9
+    rows = truth_rows(t, source="/a.mcap")
+    topics = ["/truth/vessels"] * 300 + [f"/truth/{i % 7}" for i in range(600)]
+    rows = rows.set_column(rows.schema.get_field_index("topic"), "topic", pa.array(topics))
+    st = TableStager(tmp_path / "s", row_group_rows=300, threaded=False)
+    for a in range(0, 900, 300):
+        st.add("truth", rows.slice(a, 300))
+    (f,) = st.close()
+    pf = pq.ParquetFile(f.path)
+    assert pf.metadata.num_row_groups == 3
+    back = pf.read()
+    assert back.schema.field("topic").type == pa.string()
+    assert (
+        back["topic"].to_pylist() == topics and back["source_file"].to_pylist() == ["/a.mcap"] * 900
+    )
+    for g in range(3):
+        enc = pf.metadata.row_group(g).column(back.schema.get_field_index("source_file")).encodings
+        assert "RLE_DICTIONARY" in enc or "PLAIN_DICTIONARY" in enc, enc
+    stats = json.loads(f.stats_json)
+    assert (
+        stats["minValues"]["topic"] == "/truth/0"
+        and stats["maxValues"]["topic"] == "/truth/vessels"
+    )
+    assert stats["minValues"]["source_file"] == stats["maxValues"]["source_file"] == "/a.mcap"
