@@ -44,28 +44,31 @@ static PyObject *walk_chunk(PyObject *self, PyObject *arg)
     if (PyObject_GetBuffer(arg, &v, PyBUF_SIMPLE) < 0) return NULL;
     buf = v.buf;
     n = v.len;
-    /* pass 1: check the structure, count the messages */
-    for (pos = 0; pos < n;) {
-        uint64_t length;
-        if (n - pos < 9) {
-            PyErr_Format(PyExc_ValueError, "record header cut at chunk byte %zd", pos);
-            goto fail;
+    /* pass 1: check the structure, count the messages (without the GIL: it is called in
+     * the fetch thread right after decompression, while the chunk is in cache) */
+    {
+        int bad = 0;
+        Py_BEGIN_ALLOW_THREADS
+        for (pos = 0; pos < n;) {
+            uint64_t length;
+            if (n - pos < 9) { bad = 1; break; }
+            length = le64(buf + pos + 1);
+            if (length > (uint64_t)(n - pos - 9)) { bad = 2; break; }
+            if (buf[pos] == OP_MESSAGE) {
+                if (length < MSG_HEAD) { bad = 3; break; }
+                count++;
+            }
+            pos += 9 + (Py_ssize_t)length;
         }
-        length = le64(buf + pos + 1);
-        if (length > (uint64_t)(n - pos - 9)) {
-            PyErr_Format(PyExc_ValueError, "record at chunk byte %zd runs past the chunk end",
+        Py_END_ALLOW_THREADS
+        if (bad) {
+            PyErr_Format(PyExc_ValueError,
+                         bad == 1 ? "record header cut at chunk byte %zd"
+                         : bad == 2 ? "record at chunk byte %zd runs past the chunk end"
+                                    : "message record too short at chunk byte %zd",
                          pos);
             goto fail;
         }
-        if (buf[pos] == OP_MESSAGE) {
-            if (length < MSG_HEAD) {
-                PyErr_Format(PyExc_ValueError, "message record too short at chunk byte %zd",
-                             pos);
-                goto fail;
-            }
-            count++;
-        }
-        pos += 9 + (Py_ssize_t)length;
     }
     ch = PyBytes_FromStringAndSize(NULL, 8 * count);
     lt = PyBytes_FromStringAndSize(NULL, 8 * count);

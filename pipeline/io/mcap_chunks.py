@@ -265,15 +265,29 @@ def _as_positions(lists: dict[int, tuple[list[int], list[int], list[int]]]) -> P
     }
 
 
-def native_positions(chunk: ChunkData, lo: int, hi: int, on_record: OnRecord) -> Positions | None:
-    """Message positions by the compiled record walker (``_mcap_records.c``): every
-    record of the chunk, no index needed; ``None`` when the extension is not built."""
+def walk_chunk(data: bytes) -> tuple | ValueError | None:
+    """The compiled record walker's result for decompressed chunk ``data`` (the
+    ``ValueError`` it raised, for a damaged chunk); ``None`` when it is not built."""
     if _mcap_records is None:
         return None
     try:
-        ch, lt, st, en, others = _mcap_records.walk_chunk(chunk.raw)
-    except ValueError:  # damaged: the Python walk reports the records before the damage
-        return walked_positions(chunk, lo, hi, on_record)  # to on_record, then raises
+        return _mcap_records.walk_chunk(data)
+    except ValueError as exc:
+        return exc
+
+
+def native_positions(
+    chunk: ChunkData, lo: int, hi: int, on_record: OnRecord, walked: object = None
+) -> Positions | None:
+    """Message positions by the compiled record walker (``_mcap_records.c``): every
+    record of the chunk, no index needed; ``None`` when the extension is not built.
+    ``walked``: :func:`walk_chunk` of the chunk when the fetch thread ran it already."""
+    walked = walked if walked is not None else walk_chunk(chunk.raw)
+    if walked is None:
+        return None
+    if isinstance(walked, ValueError):  # damaged: the Python walk reports the records
+        return walked_positions(chunk, lo, hi, on_record)  # before the damage, then raises
+    ch, lt, st, en, others = walked
     for op, a, b in others:  # a few per chunk: Schema/Channel records
         if op in (OP_SCHEMA, OP_CHANNEL):
             on_record(op, memoryview(chunk.raw)[a:b])
@@ -400,6 +414,7 @@ class FetchedChunk:
     data: bytes | None
     error: Exception | None
     message_index: bytes
+    walked: object = None  # walk_chunk(data), run in the fetch thread while data is in cache
 
 
 class ChunkFetcher:
@@ -460,7 +475,7 @@ class ChunkFetcher:
             data = decompress(parse_chunk(view[9 : 9 + length]), self._decompressor())
             with self._lock:
                 self.decompressed += 1
-            return FetchedChunk(ci, data, None, bytes(mi))
+            return FetchedChunk(ci, data, None, bytes(mi), walk_chunk(data))
         except Exception as exc:  # corrupt chunk: reported, the walk goes on
             return FetchedChunk(ci, None, exc, bytes(mi))
 

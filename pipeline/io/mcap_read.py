@@ -479,14 +479,16 @@ class McapBatches(Iterator[ChannelBatch]):
             return
         chunk = ChunkData(got.data)
         try:
-            positions = self._chunk_positions(chunk, ci, got.message_index)
+            positions = self._chunk_positions(chunk, ci, got.message_index, got.walked)
         except Exception as exc:  # skip this chunk only; see module docstring
             self._skip_chunk(ci, exc, got.message_index)
             return
         self.status.chunks_read += 1
         yield from self._emit(chunk, positions)
 
-    def _chunk_positions(self, chunk: ChunkData, ci: ChunkIndex, mi: bytes) -> Positions:
+    def _chunk_positions(
+        self, chunk: ChunkData, ci: ChunkIndex, mi: bytes, walked: object = None
+    ) -> Positions:
         lo, hi = (
             (_T_MIN, _T_MAX)
             if self._inside(ci.message_start_time, ci.message_end_time)
@@ -495,7 +497,7 @@ class McapBatches(Iterator[ChannelBatch]):
                 self._hi,
             )
         )
-        positions = native_positions(chunk, lo, hi, self._on_record)
+        positions = native_positions(chunk, lo, hi, self._on_record, walked)
         if positions is None and mi:
             try:
                 entries = message_index_entries(mi)

@@ -199,3 +199,37 @@ def test_window_on_damaged_file_counts_lost_in_window(healthy):
 def test_bad_window_rejected(healthy):
     with pytest.raises(ValueError):
         read_mcap_batches(healthy, start_ns=10, end_ns=10)
+
+
+def test_chunk_with_good_crc_but_broken_records_skips_only_that_chunk(tmp_path):
+    """The record walk runs in the fetch thread: a chunk whose bytes pass the CRC but whose
+    records do not tile it (a message length cut by one) is skipped with the walker's
+    reason, and every other chunk is read."""
+    import struct
+    import zlib
+
+    p = write_mcap(tmp_path / "plain.mcap", radar_messages(300), compression=CompressionType.NONE)
+    layout = chunk_layout(p)
+    start, _, lost = layout[2]
+    data = bytearray(p.read_bytes())
+    body = start + 9  # chunk record: opcode, length, then the body
+    records_at = body + 8 + 8 + 8 + 4 + 4 + 8  # times, size, crc, "" compression, length
+    assert data[records_at] in (0x01, 0x03, 0x05)  # a schema, channel or message record
+    first = records_at
+    while data[first] != 0x05:  # the chunk's first message record
+        first += 9 + struct.unpack_from("<Q", data, first + 1)[0]
+    (length,) = struct.unpack_from("<Q", data, first + 1)
+    struct.pack_into("<Q", data, first + 1, length + 1)  # the records no longer tile the chunk
+    (records_len,) = struct.unpack_from("<Q", data, records_at - 8)
+    records = bytes(data[records_at : records_at + records_len])
+    struct.pack_into("<I", data, body + 24, zlib.crc32(records))  # a CRC that passes
+    bad = tmp_path / "broken_records.mcap"
+    bad.write_bytes(bytes(data))
+    got, status = read_all(bad)
+    expected = [m for i, (_, _, msgs) in enumerate(layout) if i != 2 for m in msgs]
+    assert by_topic(got) == by_topic(expected)
+    assert status.status == "partial" and status.chunks_skipped == 1
+    (problem,) = status.problems
+    assert problem.reason_code == "corrupt_chunk" and problem.offset == start
+    assert problem.messages_lost == len(lost)
+    assert "runs past the chunk end" in problem.detail, problem.detail

@@ -26,6 +26,7 @@ from pipeline.io.mcap_chunks import (
     ChunkData,
     CorruptChunkError,
     native_positions,
+    walk_chunk,
     walked_positions,
 )
 
@@ -280,6 +281,8 @@ def test_damaged_bytes_raise_like_the_walk(raw, what):
         native_positions(chunk, *OPEN, lambda *a: None)
     assert what in str(walked.value)
     assert str(native.value) == str(walked.value)
+    err = walk_chunk(raw)  # as the fetch thread runs it: the error is returned, not raised
+    assert isinstance(err, ValueError) and what in str(err)
 
 
 def test_zero_length_non_message_record_is_fine():
