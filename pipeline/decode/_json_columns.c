@@ -427,10 +427,24 @@ static inline int find_key(const Spec *s, const uint8_t *k, Py_ssize_t len)
  * the blank skipping, the quote, key, colon and comma checks and the key lookup. A row
  * that does not match (another shape, a bad value, any error) is parsed again from its
  * start by parse_object, which gives its status and records its shape for the next rows.
+ *
+ * Each value slot also remembers the last value it read, as bytes (up to MEMO_BYTES) and
+ * as the result: a sensor's reports repeat many values (a site's sigmas, scan period,
+ * status), and the same bytes give the same result. Where a longer value starts with the
+ * remembered bytes (a number with more digits), the next literal cannot match: it starts
+ * with the byte that ended the value in the recorded row (a comma, brace or blank).
  */
 
 #define MAX_SLOTS 96  /* values per shape (wanted fields and skipped ones) */
 #define MAX_LITERAL 64
+#define MEMO_BYTES 24
+
+typedef struct {
+    uint8_t token[MEMO_BYTES];
+    int len;     /* 0: nothing remembered */
+    int null;    /* a null in a wanted field: nothing to store */
+    uint64_t value; /* the wanted field's 8 (float/int) or 1 (bool) bytes */
+} Memo;
 
 typedef struct {
     int ok;                                    /* a shape was recorded */
@@ -438,12 +452,14 @@ typedef struct {
     signed char field[MAX_SLOTS];              /* wanted field of value k, -1: skipped */
     Py_ssize_t literal_len[MAX_SLOTS + 1];
     uint8_t literal[MAX_SLOTS + 1][MAX_LITERAL];
+    Memo memo[MAX_SLOTS];
 } Shape;
 
 /* Record literal[k] = [from, to) of the shape being recorded; too long: no shape. */
 static inline void record_literal(Shape *sh, int k, const uint8_t *from, const uint8_t *to)
 {
     if (k > MAX_SLOTS || to - from > MAX_LITERAL) { sh->ok = 0; return; }
+    if (k < MAX_SLOTS) sh->memo[k].len = 0;
     sh->literal_len[k] = to - from;
     memcpy(sh->literal[k], from, (size_t)(to - from));
 }
@@ -507,19 +523,49 @@ end:
     return ST_OK;
 }
 
+/* The value [v, q) of slot k just read (field f of row r, -1: skipped), remembered when
+ * short enough and not a wanted string (its output is a span of this row). */
+static inline void remember(const Spec *s, Memo *m, int f, Py_ssize_t r, const uint8_t *v,
+                            const uint8_t *q)
+{
+    char kind = f >= 0 ? s->kind[f] : 0;
+    m->len = 0;
+    if (q - v > MEMO_BYTES || kind == 's') return;
+    m->null = f >= 0 && *v == 'n';
+    if (f >= 0 && !m->null) {
+        if (kind == 'b') m->value = ((uint8_t *)s->out[f])[r];
+        else memcpy(&m->value, s->out[f] + 8 * r, 8);
+    }
+    memcpy(m->token, v, (size_t)(q - v));
+    m->len = (int)(q - v);
+}
+
 /* Row r read along shape sh; ST_OK, or -1 when it does not match (or any error). */
-static inline int parse_shaped(const Spec *s, const Shape *sh, Py_ssize_t r,
-                               const uint8_t *base, const uint8_t *p, const uint8_t *e)
+static inline int parse_shaped(const Spec *s, Shape *sh, Py_ssize_t r, const uint8_t *base,
+                               const uint8_t *p, const uint8_t *e)
 {
     int k, st = ST_OK;
     Py_ssize_t len;
     for (k = 0; k < sh->nslots; k++) {
         int f = sh->field[k];
+        Memo *m = &sh->memo[k];
+        const uint8_t *v;
         len = sh->literal_len[k];
         if (e - p < len || !same_bytes(p, (const char *)sh->literal[k], len)) return -1;
         p += len;
+        if (m->len && e - p >= m->len && same_bytes(p, (const char *)m->token, m->len)) {
+            if (f >= 0 && !m->null) {
+                if (s->kind[f] == 'b') ((uint8_t *)s->out[f])[r] = (uint8_t)m->value;
+                else memcpy(s->out[f] + 8 * r, &m->value, 8);
+                s->valid[(Py_ssize_t)f * s->n + r] = 1;
+            }
+            p += m->len;
+            continue;
+        }
+        v = p;
         p = f >= 0 ? read_field(s, f, r, base, p, e, &st) : skip_value(p, e, 1, &st);
         if (!p) return -1;
+        remember(s, m, f, r, v, p);
     }
     len = sh->literal_len[sh->nslots];
     return e - p == len && same_bytes(p, (const char *)sh->literal[sh->nslots], len) ? ST_OK : -1;
