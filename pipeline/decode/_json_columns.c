@@ -432,16 +432,20 @@ static inline int find_key(const Spec *s, const uint8_t *k, Py_ssize_t len)
  * as the result: a sensor's reports repeat many values (a site's sigmas, scan period,
  * status), and the same bytes give the same result. Where a longer value starts with the
  * remembered bytes (a number with more digits), the next literal cannot match: it starts
- * with the byte that ended the value in the recorded row (a comma, brace or blank).
+ * with the byte that ended the value in the recorded row (a comma, brace or blank). A slot
+ * that misses MEMO_TRIES times in a row (a position, a time) stops remembering until the
+ * shape is recorded again.
  */
 
 #define MAX_SLOTS 96  /* values per shape (wanted fields and skipped ones) */
 #define MAX_LITERAL 64
 #define MEMO_BYTES 24
+#define MEMO_TRIES 8
 
 typedef struct {
     uint8_t token[MEMO_BYTES];
     int len;     /* 0: nothing remembered */
+    int misses;  /* values read since the last match */
     int null;    /* a null in a wanted field: nothing to store */
     uint64_t value; /* the wanted field's 8 (float/int) or 1 (bool) bytes */
 } Memo;
@@ -459,7 +463,7 @@ typedef struct {
 static inline void record_literal(Shape *sh, int k, const uint8_t *from, const uint8_t *to)
 {
     if (k > MAX_SLOTS || to - from > MAX_LITERAL) { sh->ok = 0; return; }
-    if (k < MAX_SLOTS) sh->memo[k].len = 0;
+    if (k < MAX_SLOTS) sh->memo[k].len = sh->memo[k].misses = 0;
     sh->literal_len[k] = to - from;
     memcpy(sh->literal[k], from, (size_t)(to - from));
 }
@@ -523,10 +527,11 @@ end:
     return ST_OK;
 }
 
-/* The value [v, q) of slot k just read (field f of row r, -1: skipped), remembered when
- * short enough and not a wanted string (its output is a span of this row). */
+/* The value [v, q) of slot k just read (field f of row r, -1: skipped; the payload ends
+ * at e), remembered when short enough and not a wanted string (its output is a span of
+ * this row). */
 static inline void remember(const Spec *s, Memo *m, int f, Py_ssize_t r, const uint8_t *v,
-                            const uint8_t *q)
+                            const uint8_t *q, const uint8_t *e)
 {
     char kind = f >= 0 ? s->kind[f] : 0;
     m->len = 0;
@@ -536,7 +541,10 @@ static inline void remember(const Spec *s, Memo *m, int f, Py_ssize_t r, const u
         if (kind == 'b') m->value = ((uint8_t *)s->out[f])[r];
         else memcpy(&m->value, s->out[f] + 8 * r, 8);
     }
-    memcpy(m->token, v, (size_t)(q - v));
+    if (e - v >= MEMO_BYTES) /* a fixed-size copy (the bytes after the value: not compared) */
+        memcpy(m->token, v, MEMO_BYTES);
+    else
+        memcpy(m->token, v, (size_t)(q - v));
     m->len = (int)(q - v);
 }
 
@@ -560,12 +568,18 @@ static inline int parse_shaped(const Spec *s, Shape *sh, Py_ssize_t r, const uin
                 s->valid[(Py_ssize_t)f * s->n + r] = 1;
             }
             p += m->len;
+            m->misses = 0;
             continue;
         }
         v = p;
         p = f >= 0 ? read_field(s, f, r, base, p, e, &st) : skip_value(p, e, 1, &st);
         if (!p) return -1;
-        remember(s, m, f, r, v, p);
+        if (m->misses < MEMO_TRIES) {
+            m->misses++;
+            remember(s, m, f, r, v, p, e);
+        } else {
+            m->len = 0;
+        }
     }
     len = sh->literal_len[sh->nslots];
     return e - p == len && same_bytes(p, (const char *)sh->literal[sh->nslots], len) ? ST_OK : -1;

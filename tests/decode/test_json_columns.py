@@ -1058,3 +1058,20 @@ def test_rows_that_differ_from_the_previous_shape_by_one_byte():
         rows += [m, base]
     got = assert_native_matches_reference(rows, chunks=3, channels=1)
     assert 0 < len(got.bad_idx) < len(mutants)  # some mutants are valid JSON, most are not
+
+
+@needs_ext
+def test_remembered_values_follow_the_rows():
+    """Each slot of a shape remembers its last value; a slot that keeps missing stops
+    trying until the shape is recorded again. Values that vary, then repeat, then vary
+    again, longer and shorter ones sharing a prefix with the remembered bytes, nulls and
+    booleans: every row decodes as the reference decodes it."""
+    xs = [*(1.5 + i for i in range(20)), *([2.25] * 30), 2.255, 2.25, 22.5, 2.2, *range(9)]
+    rows = []
+    for i, x in enumerate(xs):
+        obj = {"x": x, "y": None if i % 7 == 0 else -0.5, "n": 7 if i < 40 else i}
+        obj |= {"name": "t1", "ok": i % 3 == 0, "u": "same" if i % 11 else "other"}
+        rows.append(dumps(obj, separators=(",", ":")))
+    rows.insert(35, dumps({"x": 1.0, "n": 1}))  # another shape in the middle
+    got = assert_native_matches_reference(rows, chunks=2, channels=1)
+    assert got.bad_idx == []
