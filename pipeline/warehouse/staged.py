@@ -155,9 +155,10 @@ def _constant_string(col: pa.ChunkedArray) -> str | None:
         if n == 0:
             continue
         _, offsets_buf, data = chunk.buffers()
+        data = data if data is not None else pa.py_buffer(b"")
         off = np.frombuffer(offsets_buf, np.int32, n + 1, 4 * chunk.offset)
         step, start = int(off[1] - off[0]), int(off[0])
-        if not np.array_equal(off, start + step * np.arange(n + 1, dtype=np.int32)):
+        if not np.array_equal(off, start + step * np.arange(n + 1, dtype=np.int64)):
             return None
         first = data[start : start + step].to_pybytes().decode()
         if (value is not None and first != value) or not _periodic(data, start, n, step):
