@@ -463,7 +463,6 @@ typedef struct {
 static inline void record_literal(Shape *sh, int k, const uint8_t *from, const uint8_t *to)
 {
     if (k > MAX_SLOTS || to - from > MAX_LITERAL) { sh->ok = 0; return; }
-    if (k < MAX_SLOTS) sh->memo[k].len = sh->memo[k].misses = 0;
     sh->literal_len[k] = to - from;
     memcpy(sh->literal[k], from, (size_t)(to - from));
 }
@@ -502,7 +501,10 @@ static int parse_object(const Spec *s, Py_ssize_t r, const uint8_t *base, const 
         p = skip_ws(p + 1, e);
         if (f == -2) return ST_STRING; /* an escaped key might spell a wanted one */
         record_literal(rec, k, lit, p);
-        if (k < MAX_SLOTS) rec->field[k] = (signed char)(f < 0 ? -1 : f);
+        if (k < MAX_SLOTS) { /* slot k: its field, nothing remembered yet */
+            rec->field[k] = (signed char)(f < 0 ? -1 : f);
+            rec->memo[k].len = rec->memo[k].misses = 0;
+        }
         k++;
         if (f < 0) {
             p = skip_value(p, e, 1, &st);

@@ -91,15 +91,15 @@ class _ColumnStats:
                 self._update_chunk(chunk)
 
     def _update_chunk(self, chunk: pa.Array) -> None:
-        numeric = pa.types.is_integer(chunk.type) or pa.types.is_floating(chunk.type)
-        if numeric and chunk.null_count == 0:  # numpy, zero-copy: one pass each, NaN propagates
+        """One chunk of a float column (the only columns tracked here)."""
+        if chunk.null_count == 0:  # numpy, zero-copy: one pass each, NaN propagates
             v = chunk.to_numpy(zero_copy_only=False)
             lo, hi = v.min().item(), v.max().item()
             if lo != lo or hi != hi:
                 self.usable = False  # NaN has no place in min/max statistics
                 return
         else:
-            if pa.types.is_floating(chunk.type) and pc.any(pc.is_nan(chunk)).as_py():
+            if pc.any(pc.is_nan(chunk)).as_py():
                 self.usable = False
                 return
             mm = pc.min_max(chunk).as_py()
