@@ -45,7 +45,7 @@ from pipeline.metrics.siap import siap_by_sector, siap_config
 from pipeline.score import score_tracks
 from pipeline.sync import epoch_grid, synchronise
 from pipeline.warehouse.delta import read_table, replace_rows, replace_window
-from pipeline.warehouse.views import rebuild_views_file
+from pipeline.warehouse.views import rebuild_views_file, warm_up
 
 log = logging.getLogger(__name__)
 
@@ -289,6 +289,7 @@ def run_batch(
     """Run the batch for [start_ns, end_ns) and commit it atomically per table."""
     if end_ns <= start_ns:
         raise ValueError("--to must be after --from")
+    warm_up()  # the views file's DuckDB instance, built while the batch runs
     staging = warehouse / "_staging" / f"batch-{start_ns}-{end_ns}"
     shutil.rmtree(staging, ignore_errors=True)
     units = plan_units(warehouse, cfg, start_ns, end_ns, staging)
