@@ -60,7 +60,7 @@ from pipeline.tables import conform, empty, spec
 from pipeline.warehouse.delta import replace_source_file
 from pipeline.warehouse.ledger import file_fingerprint, ledger_entry, lookup, write_entry
 from pipeline.warehouse.staged import StagedFile, TableStager, commit_staged, read_staged
-from pipeline.warehouse.views import rebuild_views_file
+from pipeline.warehouse.views import rebuild_views_file, warm_up
 
 WINDOW_READ_MARGIN_NS = 60 * 10**9
 FILE_LEVEL_CODES = frozenset({"not_mcap", "corrupt_chunk", "truncated", "unknown_schema"})
@@ -248,7 +248,7 @@ def _decode_and_stage(
 
     try:
         for batch in scan:
-            decoder.feed(batch)
+            decoder.feed(batch, scan.chunks_left)
             for name, parts in decoder.drain().items():
                 for part in parts:
                     stage(name, part)

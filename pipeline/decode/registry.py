@@ -104,6 +104,7 @@ _KINDS[("json", "jsonschema", "surveil.OwnshipTruth")] = "ownship_truth"
 JSON_BATCH = 100_000  # JSON messages per bulk parse (~44 MB of radar payload)
 JSON_MAX_CHUNKS = 64  # chunks a pending JSON parse may hold (bounds memory: ~64 MiB)
 JSON_RAMP_STEPS = 3  # the first parses take 1/8, 1/4, 1/2 of these limits
+JSON_RAMP_DOWN_STEPS = 4  # the last parses shrink down to 1/16 of JSON_BATCH
 
 
 def decoder_kind(message_encoding: str, schema_encoding: str, schema_name: str) -> str | None:
@@ -191,9 +192,12 @@ class FileDecoder:
         if table.num_rows:
             self.parts.setdefault(name, []).append(table)
 
-    def feed(self, batch: ChannelBatch) -> None:
+    def feed(self, batch: ChannelBatch, chunks_left: int | None = None) -> None:
         """Take one batch. JSON channels are buffered per channel up to ``JSON_BATCH``
-        messages so that each bulk parse is large (a chunk holds only ~4k messages)."""
+        messages so that each bulk parse is large (a chunk holds only ~4k messages).
+
+        ``chunks_left``: chunks of the file still to come after this batch's, if known;
+        the last parses then shrink (see below)."""
         kind = decoder_kind(batch.message_encoding, batch.schema_encoding, batch.schema_name)
         if kind in ("radar", "truth"):
             self._json.append(batch)
@@ -202,7 +206,15 @@ class FileDecoder:
             # while the reader still fetches, instead of after a whole batch of chunks
             ramp = max(0, JSON_RAMP_STEPS - self._json_flushes)
             chunks = len({id(b.chunk) for b in self._json})
-            if self._json_count >= JSON_BATCH >> ramp or chunks > JSON_MAX_CHUNKS >> ramp:
+            # ... and the last ones too: once more chunks are pending than are still to
+            # come, parse them now, so that what is left to parse after the file's last
+            # chunk halves on the way to the end instead of being up to a whole batch
+            ending = chunks_left is not None and chunks > chunks_left
+            if (
+                self._json_count >= JSON_BATCH >> ramp
+                or chunks > JSON_MAX_CHUNKS >> ramp
+                or (ending and self._json_count >= JSON_BATCH >> JSON_RAMP_DOWN_STEPS)
+            ):
                 self._flush_json()
         elif kind in CHANNEL_DECODERS:
             dec = self._channels.get(batch.channel_id)

@@ -336,6 +336,7 @@ class McapBatches(Iterator[ChannelBatch]):
         self._schemas: dict[int, Schema] = {}
         self._lo = _T_MIN if start_ns is None else start_ns
         self._hi = _T_MAX if end_ns is None else end_ns
+        self._chunks_left: int | None = None
         self._gen = self._run()
 
     def __iter__(self) -> McapBatches:
@@ -343,6 +344,12 @@ class McapBatches(Iterator[ChannelBatch]):
 
     def __next__(self) -> ChannelBatch:
         return next(self._gen)
+
+    @property
+    def chunks_left(self) -> int | None:
+        """Chunks still to be read after the one the last batch came from (``None`` when
+        unknown: linear scan without a summary)."""
+        return self._chunks_left
 
     @property
     def channels(self) -> dict[int, ChannelInfo]:
@@ -466,8 +473,10 @@ class McapBatches(Iterator[ChannelBatch]):
             ci for ci in indexes if self._overlaps(ci.message_start_time, ci.message_end_time)
         ]
         fetcher = ChunkFetcher(f, size, wanted, threaded=self.prefetch and len(wanted) > 1)
+        self._chunks_left = len(wanted)
         try:
             for got in fetcher:
+                self._chunks_left -= 1
                 yield from self._indexed_chunk(got)
         finally:
             self.status.chunks_decompressed += fetcher.decompressed

@@ -129,6 +129,36 @@ def test_json_buffering_holds_a_bounded_number_of_chunks(tmp_path, monkeypatch):
     assert max(held) <= 6 and rows == 3000
 
 
+def test_json_parses_shrink_towards_the_end_of_the_file(tmp_path, monkeypatch):
+    # with chunks_left the pending JSON is parsed once it outnumbers the chunks still to
+    # come: what is left for after the last chunk is small, and the rows are the same
+    p = write_mcap(tmp_path / "r.mcap", radar_messages(3000), chunk_size=4096)
+    monkeypatch.setattr(registry, "JSON_BATCH", 800)  # 50 per parse at the end
+    monkeypatch.setattr(registry, "JSON_MAX_CHUNKS", 10_000)
+
+    def parse_sizes(hint: bool) -> tuple[list[int], list[tuple]]:
+        dec = FileDecoder(source_file=str(p), validation=ValidationConfig())
+        sizes, parts = [], []
+        scan = read_mcap_batches(p)
+        for b in scan:
+            dec.feed(b, scan.chunks_left if hint else None)
+            got = dec.drain().get("radar_tracks", [])
+            sizes += [t.num_rows for t in got]
+            parts += got
+        assert scan.chunks_left == 0
+        last = dec.finish()["radar_tracks"]
+        sizes.append(last.num_rows)
+        rows = [r for t in [*parts, last] for r in zip(*t.to_pydict().values(), strict=True)]
+        return sizes, rows
+
+    plain, plain_rows = parse_sizes(hint=False)
+    shrunk, shrunk_rows = parse_sizes(hint=True)
+    assert sum(plain) == sum(shrunk) == 3000 and plain_rows == shrunk_rows
+    assert plain[-1] >= 600  # without the hint the file ends on a large parse
+    assert shrunk[-1] <= 2 * 800 >> registry.JSON_RAMP_DOWN_STEPS
+    assert shrunk[-3] > shrunk[-2] > shrunk[-1]  # halving on the way
+
+
 def test_staged_files_hold_one_source_and_sorted_row_groups(tmp_path, cfg):
     a = write_mcap(tmp_path / "a.mcap", radar_messages(500))
     b = write_mcap(tmp_path / "b.mcap", radar_messages(300, site="R2", t0_ns=T0_NS + 7))
