@@ -401,6 +401,7 @@ def run_ingest(
     if start_ns is not None and end_ns <= start_ns:  # type: ignore[operator]
         raise IngestUsageError(f"empty window [{start_ns}, {end_ns})")
     files = expand_paths(paths)
+    warm_up()  # the views file's DuckDB instance, built while the files are decoded
     warehouse = Path(warehouse).resolve()
     staging = warehouse / "_staging" / f"ingest-{os.getpid()}-{time.time_ns()}"
     ex = _executor(executor, cfg, len(files))
