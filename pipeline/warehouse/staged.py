@@ -47,7 +47,10 @@ from deltalake.transaction import AddAction, RemoveAction, create_table_with_add
 from pipeline.tables import conform, spec
 from pipeline.warehouse.delta import replace_source_file, table_exists, table_path
 
-ROW_GROUP_ROWS = 128 * 1024
+# 64 Ki rows: a file's last row group is encoded after its last chunk is decoded (~50 ms
+# here, against ~100 ms for 128 Ki); same instructions and file size (47.95 MB per 1 M
+# radar rows either way)
+ROW_GROUP_ROWS = 64 * 1024
 MAX_FILES_PER_SLOT = 2  # staged files (and writer threads) per (table, date) of a source
 PARTITION = "date"
 
