@@ -280,7 +280,7 @@ class MessageOrder:
         out = []
         for r in np.asarray(rows, dtype=np.int64).tolist():
             raw = self.chunks[int(self.chunk[r])].raw
-            out.append(raw[int(self.start[r]) : int(self.end[r])])
+            out.append(bytes(raw[int(self.start[r]) : int(self.end[r])]))  # raw may be a view
         return out
 
 

@@ -695,7 +695,7 @@ def _rejects(
     from pipeline.decode.registry import make_rejects
 
     chunk, start, end = batch.spans()
-    raw = [chunk.raw[int(start[i]) : int(end[i])] for i in np.asarray(idx).tolist()]
+    raw = [bytes(chunk.raw[int(start[i]) : int(end[i])]) for i in np.asarray(idx).tolist()]
     return make_rejects(
         batch.log_time_ns[idx],
         source_file=source_file,

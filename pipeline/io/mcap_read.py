@@ -170,7 +170,8 @@ class ChannelBatch:
         if self._payloads is None:
             raw = self.chunk.raw  # type: ignore[union-attr]
             self._payloads = [
-                raw[a:b] for a, b in zip(self.start.tolist(), self.end.tolist(), strict=True)
+                bytes(raw[a:b])  # raw may be a view of a pooled buffer
+                for a, b in zip(self.start.tolist(), self.end.tolist(), strict=True)
             ]
         return self._payloads
 

@@ -12,6 +12,7 @@ from mcap.writer import CompressionType, IndexType, Writer
 from mcap_fixtures import T0_NS, mixed_file, radar_messages, write_mcap
 
 from pipeline.io.mcap_chunks import (
+    ChunkBuffers,
     ChunkData,
     indexed_positions,
     message_index_entries,
@@ -201,3 +202,42 @@ def test_other_compressions_keep_spans(tmp_path, compression):
     p = write_mcap(tmp_path / "c.mcap", radar_messages(300), compression=compression)
     got, _ = _all(p)
     assert sorted(got) == _reference(p)
+
+
+def test_chunk_buffers_are_reused_only_when_nothing_holds_them():
+    pool = ChunkBuffers(limit=2)
+    first = id(pool.take(100))
+    assert id(pool.take(100)) == first  # idle again as soon as the caller dropped it
+    view = memoryview(pool.take(100))
+    assert id(view.obj) == first and id(pool.take(100)) != first  # the view holds it
+    del view
+    chunk = ChunkData(memoryview(pool.take(100))[:60].toreadonly())
+    assert id(pool.take(100)) != first
+    rows = chunk.arr[10:20]  # an array that outlives its chunk
+    del chunk
+    assert id(pool.take(100)) != first
+    del rows
+    assert id(pool.take(100)) == first
+    held = [pool.take(100), pool.take(100)]  # both pooled buffers in use: a fresh one
+    extra = pool.take(100)
+    assert all(extra is not h for h in held) and len(pool._buffers) == 2
+    del held, extra
+    assert len(pool.take(5000)) >= 5000  # an idle buffer too small is replaced
+
+
+@pytest.mark.parametrize("claimed", [-1, 0, 1])
+def test_pooled_zstd_chunk_is_size_checked(claimed):
+    import zstandard
+
+    from pipeline.io.mcap_chunks import ChunkHeader, CorruptChunkError, decompress
+
+    records = bytes(range(256)) * 40
+    packed = zstandard.ZstdCompressor().compress(records)
+    head = ChunkHeader(0, 0, len(records) + claimed, 0, "zstd", packed)
+    pool = ChunkBuffers(limit=4)
+    if claimed:
+        with pytest.raises(CorruptChunkError, match="chunk header says"):
+            decompress(head, buffers=pool)
+    else:
+        data = decompress(head, buffers=pool)
+        assert isinstance(data, memoryview) and data.readonly and data == records
