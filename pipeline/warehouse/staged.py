@@ -337,6 +337,9 @@ class TableStager:
             path,
             schema,
             compression="zstd",
+            # zstd's first fast (negative) level: -14% of the encoder's instructions per row group
+            # against level 1, files +1.3% (1 M radar rows: 47.95 -> 48.59 MB)
+            compression_level=-1,
             use_dictionary=strings,
             column_encoding=encoding or None,
             write_statistics=with_stats,  # not of raw bytes (rejects.raw)
