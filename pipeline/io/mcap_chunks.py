@@ -176,8 +176,7 @@ class ChunkBuffers:
         """An idle buffer of at least ``size`` bytes (a new one if none is idle)."""
         with self._lock:
             for i in range(len(self._buffers)):
-                # references: the list, and getrefcount's argument (as below, tested)
-                if sys.getrefcount(self._buffers[i]) == 2:
+                if _references(self._buffers, i) == _IDLE_REFERENCES:
                     if len(self._buffers[i]) < size:
                         self._buffers[i] = bytearray(size)
                     return self._buffers[i]
@@ -185,6 +184,15 @@ class ChunkBuffers:
             if len(self._buffers) < self._limit:
                 self._buffers.append(buf)
             return buf
+
+
+def _references(buffers: list[bytearray], i: int) -> int:
+    return sys.getrefcount(buffers[i])
+
+
+# what _references counts for a buffer held by its list alone (the interpreter's own
+# count of the call's argument differs between CPython versions, so it is measured)
+_IDLE_REFERENCES = _references([bytearray(1)], 0)
 
 
 def decompress(
@@ -227,7 +235,8 @@ def _zstd_into(dz: object, head: ChunkHeader, buffers: ChunkBuffers) -> memoryvi
     cap = head.uncompressed_size + 1
     out = memoryview(buffers.take(cap))
     got = 0
-    with dz.stream_reader(head.records, read_size=max(len(head.records), 1)) as reader:
+    size = max(len(head.records), 1)
+    with dz.stream_reader(head.records, read_size=size, read_across_frames=True) as reader:
         while got < cap:
             n = reader.readinto(out[got:cap])
             if n == 0:

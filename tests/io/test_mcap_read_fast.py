@@ -241,3 +241,14 @@ def test_pooled_zstd_chunk_is_size_checked(claimed):
     else:
         data = decompress(head, buffers=pool)
         assert isinstance(data, memoryview) and data.readonly and data == records
+
+
+def test_pooled_zstd_chunk_of_several_frames_is_read_whole():
+    import zstandard
+
+    from pipeline.io.mcap_chunks import ChunkHeader, decompress
+
+    parts = [bytes(range(256)) * 9, b"second frame" * 50]
+    packed = b"".join(zstandard.ZstdCompressor().compress(p) for p in parts)
+    head = ChunkHeader(0, 0, sum(map(len, parts)), 0, "zstd", memoryview(packed))
+    assert decompress(head, buffers=ChunkBuffers(limit=1)) == b"".join(parts)
