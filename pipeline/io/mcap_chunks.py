@@ -333,7 +333,7 @@ def _as_positions(lists: dict[int, tuple[list[int], list[int], list[int]]]) -> P
     }
 
 
-def walk_chunk(data: bytes) -> tuple | ValueError | None:
+def walk_chunk(data: bytes | memoryview) -> tuple | ValueError | None:
     """The compiled record walker's result for decompressed chunk ``data`` (the
     ``ValueError`` it raised, for a damaged chunk); ``None`` when it is not built."""
     if _mcap_records is None:
@@ -479,7 +479,7 @@ class FetchedChunk:
     """One chunk as fetched: ``data`` (or ``error``) and the MessageIndex bytes, if any."""
 
     index: ChunkIndex
-    data: bytes | None
+    data: bytes | memoryview | None  # a view of a pooled buffer for zstd chunks
     error: Exception | None
     message_index: bytes
     walked: object = None  # walk_chunk(data), run in the fetch thread while data is in cache
