@@ -95,18 +95,41 @@ def outside(col: str, lo: float | None, hi: float | None, *, lo_open: bool = Fal
     return Check(c.is_finite() & cond, reason, if_finite=cond)
 
 
-def applicable(frame: pl.DataFrame, checks: Sequence[Check], *, finite: bool) -> list[Check]:
-    """The checks that can fail on ``frame``, each in its cheapest exact form (``finite``:
-    no float of the frame is NaN or infinite). ~40 finiteness and null tests over a
+def applicable(
+    data: pl.DataFrame | pa.Table, checks: Sequence[Check], *, finite: bool
+) -> list[Check]:
+    """The checks that can fail on ``data``, each in its cheapest exact form (``finite``:
+    no float of ``data`` is NaN or infinite). ~40 finiteness and null tests over a
     million rows cost more than the rest of the validation."""
     out = []
     for ck in checks:
-        if ck.null_of is not None and frame[ck.null_of].null_count() == 0:
+        if ck.null_of is not None and _null_count(data, ck.null_of) == 0:
             continue
         if finite and ck.only_nonfinite:
             continue
         out.append(ck._replace(fails=ck.if_finite) if finite and ck.if_finite is not None else ck)
     return out
+
+
+def _null_count(data: pl.DataFrame | pa.Table, column: str) -> int:
+    col = data[column]
+    return col.null_count if isinstance(col, pa.ChunkedArray) else col.null_count()
+
+
+def failing_rows(table: pa.Table, checks: Sequence[Check], *, finite: bool) -> np.ndarray:
+    """Indexes (int64, ascending) of the rows of ``table`` that fail one of ``checks``.
+
+    Polars evaluates the checks over the columns they read only: a float or integer
+    column without nulls is handed over without a copy, and the string columns, which
+    polars would convert to its own layout (and back when the rows are written), are not
+    converted at all unless a check reads them."""
+    checks = applicable(table, checks, finite=finite)
+    if not checks or table.num_rows == 0:
+        return np.empty(0, np.int64)
+    names = sorted({n for ck in checks for n in ck.fails.meta.root_names()})
+    frame = pl.from_arrow(table.select(names or table.column_names[:1]))
+    fails = frame.select(pl.any_horizontal([ck.fails.fill_null(False) for ck in checks]))
+    return np.flatnonzero(fails.to_series().to_numpy()).astype(np.int64)
 
 
 def split_valid(
@@ -136,21 +159,36 @@ def split_valid(
 # -- parsing -----------------------------------------------------------------------------
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class JsonParse:
     """Outcome of parsing JSON payloads.
 
-    ``frame``: parsed rows with an ``_idx`` column (index into the payloads);
+    ``rows``: the parsed rows, a polars frame with an ``_idx`` column (index into the
+    payloads) or, when the compiled parser decoded every payload, an Arrow table whose row
+    ``i`` is payload ``i`` (:attr:`frame` and :meth:`table_and_idx` give either form);
     ``bad_idx``/``bad_code``/``bad_reason``: payloads rejected while parsing; ``finite``:
-    no float of ``frame`` is NaN or infinite (known without looking: the compiled parser
+    no float of the rows is NaN or infinite (known without looking: the compiled parser
     gives no other; ``False`` means unknown).
     """
 
-    frame: pl.DataFrame
+    rows: pl.DataFrame | pa.Table
     bad_idx: list[int]
     bad_code: list[str]
     bad_reason: list[str]
     finite: bool = False
+
+    @functools.cached_property
+    def frame(self) -> pl.DataFrame:
+        """The rows as a polars frame with ``_idx``."""
+        if isinstance(self.rows, pl.DataFrame):
+            return self.rows
+        return _with_idx(pl.from_arrow(self.rows))  # type: ignore[arg-type]
+
+    def table_and_idx(self) -> tuple[pa.Table, np.ndarray]:
+        """The rows as an Arrow table (no ``_idx``) and the payload index of each row."""
+        if isinstance(self.rows, pa.Table):
+            return self.rows, np.arange(self.rows.num_rows, dtype=np.int64)
+        return self.rows.drop("_idx").to_arrow(), self.rows["_idx"].to_numpy()
 
 
 def _bulk(payloads: Sequence[bytes], schema: dict[str, pl.DataType]) -> pl.DataFrame | None:
@@ -222,8 +260,10 @@ def _one_line(payload: bytes) -> bytes:
     return payload
 
 
-def _with_idx(df: pl.DataFrame) -> pl.DataFrame:
-    return df.with_columns(pl.Series("_idx", np.arange(df.height, dtype=np.int64)))
+def _with_idx(df: pl.DataFrame, idx: np.ndarray | None = None) -> pl.DataFrame:
+    """``df`` with an ``_idx`` column: ``idx``, or 0..height-1."""
+    values = np.arange(df.height, dtype=np.int64) if idx is None else idx
+    return df.with_columns(pl.Series("_idx", values, dtype=pl.Int64))
 
 
 def parse_json_payloads(payloads: Sequence[bytes], schema: dict[str, pl.DataType]) -> JsonParse:
@@ -399,12 +439,12 @@ def parse_columns(order: MessageOrder, schema: dict[str, pl.DataType]) -> JsonPa
     kinds = native_kinds(schema)
     if kinds is None:
         return None
-    frame, flagged = parse_spans(
+    table, flagged = parse_spans(
         [c.raw for c in order.chunks], order.chunk, order.start, order.end, schema, kinds
     )
-    frame = frame.with_columns(pl.Series("_idx", np.arange(len(order), dtype=np.int64)))
     if len(flagged) == 0:
-        return JsonParse(frame, [], [], [], finite=True)
+        return JsonParse(table, [], [], [], finite=True)
+    frame = _with_idx(pl.from_arrow(table))  # type: ignore[arg-type]
     good = np.ones(len(order), dtype=bool)
     good[flagged] = False
     slow = parse_json_payloads(order.payloads(flagged), schema)
@@ -459,25 +499,33 @@ def decode_json_batches(
         out["rejects"] = [
             _rejects(order, bad_idx, parsed.bad_code, parsed.bad_reason, topic, source_file)
         ]
-    row_channel = order.channel_id[parsed.frame["_idx"].to_numpy()]
+    table, idx = parsed.table_and_idx()
+    row_channel = order.channel_id[idx]
     single = len(kinds) == 1
     for ch, kind in kinds.items():
-        frame = parsed.frame if single else parsed.frame.filter(pl.Series(row_channel == ch))
-        if frame.height == 0:
+        mine = None if single else row_channel == ch
+        rows = (table if mine is None else table.filter(mine)).select(list(kind.fields))
+        rows_idx = idx if mine is None else idx[mine]
+        if rows.num_rows == 0:
             continue
-        good, bad = split_valid(
-            frame.select([*kind.fields, "_idx"]),
-            kind_checks(kind, validation),
-            finite=parsed.finite,
-        )
-        rows = with_provenance(good, order.log_time_ns, source_file=source_file, topic=topic[ch])
-        out.setdefault(kind.table, []).append(shape(kind.table, rows.rename(kind.rename)))
-        if bad.height:
-            idx = bad["_idx"].to_numpy()
+        checks = kind_checks(kind, validation)
+        failing = failing_rows(rows, checks, finite=parsed.finite)
+        if len(failing):
+            bad_rows = _with_idx(pl.from_arrow(rows.take(failing)), rows_idx[failing])
+            bad = split_valid(bad_rows, checks, finite=parsed.finite)[1]
+            keep = np.ones(rows.num_rows, dtype=bool)
+            keep[failing] = False
+            rows, rows_idx = rows.filter(keep), rows_idx[keep]
             codes = ["out_of_range"] * bad.height
-            out.setdefault("rejects", []).append(
-                _rejects(order, idx, codes, bad["_reason"].to_list(), topic, source_file)
+            reasons = bad["_reason"].to_list()
+            rejects = _rejects(order, bad["_idx"].to_numpy(), codes, reasons, topic, source_file)
+            out.setdefault("rejects", []).append(rejects)
+        if rows.num_rows:
+            good = table_with_provenance(
+                rows, order.log_time_ns[rows_idx], source_file=source_file, topic=topic[ch]
             )
+            renames = {k: v for k, v in kind.rename.items() if k in good.column_names}
+            out.setdefault(kind.table, []).append(shape(kind.table, good.rename_columns(renames)))
     return {name: pa.concat_tables(parts) for name, parts in out.items()}
 
 
@@ -506,6 +554,19 @@ def _rejects(
         reason_code=list(codes),
         reason=list(reasons),
         raw=order.payloads(idx),
+    )
+
+
+def table_with_provenance(
+    table: pa.Table, log_time_ns: np.ndarray, *, source_file: str, topic: str
+) -> pa.Table:
+    """``table`` with source_file, topic (one value each) and ``log_time_ns`` (one per row,
+    in row order) appended: the Arrow form of :func:`with_provenance`."""
+    n = table.num_rows
+    return (
+        table.append_column("source_file", pa.repeat(pa.scalar(source_file, pa.string()), n))
+        .append_column("topic", pa.repeat(pa.scalar(topic, pa.string()), n))
+        .append_column("log_time_ns", pa.array(np.asarray(log_time_ns, dtype=np.int64)))
     )
 
 

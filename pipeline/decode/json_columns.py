@@ -70,10 +70,11 @@ def parse_spans(
     end: np.ndarray,
     schema: dict[str, pl.DataType],
     kinds: str,
-) -> tuple[pl.DataFrame, np.ndarray]:
+) -> tuple[pa.Table, np.ndarray]:
     """Parse the payloads ``chunks[chunk[r]][start[r]:end[r]]`` into ``schema``'s columns.
 
-    Returns one row per payload (values of flagged rows are meaningless) and the indexes
+    Returns an Arrow table of one row per payload (values of flagged rows are meaningless;
+    Arrow, not polars: the caller converts only the columns it validates) and the indexes
     of the flagged rows (int64, ascending)."""
     n = len(chunk)
     chunk, start, end = (np.ascontiguousarray(a, dtype=np.int64) for a in (chunk, start, end))
@@ -98,7 +99,7 @@ def parse_spans(
         name: _column(kind, out, valid[i].view(bool), list(chunks), chunk)
         for i, (name, kind, out) in enumerate(zip(schema, kinds, outs, strict=True))
     }
-    return pl.from_arrow(pa.table(columns)), flagged  # type: ignore[return-value]
+    return pa.table(columns), flagged
 
 
 def _column(

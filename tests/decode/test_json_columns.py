@@ -19,6 +19,7 @@ from decimal import ROUND_CEILING, ROUND_FLOOR, Context, Decimal
 
 import numpy as np
 import polars as pl
+import pyarrow as pa
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -671,7 +672,7 @@ def test_parse_spans_unflagged_rows_equal_the_reference():
     reference rejects or alters is flagged."""
     payloads = [p for group in sorted(CORPUS) for p in CORPUS[group]]
     order = make_order(payloads)
-    frame, flagged = json_columns.parse_spans(
+    table, flagged = json_columns.parse_spans(
         [c.raw for c in order.chunks],
         order.chunk,
         order.start,
@@ -679,6 +680,8 @@ def test_parse_spans_unflagged_rows_equal_the_reference():
         SCHEMA,
         json_columns.native_kinds(SCHEMA),
     )
+    assert isinstance(table, pa.Table)
+    frame = pl.from_arrow(table)
     assert frame.height == len(payloads) and flagged.dtype == np.int64
     assert np.all(np.diff(flagged) > 0)
     ref = json_bulk.parse_json_payloads(payloads, SCHEMA)
@@ -896,7 +899,8 @@ def test_one_and_two_threads_give_identical_frames(monkeypatch):
             chunks, order.chunk, order.start, order.end, SCHEMA, kinds
         )
         assert len(calls) == count and sorted(calls)[0][0] == 0 and sorted(calls)[-1][1] == n
-    (f1, flagged1), (f2, flagged2) = results[1], results[2]
+    (t1, flagged1), (t2, flagged2) = results[1], results[2]
+    f1, f2 = pl.from_arrow(t1), pl.from_arrow(t2)
     assert_frame_equal(f1, f2)
     assert np.array_equal(flagged1, flagged2)
     expected = [i for i in range(n) if i % 97 == 0 or (i % 89 == 0 and i % 97)]
