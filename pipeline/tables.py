@@ -11,6 +11,7 @@ import tomllib
 from dataclasses import dataclass
 from functools import cache
 
+import numpy.ma  # noqa: F401  pa.array(ndarray) imports it on first use (~25 ms): at import
 import polars as pl
 import pyarrow as pa
 import pyarrow.compute as pc
