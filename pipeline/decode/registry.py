@@ -107,11 +107,8 @@ CHANNEL_DECODERS["gyro_signals"] = "pipeline.decode.ownship:GyroSignalsChannelDe
 CHANNEL_DECODERS["ownship_truth"] = "pipeline.decode.ownship:OwnshipTruthChannelDecoder"
 _KINDS[("json", "jsonschema", "surveil.GyroSignals")] = "gyro_signals"
 _KINDS[("json", "jsonschema", "surveil.OwnshipTruth")] = "ownship_truth"
-# JSON messages per bulk parse (~22 MB of radar payload) and chunks a pending parse may
-# hold (bounds memory: ~32 MiB). The chunks stay alive until parsed: halving both from
-# 100,000 / 64 cut ~10 k page faults per file, for the same instructions
-JSON_BATCH = 50_000
-JSON_MAX_CHUNKS = 32
+JSON_BATCH = 100_000  # JSON messages per bulk parse (~44 MB of radar payload)
+JSON_MAX_CHUNKS = 64  # chunks a pending JSON parse may hold (bounds memory: ~64 MiB)
 JSON_RAMP_STEPS = 3  # the first parses take 1/8, 1/4, 1/2 of these limits
 JSON_RAMP_DOWN_STEPS = 4  # the last parses shrink down to 1/16 of JSON_BATCH
 
