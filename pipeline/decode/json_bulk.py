@@ -41,7 +41,7 @@ import pyarrow as pa
 from pipeline.config import ValidationConfig
 from pipeline.decode.json_columns import native_kinds, parse_spans
 from pipeline.io.mcap_read import ChannelBatch, ChunkData
-from pipeline.tables import conform, empty, shape
+from pipeline.tables import conform, constant_strings, empty, shape
 
 NEWLINE, SPACE = 10, 32
 _SHORT_GAP = 64  # gaps up to this many bytes are blanked by one scatter per length
@@ -539,9 +539,9 @@ def decode_json_batches(
             rejects = _rejects(order, bad["_idx"].to_numpy(), codes, reasons, topic, source_file)
             out.setdefault("rejects", []).append(rejects)
         if rows.num_rows:
-            good = table_with_provenance(
-                rows, order.log_time_ns[rows_idx], source_file=source_file, topic=topic[ch]
-            )
+            every = rows.num_rows == len(order)  # every message, in order: no gather
+            times = order.log_time_ns if every else order.log_time_ns[rows_idx]
+            good = table_with_provenance(rows, times, source_file=source_file, topic=topic[ch])
             renames = {k: v for k, v in kind.rename.items() if k in good.column_names}
             out.setdefault(kind.table, []).append(shape(kind.table, good.rename_columns(renames)))
     return {name: pa.concat_tables(parts) for name, parts in out.items()}
@@ -582,8 +582,8 @@ def table_with_provenance(
     in row order) appended: the Arrow form of :func:`with_provenance`."""
     n = table.num_rows
     return (
-        table.append_column("source_file", pa.repeat(pa.scalar(source_file, pa.string()), n))
-        .append_column("topic", pa.repeat(pa.scalar(topic, pa.string()), n))
+        table.append_column("source_file", constant_strings(source_file, n))
+        .append_column("topic", constant_strings(topic, n))
         .append_column("log_time_ns", pa.array(np.asarray(log_time_ns, dtype=np.int64)))
     )
 
