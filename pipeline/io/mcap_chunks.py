@@ -229,7 +229,7 @@ def decompress(
         if buffers is not None and head.uncompressed_size <= POOLED_MAX_BYTES:
             data = _zstd_into(dz, head, buffers)
         else:
-            data = dz.decompress(head.records, max_output_size=head.uncompressed_size)
+            data = _zstd_fresh(dz, head)
     elif head.compression == "lz4":
         if lz4_frame is None:
             raise CorruptChunkError("lz4 chunk but the lz4 module is missing")
@@ -262,6 +262,22 @@ def _zstd_into(dz: object, head: ChunkHeader, buffers: ChunkBuffers) -> memoryvi
                 break
             got += n
     return out[:got].toreadonly()
+
+
+def _zstd_fresh(dz: object, head: ChunkHeader) -> bytearray:
+    """The zstd frame(s) of ``head`` decompressed into a new buffer, up to one byte more
+    than the header claims (``ZstdDecompressor.decompress`` would stop after the first
+    frame). It grows by at most 16 MiB per read, as the data comes: a header claiming
+    more than the frames hold allocates no more than they do."""
+    cap = head.uncompressed_size + 1
+    out = bytearray()
+    with dz.stream_reader(head.records, read_across_frames=True) as reader:
+        while len(out) < cap:
+            part = reader.read(min(cap - len(out), 16 << 20))
+            if not part:
+                break
+            out += part
+    return out
 
 
 def iter_records(buf: bytes | memoryview) -> Iterator[tuple[int, memoryview]]:

@@ -3,6 +3,7 @@ checked against the records, window pruning counted in bytes and chunks, the sum
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -252,3 +253,26 @@ def test_pooled_zstd_chunk_of_several_frames_is_read_whole():
     packed = b"".join(zstandard.ZstdCompressor().compress(p) for p in parts)
     head = ChunkHeader(0, 0, sum(map(len, parts)), 0, "zstd", memoryview(packed))
     assert decompress(head, buffers=ChunkBuffers(limit=1)) == b"".join(parts)
+
+
+@pytest.mark.parametrize("pooled_max", [None, 16])
+def test_unpooled_zstd_chunk_of_several_frames_is_read_whole(monkeypatch, pooled_max):
+    """No pool (the linear scan of a file without a summary) or a chunk over
+    POOLED_MAX_BYTES: every frame is read, and a header claiming a byte more or less
+    than the frames hold is still caught by the size check."""
+    import zstandard
+
+    from pipeline.io import mcap_chunks
+    from pipeline.io.mcap_chunks import ChunkHeader, CorruptChunkError, decompress
+
+    if pooled_max is not None:
+        monkeypatch.setattr(mcap_chunks, "POOLED_MAX_BYTES", pooled_max)
+    buffers = None if pooled_max is None else ChunkBuffers(limit=1)
+    parts = [bytes(range(256)) * 9, b"second frame" * 50, b"third"]
+    packed = b"".join(zstandard.ZstdCompressor().compress(p) for p in parts)
+    whole = b"".join(parts)
+    head = ChunkHeader(0, 0, len(whole), 0, "zstd", memoryview(packed))
+    assert decompress(head, buffers=buffers) == whole
+    for claimed in (len(whole) - 1, len(whole) + 1):
+        with pytest.raises(CorruptChunkError):
+            decompress(dataclasses.replace(head, uncompressed_size=claimed), buffers=buffers)
