@@ -264,11 +264,11 @@ def _zstd_into(dz: object, head: ChunkHeader, buffers: ChunkBuffers) -> memoryvi
     return out[:got].toreadonly()
 
 
-def _zstd_fresh(dz: object, head: ChunkHeader) -> bytearray:
-    """The zstd frame(s) of ``head`` decompressed into a new buffer, up to one byte more
-    than the header claims (``ZstdDecompressor.decompress`` would stop after the first
-    frame). It grows by at most 16 MiB per read, as the data comes: a header claiming
-    more than the frames hold allocates no more than they do."""
+def _zstd_fresh(dz: object, head: ChunkHeader) -> memoryview:
+    """The zstd frame(s) of ``head`` decompressed into a new buffer (a read-only view of
+    it), up to one byte more than the header claims (``ZstdDecompressor.decompress``
+    would stop after the first frame). It grows by at most 16 MiB per read, as the data
+    comes: a header claiming more than the frames hold allocates no more than they do."""
     cap = head.uncompressed_size + 1
     out = bytearray()
     with dz.stream_reader(head.records, read_across_frames=True) as reader:
@@ -277,7 +277,7 @@ def _zstd_fresh(dz: object, head: ChunkHeader) -> bytearray:
             if not part:
                 break
             out += part
-    return out
+    return memoryview(out).toreadonly()
 
 
 def iter_records(buf: bytes | memoryview) -> Iterator[tuple[int, memoryview]]:
