@@ -50,7 +50,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 
-from jobs.common import UsageError
+from jobs.common import UsageError, keep_freed_memory
 from pipeline.config import Config, ValidationConfig
 from pipeline.decode.registry import RAW_TABLES, FileDecoder, make_rejects
 from pipeline.executors import Executor, UnitResult, make_executor
@@ -65,6 +65,9 @@ from pipeline.warehouse.views import rebuild_views_file, warm_up
 # the table schemas (schemas/*.toml, ~16 ms of TOML) are parsed with the imports, once per
 # process: otherwise the first file's run waits for them before it reads anything
 table_specs()
+# this process (a job's driver, or a worker that imports this module to ingest) keeps
+# freed memory for reuse: see keep_freed_memory
+keep_freed_memory()
 
 WINDOW_READ_MARGIN_NS = 60 * 10**9
 FILE_LEVEL_CODES = frozenset({"not_mcap", "corrupt_chunk", "truncated", "unknown_schema"})
