@@ -115,7 +115,8 @@ def constant_strings(value: str, n: int) -> pa.Array:
     with _CONSTANT_LOCK:
         held = _CONSTANT_STRINGS.pop(value, None)
         if held is None or len(held) < n:
-            held = pa.repeat(pa.scalar(value, pa.string()), max(n, 2 * len(held or ())))
+            size = n if held is None else max(n, 2 * len(held))
+            held = pa.repeat(pa.scalar(value, pa.string()), size)
         _CONSTANT_STRINGS[value] = held  # most recent last
         while len(_CONSTANT_STRINGS) > 16:
             _CONSTANT_STRINGS.pop(next(iter(_CONSTANT_STRINGS)))
