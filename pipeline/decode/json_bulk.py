@@ -116,30 +116,41 @@ def _null_count(data: pl.DataFrame | pa.Table, column: str) -> int:
     return col.null_count if isinstance(col, pa.ChunkedArray) else col.null_count()
 
 
-def failing_rows(table: pa.Table, checks: list[Check], *, finite: bool) -> np.ndarray:
-    """Indexes (int64, ascending) of the rows of ``table`` that fail one of ``checks``.
-
-    Polars evaluates the checks over the columns they read only: a float or integer
-    column without nulls is handed over without a copy, and the string columns, which
-    polars would convert to its own layout (and back when the rows are written), are not
-    converted at all unless a check reads them. The combined expression is built once per
-    list of checks and set of nullable columns that hold nulls (building it costs more
-    than evaluating it over 100,000 rows)."""
-    if table.num_rows == 0:
-        return np.empty(0, np.int64)
+def combined_checks(
+    data: pl.DataFrame | pa.Table, checks: Sequence[Check], *, finite: bool
+) -> tuple[list[Check], pl.Expr | None, list[str]]:
+    """The checks that can fail on ``data`` (:func:`applicable`), their failure
+    conditions OR-ed into one expression (``None``: none can fail) and the columns they
+    read. Built once per list of checks and set of nullable columns that hold nulls:
+    building the expression costs more than evaluating it over 100,000 rows."""
     with_nulls = frozenset(
-        ck.null_of for ck in checks if ck.null_of is not None and table[ck.null_of].null_count
+        ck.null_of for ck in checks if ck.null_of is not None and _null_count(data, ck.null_of)
     )
     key = (id(checks), finite, with_nulls)
     hit = _COMBINED_CHECKS.get(key)
     if hit is None or hit[0] is not checks:
         if len(_COMBINED_CHECKS) > 256:
             _COMBINED_CHECKS.clear()
-        usable = applicable(table, checks, finite=finite)
+        usable = applicable(data, checks, finite=finite)
         names = sorted({n for ck in usable for n in ck.fails.meta.root_names()})
         expr = pl.any_horizontal([ck.fails.fill_null(False) for ck in usable]) if usable else None
-        hit = _COMBINED_CHECKS[key] = (checks, expr, names)  # holds checks: its id stays its
-    _, expr, names = hit
+        hit = _COMBINED_CHECKS[key] = (checks, usable, expr, names)  # holds checks: its id
+    return hit[1], hit[2], hit[3]
+
+
+_COMBINED_CHECKS: dict[tuple, tuple[Sequence[Check], list[Check], pl.Expr | None, list[str]]] = {}
+
+
+def failing_rows(table: pa.Table, checks: Sequence[Check], *, finite: bool) -> np.ndarray:
+    """Indexes (int64, ascending) of the rows of ``table`` that fail one of ``checks``.
+
+    Polars evaluates the checks over the columns they read only: a float or integer
+    column without nulls is handed over without a copy, and the string columns, which
+    polars would convert to its own layout (and back when the rows are written), are not
+    converted at all unless a check reads them."""
+    if table.num_rows == 0:
+        return np.empty(0, np.int64)
+    _, expr, names = combined_checks(table, checks, finite=finite)
     if expr is None:
         return np.empty(0, np.int64)
     frame = pl.from_arrow(table.select(names or table.column_names[:1]))
@@ -149,30 +160,23 @@ def failing_rows(table: pa.Table, checks: list[Check], *, finite: bool) -> np.nd
     return np.flatnonzero(fails.to_numpy()).astype(np.int64)
 
 
-_COMBINED_CHECKS: dict[tuple, tuple[list[Check], pl.Expr | None, list[str]]] = {}
-
-
 def split_valid(
     frame: pl.DataFrame, checks: Sequence[Check], *, finite: bool = False
 ) -> tuple[pl.DataFrame, pl.DataFrame]:
     """(valid rows, rejected rows with a ``_reason`` column naming every failed check).
 
     ``finite``: the caller knows that no float of ``frame`` is NaN or infinite."""
-    checks = applicable(frame, checks, finite=finite)
-    if not checks or frame.height == 0:
+    usable, expr, _ = combined_checks(frame, checks, finite=finite)
+    if expr is None or frame.height == 0:
         return frame, frame.clear().with_columns(pl.lit("").alias("_reason"))
-    fails = frame.select(pl.any_horizontal([ck.fails.fill_null(False) for ck in checks]))
-    mask = fails.to_series()
+    mask = frame.select(expr).to_series()
     if not mask.any():
         return frame, frame.clear().with_columns(pl.lit("").alias("_reason"))
     good, bad = frame.filter(~mask), frame.filter(mask)
-    if bad.height:
-        reasons = [pl.when(ck.fails.fill_null(False)).then(ck.reason) for ck in checks]
-        bad = bad.with_columns(
-            pl.concat_str(reasons, separator="; ", ignore_nulls=True).alias("_reason")
-        )
-    else:
-        bad = bad.with_columns(pl.lit("").alias("_reason"))
+    reasons = [pl.when(ck.fails.fill_null(False)).then(ck.reason) for ck in usable]
+    bad = bad.with_columns(
+        pl.concat_str(reasons, separator="; ", ignore_nulls=True).alias("_reason")
+    )
     return good, bad
 
 

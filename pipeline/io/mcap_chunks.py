@@ -190,19 +190,11 @@ class ChunkBuffers:
             return buf
 
 
-_SHARED_BUFFERS: list[ChunkBuffers] = []
-_SHARED_LOCK = threading.Lock()
-
-
-def shared_chunk_buffers() -> ChunkBuffers:
-    """The process's pool, shared by every fetcher: a job that reads many files touches
-    fresh memory for its first file only. It holds what can be alive at once: the chunks
-    fetched ahead, plus those a consumer holds (a pending JSON parse keeps up to
-    ``registry.JSON_MAX_CHUNKS`` = 64)."""
-    with _SHARED_LOCK:
-        if not _SHARED_BUFFERS:
-            _SHARED_BUFFERS.append(ChunkBuffers(limit=(PREFETCH_BYTES >> 20) + 72))
-        return _SHARED_BUFFERS[0]
+# the process's pool, shared by every fetcher: a job that reads many files touches fresh
+# memory for its first file only. It holds what can be alive at once: the chunks fetched
+# ahead, plus those a consumer holds (a pending JSON parse keeps up to
+# registry.JSON_MAX_CHUNKS = 64)
+SHARED_BUFFERS = ChunkBuffers(limit=(PREFETCH_BYTES >> 20) + 72)
 
 
 def _references(buffers: list[bytearray], i: int) -> int:
@@ -536,7 +528,7 @@ class ChunkFetcher:
         self._threaded = threaded
         self._lock = threading.Lock()
         self._zstd = threading.local()
-        self._buffers = shared_chunk_buffers()
+        self._buffers = SHARED_BUFFERS
         self.read_bytes = 0
         self.decompressed = 0
 
