@@ -116,11 +116,22 @@ def constant_strings(value: str, n: int) -> pa.Array:
         held = _CONSTANT_STRINGS.pop(value, None)
         if held is None or len(held) < n:
             size = n if held is None else max(n, 2 * len(held))
-            held = pa.repeat(pa.scalar(value, pa.string()), size)
+            held = _repeated(value, size)
         _CONSTANT_STRINGS[value] = held  # most recent last
         while len(_CONSTANT_STRINGS) > 16:
             _CONSTANT_STRINGS.pop(next(iter(_CONSTANT_STRINGS)))
     return held.slice(0, n)
+
+
+def _repeated(value: str, n: int) -> pa.Array:
+    """``value`` ``n`` times, built from its Arrow buffers (``pa.repeat`` copies value by
+    value: 11 ms for 100,000 paths of 39 bytes, against ~1 ms plus the fresh pages)."""
+    raw = value.encode()
+    if len(raw) * n >= 2**31:  # beyond int32 offsets: as before (Arrow's error)
+        return pa.repeat(pa.scalar(value, pa.string()), n)
+    offsets = (np.arange(n + 1, dtype=np.int64) * len(raw)).astype(np.int32)
+    buffers = [None, pa.py_buffer(offsets), pa.py_buffer(raw * n)]
+    return pa.Array.from_buffers(pa.string(), n, buffers, null_count=0)
 
 
 _CONSTANT_STRINGS: dict[str, pa.Array] = {}

@@ -276,3 +276,19 @@ def test_unpooled_zstd_chunk_of_several_frames_is_read_whole(monkeypatch, pooled
     for claimed in (len(whole) - 1, len(whole) + 1):
         with pytest.raises(CorruptChunkError):
             decompress(dataclasses.replace(head, uncompressed_size=claimed), buffers=buffers)
+
+
+def test_chunk_buffers_fit_a_slightly_longer_chunk():
+    # a writer's chunks differ in size by up to a message: the idle buffer is reused
+    pool = ChunkBuffers(limit=1)
+    first = id(pool.take(1_048_600))
+    assert id(pool.take(1_048_900)) == first
+
+
+def test_chunk_buffers_hand_out_the_next_idle_buffer_first():
+    pool = ChunkBuffers(limit=3)
+    held = [pool.take(10) for _ in range(3)]
+    ids = [id(b) for b in held]
+    del held
+    # all idle again, each dropped at once: they still go out in turn
+    assert [id(pool.take(10)) for _ in range(3)] == ids

@@ -5,6 +5,7 @@ from __future__ import annotations
 import datetime as dt
 
 import pyarrow as pa
+import pytest
 
 from pipeline.tables import constant_strings, with_date
 
@@ -49,3 +50,10 @@ def test_constant_strings_are_slices_of_one_array_per_value():
     d = constant_strings("/archive/a.mcap", 4)
     assert d.buffers()[2].address == b.buffers()[2].address
     assert constant_strings("x", 0).to_pylist() == []
+
+
+@pytest.mark.parametrize("value", ["", "é/ñ.mcap", "/radar/tracks"])
+def test_constant_strings_equal_arrows_own_repeat(value):
+    got = constant_strings(value, 7)
+    got.validate(full=True)
+    assert got.equals(pa.repeat(pa.scalar(value, pa.string()), 7))
