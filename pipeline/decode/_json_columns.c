@@ -22,12 +22,16 @@
  * JSON; the fallback accepts them too).
  *
  * Numbers: a decimal significand w (<= 19 digits, exact in uint64) and exponent q are
- * converted to the correctly rounded double by Clinger's fast path (w <= 2^53 and
- * |q| <= 22: one exact IEEE operation) or else by the Eisel-Lemire algorithm (D. Lemire,
+ * converted to the correctly rounded double by the Eisel-Lemire algorithm (D. Lemire,
  * "Number Parsing at a Gigabyte per Second", Softw. Pract. Exper. 51(8), 2021; the
  * 128-bit product is always sufficient for an exact 19-digit w: N. Mushtak, D. Lemire,
  * "Fast Number Parsing Without Fallback", Softw. Pract. Exper. 53(6), 2023). The tests
- * check the result against Python's float() bit for bit.
+ * check the result against Python's float() bit for bit. Clinger's fast path (one exact
+ * IEEE multiplication or division when w <= 2^53 and |q| <= 22) is not taken: a sensor's
+ * 16- and 17-digit values fall on either side of 2^53 at random, and that branch
+ * mispredicted about once per value (a 440-byte radar report: 4.9 -> 2.4 mispredictions,
+ * ~10% fewer cycles, 1% fewer instructions, together with fast_decimal and the
+ * branch-free sign).
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -193,10 +197,6 @@ scan_number(const uint8_t *p, const uint8_t *e, Number *n)
     return p;
 }
 
-static const double POW10[23] = {1e0,  1e1,  1e2,  1e3,  1e4,  1e5,  1e6,  1e7,
-                                 1e8,  1e9,  1e10, 1e11, 1e12, 1e13, 1e14, 1e15,
-                                 1e16, 1e17, 1e18, 1e19, 1e20, 1e21, 1e22};
-
 /* Eisel-Lemire: w * 10^q correctly rounded, w != 0 exact. 0 when the result is
  * subnormal, underflows or overflows (left to the fallback). */
 static inline __attribute__((always_inline)) int eisel_lemire(int64_t q, uint64_t w, double *out)
@@ -241,13 +241,15 @@ static inline __attribute__((always_inline)) int number_to_double(const Number *
     if (!n->exact) return 0;
     if (n->w == 0) {
         d = 0.0;
-    } else if (n->w <= (UINT64_C(1) << 53) && n->q >= -22 && n->q <= 22) {
-        d = (double)n->w;
-        d = n->q < 0 ? d / POW10[-n->q] : d * POW10[n->q];
     } else if (!eisel_lemire(n->q, n->w, &d)) {
         return 0;
     }
-    *out = n->neg ? -d : d;
+    {   /* the sign bit without a branch: x and y are negative about half the time */
+        uint64_t bits;
+        memcpy(&bits, &d, sizeof bits);
+        bits |= (uint64_t)(n->neg != 0) << 63;
+        memcpy(out, &bits, sizeof bits);
+    }
     return 1;
 }
 
@@ -256,7 +258,18 @@ static inline __attribute__((always_inline)) int number_to_double(const Number *
 /* A string starting at p (after the opening quote); *plain = no escape, all ASCII. */
 static const uint8_t *scan_string(const uint8_t *p, const uint8_t *e, int *plain)
 {
+    const uint64_t ones = UINT64_C(0x0101010101010101), high = UINT64_C(0x8080808080808080);
     *plain = 1;
+    /* 8 bytes at a time to the first quote, backslash, control byte or non-ASCII byte
+     * (bit 7 of each flagged byte; the lowest one is exact: a borrow only runs past a
+     * byte that is flagged itself); the byte loop takes it from there */
+    while (e - p >= 8) {
+        uint64_t v = load8(p), quote = v ^ (ones * '"'), slash = v ^ (ones * '\\');
+        uint64_t m = (((quote - ones) & ~quote) | ((slash - ones) & ~slash) |
+                      ((v - ones * 0x20) & ~v) | v) & high;
+        if (m) { p += __builtin_ctzll(m) >> 3; break; }
+        p += 8;
+    }
     while (p < e) {
         uint8_t c = *p;
         if (c == '"') return p;
@@ -328,6 +341,47 @@ static const uint8_t *skip_value(const uint8_t *p, const uint8_t *e, int depth, 
     return p;
 }
 
+/* The usual float of an encoder, [-]I.F with 1-7 integer digits (no leading zero unless
+ * alone), 1-15 fraction digits, at most 19 digits in all and no exponent, into (w, q): the
+ * end of the number, or NULL for any other form (scan_number then reads it). Straight-line
+ * SWAR over three 8-byte words: the generic digit loops mispredict on the varying digit
+ * counts. Reads 25 bytes from p (the caller checks that they lie in the payload). */
+static inline __attribute__((always_inline)) const uint8_t *
+fast_decimal(const uint8_t *p, Number *n)
+{
+    uint64_t v0, v1, v2, w;
+    int L, F1, F2;
+    const uint8_t *f;
+    n->neg = *p == '-';
+    p += n->neg;
+    v0 = load8(p);
+    L = leading_digits(v0);
+    if ((unsigned)(L - 1) >= 7u || p[L] != '.' || (p[0] == '0' && L > 1)) return NULL;
+    f = p + L + 1;
+    v1 = load8(f);
+    F1 = leading_digits(v1);
+    if (F1 == 0) return NULL;
+    w = first_digits_value(v0, L);
+    if (F1 < 8) {
+        w = w * POW10_U64[F1] + first_digits_value(v1, F1);
+        n->q = -F1;
+        f += F1;
+    } else {
+        v2 = load8(f + 8);
+        F2 = leading_digits(v2);
+        if (F2 == 8 || L + 8 + F2 > 19) return NULL;
+        w = w * 100000000u + eight_digits_value(v1);
+        if (F2) w = w * POW10_U64[F2] + first_digits_value(v2, F2);
+        n->q = -(8 + F2);
+        f += 8 + F2;
+    }
+    if ((*f | 0x20) == 'e') return NULL;
+    n->w = w;
+    n->is_int = 0;
+    n->exact = 1;
+    return f;
+}
+
 /* Read the value of field f for row r into its column; NULL (and *st) on error. */
 static inline __attribute__((always_inline)) const uint8_t *
 read_field(const Spec *s, int f, Py_ssize_t r, const uint8_t *base, const uint8_t *p,
@@ -363,7 +417,8 @@ read_field(const Spec *s, int f, Py_ssize_t r, const uint8_t *base, const uint8_
     }
     /* a number */
     if (p >= e || !(*p == '-' || (*p >= '0' && *p <= '9'))) { *st = ST_TYPE; return NULL; }
-    q = scan_number(p, e, &num);
+    q = kind == 'f' && e - p >= 25 ? fast_decimal(p, &num) : NULL;
+    if (!q) q = scan_number(p, e, &num);
     if (!q) { *st = ST_SYNTAX; return NULL; }
     if (kind == 'i') {
         int64_t v;

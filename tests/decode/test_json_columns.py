@@ -735,6 +735,36 @@ def test_number_tokens_in_a_float_field_match_reference():
         assert_native_matches_reference(payloads[i : i + 8000], chunks=2, channels=1)
 
 
+# forms at the edges of the parser's fast path for floats ([-]I.F, 1-7 integer digits,
+# at most 19 digits in all, no exponent: fast_decimal in _json_columns.c)
+FAST_DECIMAL_EDGES = [
+    b"-0.0", b"0.0", b"0.5", b"-0.5", b"00.5", b"01.5", b"-01.5", b"1.", b"-1.", b"-.5",
+    b".5", b"-", b"--1.5", b"1.5e3", b"1.5E-3", b"1.5e", b"1.5.5", b"1.5-", b"1.5x",
+    b"1234567.123456789012", b"-1234567.123456789012", b"1234567.1234567890123",
+    b"12345678.5", b"1.12345678", b"1.123456789", b"1.123456789012345",
+    b"1.1234567890123456", b"0.000000000000000001", b"0.0000000000000000001234",
+    b"9999999.999999999999", b"9999999.9999999999999", b"-9999999.99999999999999",
+    b"1000000.0000000000001", b"4.9406564584124654", b"2.2250738585072014",
+    b"1.7976931348623157", b"0.30000000000000004", b"12527.808180456033",
+]  # fmt: skip
+
+
+@needs_ext
+def test_float_tokens_followed_by_more_fields_match_reference():
+    """The float tokens again, now with a long field after them: the fast path for the
+    usual [-]I.F form (it reads 25 bytes ahead) decodes them, or leaves them to the
+    generic scan, exactly as the reference does."""
+    rng = np.random.default_rng(22)
+    mids, near = _near_halfway_decimal_tokens()
+    values = rng.normal(size=6000) * 10.0 ** rng.integers(-8, 8, size=6000)
+    tokens = [*_halfway_tokens(), *mids[:2000], *near, *SPECIAL, *FAST_DECIMAL_EDGES]
+    tokens += _digit_tokens(rng, 5000, 19) + [repr(v).encode() for v in values.tolist()]
+    tail = b', "name": "long enough for 25 bytes", "n": 1}'
+    payloads = [b'{"x": ' + t + tail for t in tokens]
+    for i in range(0, len(payloads), 8000):
+        assert_native_matches_reference(payloads[i : i + 8000], chunks=2, channels=1)
+
+
 @needs_ext
 def test_large_random_corpus_matches_reference():
     """Many rows, mostly well formed, from every group, in random order."""
