@@ -22,6 +22,7 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import os
+import re
 import shutil
 import threading
 import uuid
@@ -75,20 +76,34 @@ def _select_list(schema: pa.Schema, *, null: bool) -> str:
 def view_sql(name: str, files: list[str]) -> str:
     """``CREATE OR REPLACE VIEW`` statement of table ``name`` over ``files``.
 
-    With no files the view is typed and empty (``... WHERE false``). File paths come from
-    the Delta log and are quoted with ``sql_literal`` (DuckDB cannot bind parameters in a
-    view definition).
+    With no files the view is typed and empty (``... WHERE false``), and DuckDB (2.0 on)
+    binds it when it is first queried instead of when it is created: such a view cannot
+    fail to bind, and binding its casts costs ~1 ms per view, most of writing the views
+    of a new warehouse (27 of 30 tables empty). A view over files is bound at creation,
+    so that a file missing from the snapshot fails the job, not an analyst's query.
+    File paths come from the Delta log and are quoted with ``sql_literal`` (DuckDB cannot
+    bind parameters in a view definition).
     """
     s = spec(name).schema
     if not files:
         body = f"SELECT {_select_list(s, null=True)} WHERE false"
-    else:
-        file_list = ", ".join(sql_literal(f) for f in files)
-        body = (
-            f"SELECT {_select_list(s, null=False)} FROM read_parquet([{file_list}], "
-            "hive_partitioning=true, union_by_name=true)"
-        )
+        return f"CREATE OR REPLACE VIEW {_ident(name)}{_DEFER_BINDING} AS {body}"
+    file_list = ", ".join(sql_literal(f) for f in files)
+    body = (
+        f"SELECT {_select_list(s, null=False)} FROM read_parquet([{file_list}], "
+        "hive_partitioning=true, union_by_name=true)"
+    )
     return f"CREATE OR REPLACE VIEW {_ident(name)} AS {body}"
+
+
+def _defer_binding_clause(version: str) -> str:
+    """`` WITH (DEFER_BINDING)`` where the DuckDB release accepts it (2.0 and later)."""
+    found = re.match(r"(\d+)\.(\d+)", version)
+    major_minor = (int(found[1]), int(found[2])) if found else (0, 0)
+    return " WITH (DEFER_BINDING)" if major_minor >= (2, 0) else ""
+
+
+_DEFER_BINDING = _defer_binding_clause(duckdb.__version__)
 
 
 def view_statements(warehouse: Path, names: Iterable[str] | None = None) -> dict[str, str]:

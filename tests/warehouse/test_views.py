@@ -7,6 +7,7 @@ from pathlib import Path
 
 import duckdb
 import pyarrow as pa
+import pytest
 from mcap_fixtures import DAY, T0, hours, truth_rows
 
 from pipeline.tables import schema, table_specs
@@ -119,3 +120,17 @@ def test_views_an_unreadable_file_is_built_again(tmp_path):
     rebuild_views_file(tmp_path)
     assert set(_view_sql(target)) == set(table_specs())
     assert sorted(p.name for p in tmp_path.iterdir()) == [VIEWS_FILE]
+
+
+def test_empty_views_bind_when_queried_and_views_over_files_when_created(tmp_path):
+    from pipeline.warehouse.views import _defer_binding_clause, view_sql
+
+    assert _defer_binding_clause("1.4.2") == "" and _defer_binding_clause("dev") == ""
+    assert _defer_binding_clause("2.0.0") == _defer_binding_clause("2.1.0.dev5") != ""
+    con = duckdb.connect()
+    con.execute(view_sql("truth", []))  # deferred or not, it queries as a typed empty view
+    assert con.execute('SELECT count(*) FROM "truth"').fetchall() == [(0,)]
+    # a file missing from a snapshot fails when the view is written (the job), not later
+    missing = str(tmp_path / "gone.parquet")
+    with pytest.raises(duckdb.IOException, match="gone.parquet"):
+        con.execute(view_sql("truth", [missing]))
