@@ -167,10 +167,8 @@ def split_valid(
 
     ``finite``: the caller knows that no float of ``frame`` is NaN or infinite."""
     usable, expr, _ = combined_checks(frame, checks, finite=finite)
-    if expr is None or frame.height == 0:
-        return frame, frame.clear().with_columns(pl.lit("").alias("_reason"))
-    mask = frame.select(expr).to_series()
-    if not mask.any():
+    mask = None if expr is None or frame.height == 0 else frame.select(expr).to_series()
+    if mask is None or not mask.any():
         return frame, frame.clear().with_columns(pl.lit("").alias("_reason"))
     good, bad = frame.filter(~mask), frame.filter(mask)
     reasons = [pl.when(ck.fails.fill_null(False)).then(ck.reason) for ck in usable]

@@ -206,15 +206,15 @@ class ChunkBuffers:
 SHARED_BUFFERS = ChunkBuffers(limit=(PREFETCH_BYTES >> 20) + 72)
 
 
+_GRAIN = 64 << 10  # pool buffer sizes are multiples of this (see _capacity)
+
+
 def _capacity(size: int) -> int:
     """A buffer's size for ``size`` bytes: rounded up to 64 KiB, so that chunks of about
     the same size fit each other's buffers (a writer closes a chunk once it passes its
     target size: the sizes differ by up to a message; replacing a buffer whenever a
     slightly longer chunk came allocated 40-70 MiB anew per 1 M-message file)."""
     return -(-size // _GRAIN) * _GRAIN
-
-
-_GRAIN = 64 << 10
 
 
 def _references(buffers: list[bytearray], i: int) -> int:
