@@ -62,3 +62,6 @@ def test_bench_runs_and_prints_its_table(tmp_path):
     for v in ("json", "protobuf", "ros2"):
         for n in ("200", "800"):
             assert {(v, n, "floor"), (v, n, "surveil"), (v, n, "baseline")} <= got
+    sizes = [int(r[1].replace(",", "")) for r in rows]
+    assert sizes == sorted(sizes)  # the table lists sizes ascending ...
+    assert out.index("wrote 800 reports") < out.index("wrote 200 reports")  # ... N runs first
