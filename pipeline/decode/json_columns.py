@@ -20,6 +20,8 @@ import numpy as np
 import polars as pl
 import pyarrow as pa
 
+from pipeline.executors import SECOND_PARSER_NICE, lower_thread_priority
+
 try:
     from pipeline.decode import _json_columns
 except ImportError:  # built without a C compiler: the read_ndjson path is used
@@ -59,7 +61,9 @@ def threads() -> int:
 def _pool() -> ThreadPoolExecutor:
     global _POOL
     if _POOL is None:
-        _POOL = ThreadPoolExecutor(max_workers=3, thread_name_prefix="json-columns")
+        _POOL = ThreadPoolExecutor(
+            3, "json-columns", initializer=lower_thread_priority, initargs=(SECOND_PARSER_NICE,)
+        )
     return _POOL
 
 

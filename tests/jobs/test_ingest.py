@@ -4,6 +4,8 @@ executor seam it runs on."""
 from __future__ import annotations
 
 import os
+import sys
+import threading
 from pathlib import Path
 
 import duckdb
@@ -19,9 +21,19 @@ from mcap_fixtures import (
     write_mcap,
 )
 
+import jobs.ingest
+import pipeline.warehouse.staged
 from jobs.ingest import IngestSummary, IngestUsageError, run_ingest
 from pipeline.config import load_config
-from pipeline.executors import ExecutorError, UnitResult, make_executor
+from pipeline.decode import json_columns
+from pipeline.executors import (
+    HASHER_NICE,
+    SECOND_PARSER_NICE,
+    WRITER_NICE,
+    ExecutorError,
+    UnitResult,
+    make_executor,
+)
 from pipeline.io.mcap_read import read_mcap_batches
 from pipeline.warehouse.delta import read_table, table_version
 from pipeline.warehouse.views import VIEWS_FILE
@@ -278,3 +290,32 @@ def test_executor_kinds():
         with pytest.raises(ExecutorError, match="surveil-pipeline\\[ray\\]"):
             make_executor("ray", 2, 1)
     assert list(make_executor("process", 2, 1).map_units(_square_or_fail, [])) == []
+
+
+def _niceness() -> int:
+    return os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="per-thread niceness is Linux's")
+def test_helper_threads_yield_the_cores_to_the_fetch_thread(tmp_path, cfg, monkeypatch):
+    """The Parquet writer, the file hasher and the second JSON parser run niced; the
+    calling thread (and so the chunk fetch thread it starts) keeps its priority."""
+    base, seen = _niceness(), {}
+    write, fingerprint = pipeline.warehouse.staged._write_group, jobs.ingest.file_fingerprint
+
+    def noted_write(f, group):
+        seen["writer"] = _niceness()
+        return write(f, group)
+
+    def noted_fingerprint(path):
+        seen["hasher"] = _niceness()
+        return fingerprint(path)
+
+    monkeypatch.setattr(pipeline.warehouse.staged, "_write_group", noted_write)
+    monkeypatch.setattr(jobs.ingest, "file_fingerprint", noted_fingerprint)
+    src = write_mcap(tmp_path / "a.mcap", radar_messages(50))
+    assert ingest([src], cfg, tmp_path / "wh").exit_code == 0
+    assert seen == {"writer": min(19, base + WRITER_NICE), "hasher": min(19, base + HASHER_NICE)}
+    parser = json_columns._pool().submit(_niceness).result()
+    assert parser == min(19, base + SECOND_PARSER_NICE)
+    assert _niceness() == base
