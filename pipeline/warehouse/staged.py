@@ -278,9 +278,9 @@ class TableStager:
     ``add(name, table)`` takes rows of raw table ``name`` (any column order: they are
     conformed); ``close()`` flushes and returns the :class:`StagedFile` list. Parquet
     encoding runs in a background thread per file (niced: ``WRITER_NICE``), at most two
-    row groups behind. A row
-    group that finds its slot's file still busy goes to a second file of the slot, with
-    its own thread (``MAX_FILES_PER_SLOT``): a big table is then written on two cores, which
+    row groups behind. A row group that finds its slot's file still busy goes to a second
+    file of the slot, with its own thread (``MAX_FILES_PER_SLOT``): a big table is then
+    written on two cores, which
     shortens the tail of a file's ingest when decoding has kept both cores busy.
     """
 
