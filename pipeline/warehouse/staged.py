@@ -280,8 +280,8 @@ class TableStager:
     encoding runs in a background thread per file (niced: ``WRITER_NICE``), at most two
     row groups behind. A row group that finds its slot's file still busy goes to a second
     file of the slot, with its own thread (``MAX_FILES_PER_SLOT``): a big table is then
-    written on two cores, which
-    shortens the tail of a file's ingest when decoding has kept both cores busy.
+    written on two cores, which shortens the tail of a file's ingest when decoding has
+    kept both cores busy.
     """
 
     def __init__(
