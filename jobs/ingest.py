@@ -42,7 +42,7 @@ import shutil
 import time
 from collections import Counter
 from collections.abc import Callable, Iterable, Sequence
-from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import Future
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -53,13 +53,7 @@ import pyarrow.compute as pc
 from jobs.common import UsageError, keep_freed_memory
 from pipeline.config import Config, ValidationConfig
 from pipeline.decode.registry import RAW_TABLES, FileDecoder, make_rejects
-from pipeline.executors import (
-    HASHER_NICE,
-    Executor,
-    UnitResult,
-    lower_thread_priority,
-    make_executor,
-)
+from pipeline.executors import HASHER_NICE, Executor, UnitResult, helper_pool, make_executor
 from pipeline.io.mcap_index import mcap_index_rows
 from pipeline.io.mcap_read import ReadStatus, read_mcap_batches
 from pipeline.tables import conform, empty, spec, table_specs
@@ -234,9 +228,7 @@ def ingest_file(unit: IngestUnit) -> FileManifest:
             if sha == prior["sha256"]:
                 return FileManifest(unit.path, size, sha, skipped=True)
         else:  # hash while decoding (hashlib releases the GIL)
-            hasher = ThreadPoolExecutor(
-                1, "sha256", initializer=lower_thread_priority, initargs=(HASHER_NICE,)
-            )
+            hasher = helper_pool(1, "sha256", HASHER_NICE)
             sha = hasher.submit(lambda: file_fingerprint(path)[1])
     try:
         return _decode_and_stage(unit, path, size, sha)

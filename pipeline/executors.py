@@ -26,7 +26,13 @@ import sys
 import threading
 import traceback
 from collections.abc import Callable, Iterable, Iterator
-from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from concurrent.futures import (
+    FIRST_COMPLETED,
+    Future,
+    ProcessPoolExecutor,
+    ThreadPoolExecutor,
+    wait,
+)
 from dataclasses import dataclass
 from typing import Any, Generic, Protocol, TypeVar
 
@@ -107,6 +113,12 @@ def lower_thread_priority(nice: int) -> None:
     with contextlib.suppress(OSError):
         current = os.getpriority(os.PRIO_PROCESS, tid)
         os.setpriority(os.PRIO_PROCESS, tid, min(19, current + nice))
+
+
+def helper_pool(workers: int, name: str, nice: int) -> ThreadPoolExecutor:
+    """A thread pool whose threads run ``nice`` steps nicer than the thread creating them
+    (:func:`lower_thread_priority` as their initializer)."""
+    return ThreadPoolExecutor(workers, name, initializer=lower_thread_priority, initargs=(nice,))
 
 
 def _describe(exc: BaseException) -> str:

@@ -20,7 +20,7 @@ import numpy as np
 import polars as pl
 import pyarrow as pa
 
-from pipeline.executors import SECOND_PARSER_NICE, lower_thread_priority
+from pipeline.executors import SECOND_PARSER_NICE, helper_pool
 
 try:
     from pipeline.decode import _json_columns
@@ -61,9 +61,7 @@ def threads() -> int:
 def _pool() -> ThreadPoolExecutor:
     global _POOL
     if _POOL is None:
-        _POOL = ThreadPoolExecutor(
-            3, "json-columns", initializer=lower_thread_priority, initargs=(SECOND_PARSER_NICE,)
-        )
+        _POOL = helper_pool(3, "json-columns", SECOND_PARSER_NICE)
     return _POOL
 
 

@@ -44,7 +44,7 @@ from deltalake import DeltaTable
 from deltalake import Schema as DeltaSchema
 from deltalake.transaction import AddAction, RemoveAction, create_table_with_add_actions
 
-from pipeline.executors import WRITER_NICE, lower_thread_priority
+from pipeline.executors import WRITER_NICE, helper_pool
 from pipeline.tables import conform, spec
 from pipeline.warehouse.delta import replace_source_file, table_exists, table_path
 
@@ -348,13 +348,7 @@ class TableStager:
             store_schema=False,  # readers see strings, not the dictionaries
         )
         stats = {f.name: _ColumnStats() for f in schema if pa.types.is_floating(f.type)}
-        pool = (
-            ThreadPoolExecutor(
-                1, "stage", initializer=lower_thread_priority, initargs=(WRITER_NICE,)
-            )
-            if self.threaded
-            else None
-        )
+        pool = helper_pool(1, "stage", WRITER_NICE) if self.threaded else None
         return _OpenFile(
             slot.table, slot.partition, path, writer, pool, stats=stats, dictionary_columns=constant
         )
