@@ -110,7 +110,7 @@ def payloads(variant: str, cols: dict) -> tuple[np.ndarray, np.ndarray, bytes]:
         import polars as pl
         import pyarrow as pa
 
-        from pipeline.io.mcap_write import _json_payloads
+        from pipeline.io.mcap_write import json_payloads as _json_payloads
 
         df = pl.DataFrame(
             {k: list(v) if k in ("site_id", "status") else v for k, v in cols.items()}
@@ -291,7 +291,7 @@ def measure_baseline(path: Path, out: Path) -> int:
 
 def measure_surveil(path: Path, warehouse: Path, executor: str) -> int:
     from jobs.ingest import run_ingest
-    from pipeline.config import load_config
+    from pipeline.families import load_config
 
     shutil.rmtree(warehouse, ignore_errors=True)
     summary = run_ingest([path], load_config(), warehouse, executor=executor)

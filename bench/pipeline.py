@@ -34,20 +34,20 @@ STAGE = textwrap.dedent(
     out = {}
     if stage == "simulate":
         from jobs.simulate import run_simulate
-        from pipeline.config import load_config
+        from pipeline.families import load_config
         files = run_simulate("channel", args["duration_s"], args["seed"], Path(args["archive"]),
                              load_config(), start_ns=args["start_ns"])
         out["files"] = [str(f) for f in files]
     elif stage == "ingest":
         from jobs.ingest import run_ingest
-        from pipeline.config import load_config
+        from pipeline.families import load_config
         s = run_ingest([Path(f) for f in args["files"]], load_config(), Path(args["warehouse"]),
                        executor=args["executor"])
         out["messages"] = s.messages_read
         out["rows"] = dict(s.rows)
     elif stage == "batch":
         from jobs.batch import run_batch
-        from pipeline.config import load_config
+        from pipeline.families import load_config
         s = run_batch(load_config(), Path(args["warehouse"]), start_ns=args["start_ns"],
                       end_ns=args["end_ns"], executor_kind=args["executor"])
         out["rows"] = dict(s.rows)

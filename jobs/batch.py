@@ -16,7 +16,6 @@ import contextlib
 import itertools
 import logging
 import shutil
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -24,61 +23,16 @@ import numpy as np
 import polars as pl
 import pyarrow.parquet as pq
 
-from jobs.batch_airfield import OUTPUTS as AIRFIELD_OUTPUTS
-from jobs.batch_airfield import UNIT_S as AIRFIELD_UNIT_S
-from jobs.batch_airfield import airfield_unit
-from jobs.batch_gaps import OUTPUTS as GAPS_OUTPUTS
-from jobs.batch_gaps import gaps_unit
-from jobs.batch_nav import OUTPUTS as NAV_OUTPUTS
-from jobs.batch_nav import nav_unit
 from pipeline import tables
-from pipeline.align import align_reports
-from pipeline.associate.identity import identify
-from pipeline.associate.stitch import relabel, stitch_track_ids
-from pipeline.associate.track_to_track import associate_tracks
 from pipeline.config import Config
-from pipeline.cross_track_eval import cross_track_by_leg
 from pipeline.executors import make_executor
-from pipeline.fuse import fuse
-from pipeline.geometry import add_geodetic, assign_sectors, cross_track
-from pipeline.metrics.siap import siap_by_sector, siap_config
-from pipeline.score import score_tracks
-from pipeline.sync import epoch_grid, synchronise
+from pipeline.families import FAMILIES, family
+from pipeline.family import Family, Window
+from pipeline.units import NS
 from pipeline.warehouse.delta import read_table, replace_rows, replace_window
 from pipeline.warehouse.views import rebuild_views_file, warm_up
 
 log = logging.getLogger(__name__)
-
-NS = 1_000_000_000
-UNIT_S = 3600
-DERIVED_TABLES = ("associations", "system_tracks", "identifications", "track_errors")
-# maritime audit tables (docs/maritime.md): SIAP against truth, cross-track error per leg
-AUDIT_TABLES = ("siap_by_sector", "cross_track_by_leg")
-
-
-@dataclass(frozen=True)
-class BatchInputs:
-    radar_tracks: pl.DataFrame
-    ais_reports: pl.DataFrame
-    truth: pl.DataFrame | None
-
-
-UnitCompute = Callable[[Path, Config, int, int], dict[str, pl.DataFrame]]
-"""(warehouse, cfg, start_ns, end_ns) -> {table: frame}; reads its inputs by path."""
-
-
-@dataclass(frozen=True)
-class BatchFamily:
-    """A sensor family's batch: the derived tables it owns and how one unit computes
-    them. ``unit_s`` cuts the window at UTC multiples of it (None: one unit for the
-    whole window). ``stitch`` relabels system track ids across unit seams. A unit may
-    also return ``rejects`` rows (stage 'batch') logged inside its sub-window."""
-
-    name: str
-    outputs: tuple[str, ...]
-    compute_unit: UnitCompute
-    unit_s: int | None = UNIT_S
-    stitch: bool = False
 
 
 @dataclass(frozen=True)
@@ -120,112 +74,19 @@ class BatchSummary:
         return "\n".join(lines)
 
 
-def batch_window(
-    inputs: BatchInputs, *, start_ns: int, end_ns: int, cfg: Config
-) -> dict[str, pl.DataFrame]:
-    """Compose the pure batch stages for the epochs in [start_ns, end_ns).
-
-    Returns frames for ``associations``, ``system_tracks``, ``identifications``,
-    ``track_errors``, ``siap_by_sector`` (empty without truth), ``cross_track_by_leg``
-    and batch ``rejects`` (reports from unknown sites).
-    """
-    aligned, unknown = align_reports(inputs.radar_tracks, cfg)
-    epochs = epoch_grid(start_ns, end_ns, cfg.sync.epoch_period_s)
-    synced = synchronise(aligned, epochs_ns=epochs, sync=cfg.sync)
-    id_base = (start_ns // NS) * 10_000
-    associated = associate_tracks(synced, cfg=cfg.association, id_base=id_base)
-    fused = fuse(associated)
-    fused = add_geodetic(fused, cfg.region)
-    fused = assign_sectors(fused, cfg.sectors, cfg.region)
-    fused = cross_track(fused, cfg.fairway_legs, cfg.region, cfg.max_cross_track_m)
-    identifications, fused = identify(fused, inputs.ais_reports, cfg=cfg.ais, region=cfg.region)
-    associated = assign_sectors(associated, cfg.sectors, cfg.region)
-    errors = score_tracks(
-        fused,
-        associated,
-        truth=inputs.truth,
-        ais_reports=inputs.ais_reports,
-        region=cfg.region,
-        sectors=cfg.sectors,
-    )
-    associations = associated.with_columns(
-        pl.col("P_xx").sqrt().alias("sigma_x_m"),
-        pl.col("P_yy").sqrt().alias("sigma_y_m"),
-        pl.col("P_xy").alias("cov_xy_m2"),
-    )
-    siap = siap_by_sector(
-        fused, inputs.truth, epochs_ns=epochs, epoch_period_s=cfg.sync.epoch_period_s,
-        region=cfg.region, sectors=cfg.sectors, cfg=siap_config(cfg), start_ns=start_ns,
-        end_ns=end_ns,
-    )
-    cross = cross_track_by_leg(
-        fused, associations, errors, legs=cfg.fairway_legs, region=cfg.region,
-        sites=cfg.radar_sites,
-    )
-    return {
-        "associations": associations,
-        "system_tracks": fused,
-        "identifications": identifications,
-        "track_errors": errors,
-        "siap_by_sector": siap,
-        "cross_track_by_leg": cross,
-        "rejects": _unknown_site_rejects(unknown, start_ns, end_ns),
-    }
-
-
-def _unknown_site_rejects(unknown: pl.DataFrame, start_ns: int, end_ns: int) -> pl.DataFrame:
-    """Reports from sites missing in the config: rejects rows (those logged in the window)."""
-    unknown = unknown.filter(pl.col("log_time_ns").is_between(start_ns, end_ns, closed="left"))
-    if unknown.height == 0:
-        return pl.DataFrame()
-    return unknown.select(
-        pl.col("log_time_ns"),
-        pl.col("source_file"),
-        pl.col("topic"),
-        pl.lit("batch").alias("stage"),
-        pl.lit("unknown_site").alias("reason_code"),
-        (pl.lit("radar site not in config: ") + pl.col("site_id")).alias("reason"),
-    )
-
-
-def read_inputs(warehouse: Path, cfg: Config, start_ns: int, end_ns: int) -> BatchInputs:
-    """Read a unit's inputs, with the margins the stages need before the window
-    (one scan for synchronisation, the AIS report age for identification)."""
-    # an epoch takes each radar's latest scan ending within one period before it, and a
-    # scan's reports start one period before its end: two periods of margin, plus slack
-    scan_margin_ns = int((2 * max(s.scan_period_s for s in cfg.radar_sites) + 1.0) * NS)
-    ais_margin_ns = int(cfg.ais.max_report_age_s * NS)
-    radar = read_table(warehouse, "radar_tracks", start_ns=start_ns - scan_margin_ns, end_ns=end_ns)
-    ais = read_table(warehouse, "ais_reports", start_ns=start_ns - ais_margin_ns, end_ns=end_ns)
-    truth = read_table(warehouse, "truth", start_ns=start_ns - 2 * NS, end_ns=end_ns + 2 * NS)
-    return BatchInputs(
-        radar_tracks=pl.from_arrow(radar),
-        ais_reports=pl.from_arrow(ais),
-        truth=pl.from_arrow(truth) if truth.num_rows else None,
-    )
-
-
-def maritime_unit(warehouse: Path, cfg: Config, start_ns: int, end_ns: int) -> dict:
-    """Maritime family: radar + AIS association, fusion, identification, scoring."""
-    inputs = read_inputs(warehouse, cfg, start_ns, end_ns)
-    return batch_window(inputs, start_ns=start_ns, end_ns=end_ns, cfg=cfg)
-
-
-MARITIME = BatchFamily("maritime", DERIVED_TABLES + AUDIT_TABLES, maritime_unit, stitch=True)
-
-# airfield surface surveillance (jobs/batch_airfield.py; built here: BatchFamily lives here)
-AIRFIELD = BatchFamily("airfield", AIRFIELD_OUTPUTS, airfield_unit, unit_s=AIRFIELD_UNIT_S)
-
-# forecasts across data gaps (jobs/batch_gaps.py): one unit per window (filter continuity)
-GAPS = BatchFamily("gaps", GAPS_OUTPUTS, gaps_unit, unit_s=None)
-
-# Every family the batch runs; each family adds its own line.
-NAV = BatchFamily("nav", NAV_OUTPUTS, nav_unit, unit_s=None)
-FAMILIES: tuple[BatchFamily, ...] = (MARITIME, AIRFIELD, GAPS, NAV)
-
-
-def family(name: str) -> BatchFamily:
-    return next(f for f in FAMILIES if f.name == name)
+def read_inputs(fam: Family, warehouse: Path, cfg: Config, window: Window
+                ) -> dict[str, pl.DataFrame]:
+    """The tables ``fam``'s stage declares, each over its own span around ``window``."""
+    out = {}
+    for spec in fam.inputs(cfg):
+        columns = list(spec.columns) if spec.columns else None
+        if spec.whole_table:
+            table = read_table(warehouse, spec.table, columns=columns)
+        else:
+            lo, hi = spec.span_ns(window)
+            table = read_table(warehouse, spec.table, start_ns=lo, end_ns=hi, columns=columns)
+        out[spec.table] = pl.from_arrow(table)
+    return out
 
 
 @dataclass(frozen=True)
@@ -240,7 +101,8 @@ class UnitManifest:
 def run_unit(unit: BatchUnit) -> UnitManifest:
     """Worker: read, compute, stage."""
     fam = family(unit.family)
-    out = fam.compute_unit(Path(unit.warehouse), unit.cfg, unit.start_ns, unit.end_ns)
+    window = Window(unit.start_ns, unit.end_ns)
+    out = fam.stage(read_inputs(fam, Path(unit.warehouse), unit.cfg, window), window, unit.cfg)
     unknown = set(out) - set(fam.outputs) - {"rejects"}
     if unknown:
         raise ValueError(f"family {fam.name} returned tables it does not own: {unknown}")
@@ -324,9 +186,10 @@ def _commit(warehouse: Path, manifests: list[UnitManifest], summary: BatchSummar
         ours = sorted((m for m in manifests if m.family == fam.name), key=lambda m: m.start_ns)
         parts = {name: [pl.read_parquet(m.files[name]) for m in ours if name in m.files]
                  for name in fam.outputs}
-        mapping = stitch_track_ids(parts.get("associations", [])) if fam.stitch else {}
+        if fam.join_units is not None:
+            parts = fam.join_units(parts)
         for name in fam.outputs:
-            frames = [relabel(p, mapping) for p in parts[name]]
+            frames = parts[name]
             table = tables.conform(name, pl.concat(frames) if frames else tables.empty(name))
             replace_window(
                 warehouse, name, table, start_ns=summary.start_ns, end_ns=summary.end_ns

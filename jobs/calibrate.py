@@ -1,23 +1,32 @@
-"""`surveil calibrate-radars --from --to`: estimate each radar's registration bias (range,
-azimuth / north alignment, time offset) from the AIS reports of cooperative ships in a
-window (e.g. a night), write it to the ``radar_bias_by_site`` table (one atomic commit
-replacing the window) and print the ``[radar_bias.correction]`` lines to configure.
-See pipeline/bias.py for the model."""
+"""Calibration jobs: read a window, fit, commit the fit (one atomic commit replacing the
+window), rebuild the views.
+
+- ``surveil calibrate-radars --from --to``: each radar's registration bias (range,
+  azimuth / north alignment, time offset) from the AIS reports of cooperative ships
+  (``radar_bias_by_site``); prints the ``[radar_bias.correction]`` lines to configure.
+  Model: pipeline/maritime/bias.py.
+- ``surveil calibrate --from --to``: each airfield sensor's coloured-error AR models
+  against the reference channel (``sensor_error_models``, predicate on
+  ``fit_start_ns``). Model: pipeline/airfield/calibrate.py.
+"""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import polars as pl
 
 from jobs.common import UsageError, iso
 from pipeline import tables
-from pipeline.bias import correction_toml, estimate_biases, radar_bias_config
+from pipeline.airfield.config import airfield_config
+from pipeline.airfield.stage import calibration
 from pipeline.config import Config
+from pipeline.maritime.bias import correction_toml, estimate_biases
+from pipeline.maritime.config import radar_bias_config
+from pipeline.units import NS
 from pipeline.warehouse.delta import read_table, replace_window
 from pipeline.warehouse.views import rebuild_views_file
-
-NS = 1_000_000_000
 
 
 def run_calibration(cfg: Config, warehouse: Path, *, start_ns: int, end_ns: int) -> pl.DataFrame:
@@ -55,3 +64,42 @@ def render(est: pl.DataFrame) -> str:
         ]
     lines += ["", "# to apply in batch: [radar_bias] apply = true, and", correction_toml(est)]
     return "\n".join(lines)
+
+
+@dataclass
+class CalibrateSummary:
+    start_ns: int
+    end_ns: int
+    rows: int
+    fits: dict[str, str]
+
+    def render(self) -> str:
+        lines = [f"sensor_error_models: {self.rows} rows for fit window "
+                 f"[{self.start_ns}, {self.end_ns})"]
+        lines += [f"  {k:<18} {v}" for k, v in sorted(self.fits.items())]
+        return "\n".join(lines)
+
+
+def run_calibrate(cfg: Config, warehouse: Path, *, start_ns: int, end_ns: int,
+                  max_order: int = 4, min_speed_mps: float = 0.0) -> CalibrateSummary:
+    """Fit and store every configured airfield sensor's error models for the window."""
+    acfg = airfield_config(cfg)
+    obs = pl.from_arrow(read_table(warehouse, "airfield_obs", start_ns=start_ns, end_ns=end_ns))
+    truth = pl.from_arrow(read_table(warehouse, "airfield_truth", start_ns=start_ns,
+                                     end_ns=end_ns))
+    if obs.height == 0:
+        raise UsageError("no airfield_obs rows in the window: ingest the archive first")
+    if truth.height == 0:
+        raise UsageError("no airfield_truth rows in the window: calibrate needs a reference "
+                         "(simulated truth, or DGNSS reference vehicles on the truth channel)")
+    rows, fits = calibration(obs, truth, acfg, start_ns=start_ns, end_ns=end_ns,
+                             max_order=max_order, min_speed_mps=min_speed_mps)
+    if rows.height == 0:
+        raise UsageError("too few matched reports in the window to fit any error model")
+    table = tables.conform("sensor_error_models", rows)
+    replace_window(warehouse, "sensor_error_models", table, start_ns=start_ns, end_ns=end_ns)
+    rebuild_views_file(warehouse)
+    desc = {k: f"AR({f.model.order}) on {f.n_rows} rows, BIC "
+               + ", ".join(f"{p}:{b:.0f}" for p, b in sorted(f.bic_by_order.items()))
+            for k, f in fits.items()}
+    return CalibrateSummary(start_ns, end_ns, table.num_rows, desc)

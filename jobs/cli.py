@@ -19,7 +19,8 @@ from jobs.common import (
     parse_time_ns,
     setup_logging,
 )
-from pipeline.config import Config, ConfigError, load_config
+from pipeline.config import Config, ConfigError
+from pipeline.families import load_config
 
 log = logging.getLogger("surveil")
 

@@ -17,7 +17,7 @@ import click
 def calibrate(st, from_, to, max_order, min_speed) -> None:
     """Fit each airfield sensor's coloured-error AR model against the reference channel
     (airfield paper eq. 2, 7, 8; order by BIC) into sensor_error_models."""
-    from jobs.batch_airfield import run_calibrate
+    from jobs.calibrate import run_calibrate
     from jobs.cli import _window
 
     start, end = _window(from_, to, required=True)

@@ -56,9 +56,9 @@ def gaps_montecarlo(
     without the admissible-area constraint: share of true positions inside the 90%
     region, forecast errors, probability of the zone the ship actually reached."""
     from jobs.common import UsageError
-    from jobs.gaps_montecarlo import run_montecarlo, summarise
     from jobs.report import format_report
     from jobs.simulate import parse_duration
+    from pipeline.experiments.gaps_montecarlo import run_montecarlo, summarise
 
     try:
         duration_s = parse_duration(duration)

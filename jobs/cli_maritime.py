@@ -9,7 +9,7 @@ import click
 
 
 def _emit(result: dict, fmt: str) -> None:
-    from jobs.experiment import render
+    from pipeline.maritime.experiment import render
 
     click.echo(json.dumps(result, indent=2) if fmt == "json" else render(result))
 
@@ -34,7 +34,7 @@ def experiment() -> None:
 def identification(st, sigma, dx, dy, trials, seed, fmt) -> None:
     """Two stationary targets, two radars: probability of correct identification
     (two-radar identification paper), with its 95 % Monte Carlo interval."""
-    from jobs.experiment import identification_experiment
+    from pipeline.maritime.experiment import identification_experiment
 
     _emit(identification_experiment(st.cfg, sigma_m=sigma, dx_m=dx, dy_m=dy, trials=trials,
                                     seed=seed), fmt)
@@ -54,7 +54,7 @@ def identification(st, sigma, dx, dy, trials, seed, fmt) -> None:
 def velocity(st, sigma, dx, dy, speed, course_difference, trials, seed, fmt) -> None:
     """Moving targets: probability of correct identification with and without the
     reported velocities."""
-    from jobs.experiment import velocity_experiment
+    from pipeline.maritime.experiment import velocity_experiment
 
     _emit(velocity_experiment(st.cfg, sigma_m=sigma, dx_m=dx, dy_m=dy, speed_mps=speed,
                               course_difference_deg=course_difference, trials=trials,

@@ -9,6 +9,10 @@ import logging
 import sys
 from datetime import UTC, datetime
 
+from pipeline.errors import UsageError
+
+__all__ = ["UsageError"]
+
 EXIT_OK = 0
 EXIT_UNITS_FAILED = 1
 EXIT_USAGE = 2
@@ -41,10 +45,6 @@ def keep_freed_memory() -> bool:
         mallopt(_M_MMAP_THRESHOLD, MMAP_THRESHOLD_BYTES)
         and mallopt(_M_TRIM_THRESHOLD, TRIM_THRESHOLD_BYTES)
     )
-
-
-class UsageError(ValueError):
-    """Bad arguments or inputs the user must fix (exit code 2)."""
 
 
 def parse_time_ns(text: str) -> int:

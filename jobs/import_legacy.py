@@ -2,7 +2,7 @@
 
 One work unit per input file, run in this process (files are small text logs; the work
 is file I/O plus column operations). Each input gives ``<out>/<file name>.mcap`` (see
-:mod:`pipeline.io.legacy_import` for the formats, channels and log-time sources).
+:mod:`pipeline.convert.legacy` for the formats, channels and log-time sources).
 
 Inputs: files are taken as given; directories are walked recursively and every file
 whose content is importable is taken (others are listed as skipped). Usage errors
@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from jobs.common import UsageError
-from pipeline.io.legacy_import import ImportedFile, detect_format, import_file, output_path
+from pipeline.convert.legacy import ImportedFile, detect_format, import_file, output_path
 
 
 @dataclass

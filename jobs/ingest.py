@@ -53,10 +53,11 @@ import pyarrow.compute as pc
 from jobs.common import UsageError, keep_freed_memory
 from pipeline.config import Config, ValidationConfig
 from pipeline.decode.registry import RAW_TABLES, FileDecoder, make_rejects
-from pipeline.executors import HASHER_NICE, Executor, UnitResult, helper_pool, make_executor
+from pipeline.executors import Executor, UnitResult, make_executor
 from pipeline.io.mcap_index import mcap_index_rows
 from pipeline.io.mcap_read import ReadStatus, read_mcap_batches
 from pipeline.tables import conform, empty, spec, table_specs
+from pipeline.threads import HASHER_NICE, helper_pool
 from pipeline.warehouse.delta import replace_source_file
 from pipeline.warehouse.ledger import file_fingerprint, ledger_entry, lookup, write_entry
 from pipeline.warehouse.staged import StagedFile, TableStager, commit_staged, read_staged

@@ -10,15 +10,14 @@ from collections.abc import Callable
 from pathlib import Path
 
 from jobs.common import UsageError
-from jobs.simulate_gaps import write_gaps_archive
 from pipeline.config import Config
-from pipeline.io.airfield_mcap import simulate_airfield_archive
-from pipeline.io.mcap_write import write_channel_archive
+from pipeline.simulate import DEFAULT_START_NS
+from pipeline.simulate.airfield_mcap import simulate_airfield_archive
 from pipeline.simulate.channel import simulate_channel
+from pipeline.simulate.channel_mcap import write_channel_archive
+from pipeline.simulate.gaps_mcap import write_gaps_archive
 from pipeline.simulate.ownship import simulate_ownship_archive
 
-NS = 1_000_000_000
-DEFAULT_START_NS = 1_768_435_200 * NS
 """2026-01-15T00:00:00Z, ns since the Unix epoch."""
 
 

@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import math
 import tomllib
-from collections.abc import Mapping
-from dataclasses import dataclass, field
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -42,21 +42,6 @@ class RadarSite:
     sigma_azimuth_rad: float
     sigma_speed_mps: float
     sigma_course_rad: float
-
-
-@dataclass(frozen=True)
-class SyncConfig:
-    sigma_dt_s: float = 0.1
-    epoch_period_s: float = 4.0
-
-
-@dataclass(frozen=True)
-class AssociationConfig:
-    gate_probability: float = 0.999
-    max_course_difference_rad: float = math.radians(30.0)
-    max_speed_difference_mps: float = 2.5
-    course_gate_min_speed_mps: float = 1.0
-    track_timeout_s: float = 30.0
 
 
 @dataclass(frozen=True)
@@ -101,23 +86,31 @@ class ExecutionConfig:
 class Config:
     region: RegionConfig
     radar_sites: tuple[RadarSite, ...]
-    sync: SyncConfig
-    association: AssociationConfig
     ais: AisConfig
     validation: ValidationConfig
     fairway_legs: tuple[FairwayLeg, ...]
-    max_cross_track_m: float
     sectors: tuple[Sector, ...]
     warehouse_path: str = "warehouse"
     execution: ExecutionConfig = field(default_factory=ExecutionConfig)
     source: str = ""
-    # The whole parsed TOML, for sensor-family sections (e.g. [ownship], [airfield])
-    # that their own modules parse into their own frozen dataclasses.
+    # The whole parsed TOML (raw), and each sensor family's section parsed into its own
+    # typed config object when the file loaded ({family name: object}).
     sections: Mapping[str, Any] = field(default_factory=dict, compare=False, repr=False)
+    families: Mapping[str, Any] = field(default_factory=dict, compare=False, repr=False)
 
     def section(self, name: str) -> Mapping[str, Any]:
-        """A family's raw TOML section (empty mapping when absent)."""
+        """A raw TOML section (empty mapping when absent)."""
         return self.sections.get(name, {})
+
+    def family(self, name: str) -> Any:
+        """The typed config of sensor family ``name``, parsed when the file loaded."""
+        try:
+            return self.families[name]
+        except KeyError:
+            raise ConfigError(
+                f"config {self.source or '(in memory)'} was loaded without the {name!r} "
+                "family: load it with pipeline.families.load_config"
+            ) from None
 
     def site(self, site_id: str) -> RadarSite:
         for s in self.radar_sites:
@@ -129,8 +122,18 @@ class Config:
 DEFAULT_CONFIG_PATH = resource_path("config") / "surveil.toml"
 
 
-def load_config(path: str | Path | None = None) -> Config:
-    """Load and validate a TOML config; ``None`` loads the shipped default."""
+FamilyParser = Callable[[Mapping[str, Any], "Config"], Any]
+"""(the whole TOML document, the core config) -> a family's typed config."""
+
+
+def load_config(
+    path: str | Path | None = None, families: Mapping[str, FamilyParser] | None = None
+) -> Config:
+    """Load and validate a TOML config; ``None`` loads the shipped default.
+
+    ``families`` maps a family name to its parser; every family's sections are parsed
+    here, so a bad value fails the load, not a later work unit.
+    ``pipeline.families.load_config`` passes every registered family."""
     p = Path(path) if path is not None else DEFAULT_CONFIG_PATH
     try:
         raw = tomllib.loads(p.read_text())
@@ -138,10 +141,26 @@ def load_config(path: str | Path | None = None) -> Config:
         raise ConfigError(f"config file not found: {p}") from exc
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"config file {p} is not valid TOML: {exc}") from exc
+    return config_from_mapping(raw, str(p), families)
+
+
+def config_from_mapping(
+    raw: Mapping[str, Any], source: str, families: Mapping[str, FamilyParser] | None = None
+) -> Config:
+    """Validate an already parsed TOML document (see :func:`load_config`)."""
     try:
-        return _parse(raw, str(p))
+        core = _parse(dict(raw), source)
     except (KeyError, TypeError, ValueError) as exc:
-        raise ConfigError(f"config file {p}: {exc!r}") from exc
+        raise ConfigError(f"config file {source}: {exc!r}") from exc
+    parsed = {}
+    for name, parse in (families or {}).items():
+        try:
+            parsed[name] = parse(raw, core)
+        except ConfigError:
+            raise
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ConfigError(f"config file {source} ({name} family): {exc!r}") from exc
+    return replace(core, families=parsed)
 
 
 def _parse(raw: dict, source: str) -> Config:
@@ -164,14 +183,6 @@ def _parse(raw: dict, source: str) -> Config:
     )
     if len({s.site_id for s in sites}) != len(sites):
         raise ValueError("radar site ids must be unique")
-    a = raw.get("association", {})
-    assoc = AssociationConfig(
-        gate_probability=a.get("gate_probability", 0.999),
-        max_course_difference_rad=math.radians(a.get("max_course_difference_deg", 30.0)),
-        max_speed_difference_mps=a.get("max_speed_difference_mps", 2.5),
-        course_gate_min_speed_mps=a.get("course_gate_min_speed_mps", 1.0),
-        track_timeout_s=a.get("track_timeout_s", 30.0),
-    )
     legs = tuple(
         FairwayLeg(
             leg_id=leg["leg_id"],
@@ -192,12 +203,9 @@ def _parse(raw: dict, source: str) -> Config:
     return Config(
         region=region,
         radar_sites=sites,
-        sync=SyncConfig(**raw.get("sync", {})),
-        association=assoc,
         ais=AisConfig(**raw.get("ais", {})),
         validation=ValidationConfig(**raw.get("validation", {})),
         fairway_legs=legs,
-        max_cross_track_m=raw.get("fairway", {}).get("max_cross_track_m", 2000.0),
         sectors=sectors,
         warehouse_path=raw.get("warehouse", {}).get("path", "warehouse"),
         execution=ExecutionConfig(**raw.get("execution", {})),

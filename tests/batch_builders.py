@@ -14,8 +14,9 @@ import polars as pl
 
 from pipeline import frames
 from pipeline.config import Config, RadarSite
+from pipeline.maritime.config import maritime_config
+from pipeline.units import NS
 
-NS = 1_000_000_000
 T0_NS = 1_768_435_200 * NS  # 2026-01-15T00:00:00Z
 TWO_PI = 2.0 * np.pi
 
@@ -195,9 +196,10 @@ def ais_reports(ships: list[Ship], cfg: Config, rng: np.random.Generator, *,
 
 def epochs_for(duration_s: float, cfg: Config) -> np.ndarray:
     """Epoch grid covering the run, starting once every radar has a full scan."""
-    from pipeline.sync import epoch_grid
+    from pipeline.maritime.sync import epoch_grid
 
-    return epoch_grid(T0_NS + 10 * NS, T0_NS + int(duration_s * NS), cfg.sync.epoch_period_s)
+    period_s = maritime_config(cfg).sync.epoch_period_s
+    return epoch_grid(T0_NS + 10 * NS, T0_NS + int(duration_s * NS), period_s)
 
 
 def vessel_of(local_track_id: pl.Expr) -> pl.Expr:
@@ -224,13 +226,13 @@ class Chain:
 
 def run_chain(ships: list[Ship], cfg: Config, seed: int, duration_s: float) -> Chain:
     """align -> sync -> associate -> fuse -> geometry -> identify -> score."""
-    from pipeline.align import align_reports
-    from pipeline.associate.identity import identify
-    from pipeline.associate.track_to_track import associate_tracks
-    from pipeline.fuse import fuse
     from pipeline.geometry import add_geodetic, assign_sectors, cross_track
-    from pipeline.score import score_tracks
-    from pipeline.sync import synchronise
+    from pipeline.maritime.align import align_reports
+    from pipeline.maritime.associate import associate_tracks
+    from pipeline.maritime.fuse import fuse
+    from pipeline.maritime.identity import identify
+    from pipeline.maritime.score import score_tracks
+    from pipeline.maritime.sync import synchronise
 
     rng = np.random.default_rng(seed)
     radar = radar_reports(ships, cfg, rng, duration_s=duration_s,
@@ -238,12 +240,13 @@ def run_chain(ships: list[Ship], cfg: Config, seed: int, duration_s: float) -> C
     truth = truth_table(ships, cfg, duration_s=duration_s)
     ais = ais_reports(ships, cfg, rng, duration_s=duration_s)
     aligned, _ = align_reports(radar, cfg)
-    synced = synchronise(aligned, epochs_ns=epochs_for(duration_s, cfg), sync=cfg.sync)
-    associated = associate_tracks(synced, cfg=cfg.association, id_base=1_000)
+    sync = maritime_config(cfg).sync
+    synced = synchronise(aligned, epochs_ns=epochs_for(duration_s, cfg), sync=sync)
+    associated = associate_tracks(synced, cfg=maritime_config(cfg).association, id_base=1_000)
     fused = fuse(associated)
     fused = add_geodetic(fused, cfg.region)
     fused = assign_sectors(fused, cfg.sectors, cfg.region)
-    fused = cross_track(fused, cfg.fairway_legs, cfg.region, cfg.max_cross_track_m)
+    fused = cross_track(fused, cfg.fairway_legs, cfg.region, maritime_config(cfg).max_cross_track_m)
     identifications, fused = identify(fused, ais, cfg=cfg.ais, region=cfg.region)
     associated = assign_sectors(associated, cfg.sectors, cfg.region)
     errors = score_tracks(fused, associated, truth=truth, ais_reports=ais, region=cfg.region,

@@ -9,10 +9,11 @@ from pathlib import Path
 
 import pytest
 
-from pipeline.config import Config, load_config
+from pipeline.config import Config
+from pipeline.families import load_config
+from pipeline.units import NS
 
 REAL_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "real"
-NS = 1_000_000_000
 # 00:50 -> 01:10: two archive files and two batch units across the hour boundary
 E2E_START_NS = 1_768_438_200 * NS  # 2026-01-15T00:50:00Z
 E2E_DURATION_S = 1200.0

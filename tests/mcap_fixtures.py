@@ -17,10 +17,11 @@ from mcap.writer import CompressionType, Writer
 
 from pipeline.resources import resource_path
 from pipeline.tables import conform
+from pipeline.units import NS
 
 T0_NS = 1_767_225_600 * 10**9  # 2026-01-01T00:00:00Z
 T0 = T0_NS
-NS = 10**9
+
 DAY = 86_400 * NS
 RADAR_SCHEMA = "surveil.RadarTrackReport"
 TRUTH_SCHEMA = "surveil.TruthState"

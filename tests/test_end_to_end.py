@@ -5,6 +5,7 @@ from __future__ import annotations
 import polars as pl
 
 from jobs.report import run_named_report
+from pipeline.maritime.config import maritime_config
 from pipeline.warehouse.delta import read_table
 
 
@@ -57,7 +58,7 @@ def test_system_track_ids_are_stable(e2e):
     st = pl.from_arrow(read_table(e2e.warehouse, "system_tracks"))
     # a ship followed for the whole window keeps one id: long tracks dominate
     life = st.group_by("system_track_id").agg(pl.len().alias("n"))
-    assert life["n"].max() * e2e.cfg.sync.epoch_period_s > 600
+    assert life["n"].max() * maritime_config(e2e.cfg).sync.epoch_period_s > 600
 
 
 def test_ships_without_ais_rarely_get_an_mmsi(e2e):

@@ -7,7 +7,8 @@ import polars as pl
 import pytest
 
 from pipeline import frames
-from pipeline.config import Config, FairwayLeg, Sector, load_config
+from pipeline.config import Config, FairwayLeg, Sector
+from pipeline.families import load_config
 from pipeline.geometry import (
     add_geodetic,
     assign_sectors,

@@ -26,8 +26,8 @@ from pipeline.airfield.config import AirfieldConfig
 from pipeline.airfield.fusion import ChannelModels, config_models
 from pipeline.airfield.score import reference_frame
 from pipeline.filters.ar_errors import VarFit, VarModel, select_order
+from pipeline.units import NS
 
-NS = 1_000_000_000
 MAX_ORDER = 4
 
 

@@ -249,11 +249,15 @@ def parse_airfield(section: Mapping[str, Any]) -> AirfieldConfig:
 
 
 def airfield_config(cfg: Config) -> AirfieldConfig:
-    """The parsed ``[airfield]`` section of ``cfg``; ConfigError when absent or invalid."""
-    section = cfg.section("airfield")
-    if not section:
+    """The parsed ``[airfield]`` section of ``cfg``; ConfigError when the file has none."""
+    acfg = cfg.family("airfield")
+    if acfg is None:
         raise ConfigError(f"config {cfg.source or ''} has no [airfield] section")
-    try:
-        return parse_airfield(section)
-    except (KeyError, TypeError, ValueError) as exc:
-        raise ConfigError(f"config {cfg.source or ''} [airfield]: {exc!r}") from exc
+    return acfg
+
+
+def parse_airfield_section(raw: Mapping[str, Any], core: Config | None = None
+                           ) -> AirfieldConfig | None:
+    """The ``[airfield]`` section parsed, or None when the file has none (the airfield
+    family then writes nothing)."""
+    return parse_airfield(raw) if raw else None

@@ -25,8 +25,8 @@ import polars as pl
 import shapely
 
 from pipeline.airfield.config import AirfieldConfig, AirfieldSector
+from pipeline.decode import asterix_encode as cat010
 from pipeline.frames import enu_to_geodetic, geodetic_to_enu, polar_to_enu, site_rotation_rad
-from pipeline.io import asterix_encode as cat010
 
 R_FLOOR_M2 = 1e-4
 """Smallest white variance we model (keeps S invertible for mm-resolution channels)."""

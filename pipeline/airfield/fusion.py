@@ -13,7 +13,7 @@ Per epoch k (Δt = ``filter.epoch_s``; a report belongs to the epoch nearest its
    is back; every target it left gets an ``outage`` check with η = 1;
 4. every report of a target older than ``warmup_s`` is checked on the prior: ξ (eq. 21)
    against (d1, d2) (eq. 22) gives η (eq. 23); the exclusion rule of
-   :mod:`pipeline.integrity` excludes and readmits the channel for that target;
+   :mod:`pipeline.filters.integrity` excludes and readmits the channel for that target;
 5. the channels in use update the target one after another (equivalent to the joint
    update of eq. 19: their white noises are independent).
 
@@ -33,10 +33,10 @@ from pipeline.airfield.config import AirfieldConfig, IntegrityConfig
 from pipeline.airfield.frames import assign_areas
 from pipeline.filters import airfield_kf as kf
 from pipeline.filters.ar_errors import VarModel
+from pipeline.filters.integrity import chi2_thresholds, eta, nis, step_exclusion
 from pipeline.frames import enu_to_geodetic
-from pipeline.integrity import chi2_thresholds, eta, nis, step_exclusion
+from pipeline.units import NS
 
-NS = 1_000_000_000
 CHECK_NONE, CHECK_NIS, CHECK_BIRTH, CHECK_OUTAGE = 0, 1, 2, 3
 CHECK_NAMES = np.array(["", "nis", "birth", "outage"], dtype=object)
 SIGMA_P0_M = 100.0

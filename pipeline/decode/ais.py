@@ -51,8 +51,8 @@ from pyais.messages import MSG_CLASS, AISSentence, NMEASentenceFactory
 
 from pipeline.decode.registry import make_rejects
 from pipeline.tables import conform, empty, schema
+from pipeline.units import KNOT_MPS
 
-KNOT_MPS = 1852.0 / 3600.0
 DEG = math.pi / 180.0
 POSITION_TYPES = frozenset({1, 2, 3, 18, 19, 27})
 STATIC_TYPES = frozenset({5, 19, 24})

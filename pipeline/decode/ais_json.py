@@ -36,8 +36,8 @@ import pyarrow as pa
 
 from pipeline.decode.registry import make_rejects
 from pipeline.tables import conform, empty
+from pipeline.units import KNOT_MPS
 
-KNOT_MPS = 1852.0 / 3600.0
 DEG = math.pi / 180.0
 MAX_SPEED_MPS = 40.0
 NOT_VESSEL_MSG_ID = {"base station": 4, "aton": 21, "sar airborne": 9}

@@ -84,10 +84,9 @@ import pyarrow as pa
 from pipeline.decode.registry import make_rejects
 from pipeline.io.mcap_read import ChannelBatch
 from pipeline.tables import conform, empty
+from pipeline.units import NM_M, NS
 
-NS = 1_000_000_000
 DAY_NS = 86_400 * NS
-NM_M = 1852.0
 KT_MPS = NM_M / 3600.0
 TARGET_CATEGORIES = frozenset({10, 20, 21, 48, 62})
 SERVICE_CATEGORIES = frozenset({34, 65})

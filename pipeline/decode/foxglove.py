@@ -43,8 +43,7 @@ import pyarrow as pa
 from pipeline.decode.registry import make_rejects
 from pipeline.io.mcap_read import ChannelBatch
 from pipeline.tables import conform, empty
-
-NS = 1_000_000_000
+from pipeline.units import NS
 
 
 @dataclass

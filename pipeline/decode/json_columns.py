@@ -20,7 +20,7 @@ import numpy as np
 import polars as pl
 import pyarrow as pa
 
-from pipeline.executors import SECOND_PARSER_NICE, helper_pool
+from pipeline.threads import SECOND_PARSER_NICE, helper_pool
 
 try:
     from pipeline.decode import _json_columns

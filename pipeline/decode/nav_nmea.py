@@ -41,9 +41,9 @@ from collections.abc import Callable
 import numpy as np
 import polars as pl
 
-KNOT_MPS = 1852.0 / 3600.0
+from pipeline.units import KNOT_MPS, NM_M
+
 KMH_MPS = 1.0 / 3.6
-NM_M = 1852.0
 SM_M = 1609.344
 DEG = math.pi / 180.0
 _DIST_M = {"N": NM_M, "K": 1000.0, "S": SM_M}

@@ -65,8 +65,8 @@ import pyarrow as pa
 
 from pipeline.decode.registry import make_rejects
 from pipeline.tables import conform, empty
+from pipeline.units import NS
 
-NS = 1_000_000_000
 DAY_NS = 86_400 * NS
 AIS_FORMATTERS = frozenset({"VDM", "VDO"})
 NAV_TABLES = ("nav_gnss", "nav_heading", "nav_speed_log", "arpa_targets", "arpa_own_ship")

@@ -24,8 +24,7 @@ from mcap.records import Schema
 from pipeline.decode.foxglove import FixColumns, FixContext, fix_table, platform_of
 from pipeline.decode.registry import make_rejects
 from pipeline.io.mcap_read import ChannelBatch
-
-NS = 1_000_000_000
+from pipeline.units import NS
 
 
 def protobuf_decoder(schema_name: str, schema_data: bytes) -> Callable[[bytes], Any]:

@@ -62,8 +62,8 @@ from pipeline.decode.foxglove import FixColumns, FixContext, fix_table, platform
 from pipeline.decode.registry import make_rejects
 from pipeline.io.mcap_read import ChannelBatch
 from pipeline.tables import conform, empty
+from pipeline.units import NS
 
-NS = 1_000_000_000
 NAVSATFIX = "sensor_msgs/msg/NavSatFix"
 IMU = "sensor_msgs/msg/Imu"
 SENTENCE = "nmea_msgs/msg/Sentence"

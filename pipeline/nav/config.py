@@ -11,7 +11,41 @@ from typing import Any
 from pipeline.config import Config, ConfigError
 from pipeline.filters.current_log import CurrentLogSettings
 from pipeline.filters.gyro_gnss_log import FilterSettings, GyroModel, NavFilterModel, RollModel
-from pipeline.simulate.ownship import OwnshipScenarioConfig
+
+
+@dataclass(frozen=True)
+class OwnshipScenarioConfig:
+    """Scenario parameters (SI units; degrees only in the ``_deg`` names)."""
+
+    platform_id: str = "ownship"
+    start_lat_deg: float = 46.30
+    start_lon_deg: float = 30.70
+    initial_heading_rad: float = math.radians(90.0)  # east: the paper gives no heading
+    accel_mps2: float = 0.05  # paper eq. 5
+    max_speed_mps: float = 9.0
+    turn_start_s: float = 900.0  # minute 15
+    turn_duration_s: float = 240.0  # a full turn by minute 19
+    turn_direction: int = 1  # +1 to starboard
+    truth_step_s: float = 0.1
+    sample_period_s: float = 1.0
+    gnss_lat_sigma_deg: float = 2.9e-5  # paper eq. 4
+    gnss_position_tau_s: float = 60.0
+    gnss_speed_sigma_mps: float = 0.053  # paper eq. 4
+    gnss_velocity_tau_s: float = 15.0
+    outages_s: tuple[tuple[float, float], ...] = ((960.0, 30.0), (1320.0, 120.0))
+    outlier_count: int = 6
+    outlier_position_m: tuple[float, float] = (40.0, 150.0)
+    outlier_velocity_mps: tuple[float, float] = (1.0, 3.0)
+    log_sigma_mps: float = 0.5
+    log_bias_mps: float = 0.2
+    current_speed_mps: float = 0.3
+    current_set_rad: float = math.radians(120.0)  # direction the current flows to
+    heading_resolution_deg: float = 0.01
+    accelerometer_sigma_rad: float = 1e-4
+    amplifier_sigma_rad: float = 1e-5
+    initial_gyro_error_sigma_rad: float = math.radians(0.5)
+    gyro: GyroModel = field(default_factory=GyroModel)
+    roll: RollModel = field(default_factory=RollModel)
 
 
 @dataclass(frozen=True)
@@ -44,8 +78,12 @@ def _f(raw: Mapping[str, Any], key: str, default: float) -> float:
 
 
 def ownship_config(cfg: Config) -> OwnshipConfig:
-    """Parse ``cfg.section("ownship")`` (defaults for anything absent)."""
-    raw = cfg.section("ownship")
+    """The nav family's config (``[ownship]``), parsed when ``cfg`` was loaded."""
+    return cfg.family("nav")
+
+
+def parse_ownship(raw: Mapping[str, Any], core: Config | None = None) -> OwnshipConfig:
+    """Parse the ``[ownship]`` section (defaults for anything absent)."""
     d = OwnshipConfig()
     nav = NavSettings(
         filter_step_s=_f(raw, "filter_step_s", d.nav.filter_step_s),

@@ -55,8 +55,6 @@ import polars as pl
 
 from pipeline import frames
 
-NS = 1_000_000_000
-
 
 @dataclass(frozen=True)
 class DrSettings:

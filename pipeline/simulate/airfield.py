@@ -63,12 +63,11 @@ import numpy as np
 import polars as pl
 
 from pipeline.airfield.config import AirfieldConfig, FaultConfig, SensorConfig
+from pipeline.decode import asterix_encode as cat010
 from pipeline.filters.ar_errors import VarModel, simulate_var, stationary_covariance
 from pipeline.frames import enu_to_geodetic, enu_to_polar, geodetic_to_enu, site_rotation_rad
-from pipeline.io import asterix_encode as cat010
 from pipeline.simulate.channel import Route, build_route
-
-NS = 1_000_000_000
+from pipeline.units import NS
 
 # --- layout (m from the reference point) ---------------------------------------------
 RUNWAY_WEST_X = -1500.0

@@ -41,7 +41,8 @@ import numpy as np
 import polars as pl
 from pyais import encode_dict
 
-KNOT_MPS = 1852.0 / 3600.0
+from pipeline.units import KNOT_MPS
+
 """One knot in m/s."""
 
 CLASS_A_STATIC_INTERVAL_S = 360.0

@@ -53,7 +53,7 @@ it with time = that sweep time, published at the end of the scan (log time):
 - the trackers run for 60 s before the start on the ships already under way (not
   archived), so the log opens, like a cut from a continuous archive, with confirmed
   tracks; ships that arrive later start with "new" tracks.
-- registration bias (``[radar_bias.simulate]``, see :mod:`pipeline.bias`; none by
+- registration bias (``[radar_bias.simulate]``, see :mod:`pipeline.maritime.bias`; none by
   default): the site's range_bias_m is added to every range, azimuth_bias_deg to every
   azimuth and course (a misaligned antenna encoder), and time_offset_s to every report
   time (a clock offset; the log time is the recorder's and is not shifted).
@@ -73,7 +73,6 @@ import numpy as np
 import polars as pl
 from scipy.special import ndtr
 
-from pipeline.bias import SiteBias, radar_bias_config
 from pipeline.config import Config, RadarSite
 from pipeline.decode.radar import RADAR_FIELDS
 from pipeline.frames import (
@@ -84,9 +83,9 @@ from pipeline.frames import (
     polar_to_enu,
     wrap_angle,
 )
+from pipeline.maritime.config import SiteBias, radar_bias_config
 from pipeline.simulate.ais_traffic import AisStation, StateFn, draw_identity, simulate_ais
-
-NS = 1_000_000_000
+from pipeline.units import NS
 
 # --- traffic -----------------------------------------------------------------------
 N_INITIAL_PER_DIRECTION = 11

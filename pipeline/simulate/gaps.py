@@ -55,8 +55,8 @@ from pipeline.simulate.channel import (
     convergence_rad,
     offset_polyline,
 )
+from pipeline.units import NS
 
-NS = 1_000_000_000
 N_SHIPS = 16
 SPEED_RANGE_MPS = (3.0, 8.0)
 LATERAL_OFFSET_RANGE_M = (50.0, 250.0)

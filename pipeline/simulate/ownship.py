@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
 
@@ -44,48 +44,13 @@ from pipeline import frames
 from pipeline.filters import kalman
 from pipeline.filters.gyro_gnss_log import EARTH_RATE_RADPS, G_MPS2, GyroModel, RollModel
 from pipeline.io.mcap_write import write_mcap_file
+from pipeline.nav.config import OwnshipScenarioConfig
 from pipeline.resources import resource_path
+from pipeline.units import KNOT_MPS, NS
 
-NS = 1_000_000_000
-KNOT_MPS = 1852.0 / 3600.0
 GYRO_SIGNALS_SCHEMA = "surveil.GyroSignals"
 OWNSHIP_TRUTH_SCHEMA = "surveil.OwnshipTruth"
 MCAP_LIBRARY = "surveil-pipeline/ownship"
-
-
-@dataclass(frozen=True)
-class OwnshipScenarioConfig:
-    """Scenario parameters (SI units; degrees only in the ``_deg`` names)."""
-
-    platform_id: str = "ownship"
-    start_lat_deg: float = 46.30
-    start_lon_deg: float = 30.70
-    initial_heading_rad: float = math.radians(90.0)  # east: the paper gives no heading
-    accel_mps2: float = 0.05  # paper eq. 5
-    max_speed_mps: float = 9.0
-    turn_start_s: float = 900.0  # minute 15
-    turn_duration_s: float = 240.0  # a full turn by minute 19
-    turn_direction: int = 1  # +1 to starboard
-    truth_step_s: float = 0.1
-    sample_period_s: float = 1.0
-    gnss_lat_sigma_deg: float = 2.9e-5  # paper eq. 4
-    gnss_position_tau_s: float = 60.0
-    gnss_speed_sigma_mps: float = 0.053  # paper eq. 4
-    gnss_velocity_tau_s: float = 15.0
-    outages_s: tuple[tuple[float, float], ...] = ((960.0, 30.0), (1320.0, 120.0))
-    outlier_count: int = 6
-    outlier_position_m: tuple[float, float] = (40.0, 150.0)
-    outlier_velocity_mps: tuple[float, float] = (1.0, 3.0)
-    log_sigma_mps: float = 0.5
-    log_bias_mps: float = 0.2
-    current_speed_mps: float = 0.3
-    current_set_rad: float = math.radians(120.0)  # direction the current flows to
-    heading_resolution_deg: float = 0.01
-    accelerometer_sigma_rad: float = 1e-4
-    amplifier_sigma_rad: float = 1e-5
-    initial_gyro_error_sigma_rad: float = math.radians(0.5)
-    gyro: GyroModel = field(default_factory=GyroModel)
-    roll: RollModel = field(default_factory=RollModel)
 
 
 @dataclass(frozen=True)

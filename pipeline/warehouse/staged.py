@@ -44,8 +44,8 @@ from deltalake import DeltaTable
 from deltalake import Schema as DeltaSchema
 from deltalake.transaction import AddAction, RemoveAction, create_table_with_add_actions
 
-from pipeline.executors import WRITER_NICE, helper_pool
 from pipeline.tables import conform, spec
+from pipeline.threads import WRITER_NICE, helper_pool
 from pipeline.warehouse.delta import replace_source_file, table_exists, table_path
 
 # 64 Ki rows: a file's last row group is encoded after its last chunk is decoded (~50 ms

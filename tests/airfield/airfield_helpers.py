@@ -6,8 +6,8 @@ import polars as pl
 
 from pipeline.airfield.config import AirfieldConfig, airfield_config
 from pipeline.config import Config
+from pipeline.units import NS
 
-NS = 1_000_000_000
 START_NS = 1_768_435_200 * NS  # 2026-01-15T00:00:00Z
 
 

@@ -4,7 +4,7 @@ test_airfield_fusion.py and test_airfield_calibrate.py).
     .venv/bin/pytest -m slow tests/airfield/test_airfield_acceptance.py -s
 
 prints the figures quoted in docs/airfield.md. Runs: 600 s airfield scenes with the
-compressed fault schedule of :func:`pipeline.airfield.evaluate.mc_faults` (SMR jamming
+compressed fault schedule of :func:`pipeline.experiments.airfield_montecarlo.mc_faults` (SMR jamming
 x10, MLAT bias 30 m, VASN dropout, SMR jamming + MLAT bias at once), seeds 1000-1099,
 exclusion on and off; 100 fault-free scenes, seeds 2000-2099; 30 calibrations of
 fault-free 1200 s scenes, seeds 3000-3029.
@@ -18,8 +18,12 @@ import pytest
 from airfield_helpers import START_NS, acfg
 
 from pipeline.airfield.calibrate import calibrate
-from pipeline.airfield.evaluate import mc_faults, monte_carlo_fault_free, monte_carlo_faults
 from pipeline.airfield.frames import sensor_rows, to_common_frame
+from pipeline.experiments.airfield_montecarlo import (
+    mc_faults,
+    monte_carlo_fault_free,
+    monte_carlo_faults,
+)
 from pipeline.simulate.airfield import simulate_airfield
 
 pytestmark = pytest.mark.slow

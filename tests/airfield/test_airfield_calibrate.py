@@ -12,8 +12,8 @@ from pipeline.airfield.calibrate import calibrate, model_from_rows, stored_model
 from pipeline.airfield.frames import sensor_rows, to_common_frame
 from pipeline.simulate.airfield import simulate_airfield
 from pipeline.tables import conform
+from pipeline.units import NS
 
-NS = 1_000_000_000
 Z_999 = 3.2905
 
 

@@ -10,18 +10,18 @@ import pytest
 from airfield_helpers import START_NS, acfg, seconds
 
 from pipeline.airfield.associate import associate
-from pipeline.airfield.evaluate import (
-    false_alarm_share,
-    fault_metrics,
-    mc_faults,
-    run_scenario,
-)
 from pipeline.airfield.frames import sensor_rows, to_common_frame
 from pipeline.airfield.fusion import (
     Grids,
     birth_outliers,
     config_models,
     fuse_airfield,
+)
+from pipeline.experiments.airfield_montecarlo import (
+    false_alarm_share,
+    fault_metrics,
+    mc_faults,
+    run_scenario,
 )
 from pipeline.filters import airfield_kf as kf
 from pipeline.simulate.airfield import simulate_airfield

@@ -12,15 +12,15 @@ from airfield_helpers import START_NS
 from mcap.reader import make_reader
 
 from jobs.batch import run_batch
-from jobs.batch_airfield import run_calibrate
+from jobs.calibrate import run_calibrate
 from jobs.common import UsageError
 from jobs.ingest import run_ingest
 from jobs.report import open_warehouse
 from jobs.simulate import run_simulate
 from pipeline.reports import run_report
+from pipeline.units import NS
 from pipeline.warehouse.delta import read_table
 
-NS = 1_000_000_000
 DURATION_S = 600.0
 CAL_END_NS = START_NS + 300 * NS
 END_NS = START_NS + int(DURATION_S * NS)

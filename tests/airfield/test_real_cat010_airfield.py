@@ -13,11 +13,11 @@ from conftest import real_data_dir
 
 from jobs.batch import run_batch
 from jobs.ingest import run_ingest
-from pipeline.io.asterix_import import wrap_asterix_file
+from pipeline.convert.asterix import wrap_asterix_file
+from pipeline.units import NS
 from pipeline.warehouse.delta import read_table
 
 pytestmark = pytest.mark.realdata
-NS = 1_000_000_000
 DAY = date(2026, 1, 15)
 DAY_NS = 1_768_435_200 * NS
 

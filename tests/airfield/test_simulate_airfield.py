@@ -13,8 +13,8 @@ from polars.testing import assert_frame_equal
 
 from pipeline.airfield.config import FaultConfig
 from pipeline.airfield.frames import assign_areas
+from pipeline.decode import asterix_encode as cat010
 from pipeline.filters.ar_errors import stationary_covariance
-from pipeline.io import asterix_encode as cat010
 from pipeline.simulate.airfield import Move, simulate_airfield, speed_profile
 
 DURATION_S = 600.0

@@ -10,8 +10,7 @@ import polars as pl
 from pipeline.decode.registry import CHANNEL_DECODERS, RAW_TABLES, decoder_kind
 from pipeline.decode.vasn import decode_airfield_truth, decode_vasn_reports
 from pipeline.tables import schema
-
-NS = 1_000_000_000
+from pipeline.units import NS
 
 
 def vasn(i: int, **over) -> bytes:

@@ -9,9 +9,10 @@ from functools import reduce
 import numpy as np
 
 from pipeline.decode.nmea import decode_nmea_sentences
+from pipeline.units import NS
 
 T0_NS = 1_767_225_600 * 10**9  # 2026-01-01T00:00:00Z
-NS = 10**9
+
 SRC, TOPIC, PLATFORM = "/arch/nav.mcap", "/nav/nmea", "ship-1"
 
 

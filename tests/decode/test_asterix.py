@@ -17,7 +17,8 @@ import pytest
 from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
 
-from pipeline.config import ValidationConfig, load_config
+from pipeline.config import ValidationConfig
+from pipeline.convert.asterix import wrap_asterix_file
 from pipeline.decode.asterix import (
     DAY_NS,
     AsterixChannelDecoder,
@@ -26,10 +27,10 @@ from pipeline.decode.asterix import (
     tod_to_time_ns,
 )
 from pipeline.decode.registry import FileDecoder, decoder_kind
-from pipeline.io.asterix_import import wrap_asterix_file
+from pipeline.families import load_config
 from pipeline.io.mcap_read import ChannelBatch, read_mcap_batches
+from pipeline.units import NS
 
-NS = 1_000_000_000
 T0 = int(datetime(2026, 3, 1, 10, 0, tzinfo=UTC).timestamp()) * NS  # 10:00 UTC
 REAL = Path(__file__).resolve().parents[3] / "shared" / "data" / "real" / "asterix"
 
@@ -426,9 +427,9 @@ def test_cat010_decode_rate():
 
 
 def test_airfield_simulator_encoder_round_trips():
-    """The airfield issue's CAT010 encoder (pipeline/io/asterix_encode.py) decodes here to
+    """The airfield issue's CAT010 encoder (pipeline/decode/asterix_encode.py) decodes here to
     the values it quantised: both sides follow CAT010 ed 1.1."""
-    enc = pytest.importorskip("pipeline.io.asterix_encode")
+    enc = pytest.importorskip("pipeline.decode.asterix_encode")
     n = 6
     t = T0 + np.arange(n, dtype=np.int64) * NS // 2
     common = {"time_ns": t, "track_number": np.arange(n) + 100,

@@ -9,8 +9,8 @@ import pytest
 
 from pipeline.decode.foxglove import FixContext, decode_location_fix_json
 from pipeline.decode.registry import decoder_kind
+from pipeline.units import NS
 
-NS = 1_000_000_000
 T0 = 1_772_359_200 * NS
 CTX = FixContext("f.mcap", "/gps", "vessel1", "LocationFix")
 

@@ -1026,7 +1026,7 @@ def test_simulated_archive_ingests_the_same_without_the_extension(tmp_path, monk
     runs; forced here) give the same warehouse rows."""
     from jobs.ingest import run_ingest
     from jobs.simulate import run_simulate
-    from pipeline.config import load_config
+    from pipeline.families import load_config
     from pipeline.warehouse.delta import read_table
 
     cfg = load_config()

@@ -11,11 +11,11 @@ from mcap.writer import Writer
 from pipeline.config import ValidationConfig
 from pipeline.decode.registry import FileDecoder, decoder_kind
 from pipeline.io.mcap_read import read_mcap_batches
+from pipeline.units import NS
 
 fsp = pytest.importorskip("foxglove_schemas_protobuf.LocationFix_pb2")
 mcap_pb = pytest.importorskip("mcap_protobuf.writer")
 
-NS = 1_000_000_000
 T0 = 1_772_359_200 * NS
 
 

@@ -27,8 +27,8 @@ from pipeline.decode.ros2 import (
     yaw_to_heading_rad,
 )
 from pipeline.io.mcap_read import ChannelBatch, read_mcap_batches
+from pipeline.units import NS
 
-NS = 1_000_000_000
 T0 = 1_772_359_200 * NS  # 2026-03-01T10:00:00Z
 SEP = "\n" + "=" * 80 + "\n"
 HEADER = "MSG: std_msgs/Header\nbuiltin_interfaces/Time stamp\nstring frame_id"
@@ -345,8 +345,8 @@ def test_navsatfix_decode_rates(tmp_path):
     from mcap_ros2._dynamic import serialize_dynamic
 
     from jobs.ingest import run_ingest
-    from pipeline.config import load_config
     from pipeline.decode.ros2 import Ros2ChannelDecoder
+    from pipeline.families import load_config
 
     name = "sensor_msgs/msg/NavSatFix"
     encode = serialize_dynamic(name, NAVSATFIX)[name]

@@ -8,7 +8,7 @@ import pytest
 
 from pipeline.filters import airfield_kf as kf
 from pipeline.filters.ar_errors import VarModel, stationary_covariance
-from pipeline.integrity import chi2_thresholds, eta, nis
+from pipeline.filters.integrity import chi2_thresholds, eta, nis
 
 POS = {
     "S": VarModel([[[1.30, 0.10], [-0.05, 1.20]], [[-0.45, -0.06], [0.04, -0.35]]],

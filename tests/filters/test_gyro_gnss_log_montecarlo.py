@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline.config import load_config
+from pipeline.families import load_config
 from pipeline.filters.gyro_gnss_log import FilterInputs, run_filter
 from pipeline.nav.config import ownship_config
 from pipeline.simulate.ownship import simulate_ownship

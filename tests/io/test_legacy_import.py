@@ -1,5 +1,5 @@
 """``surveil import``: NMEA text logs and AIS CSV tables -> MCAP with honest log times;
-format detection, usage errors, the CLI (pipeline/io/legacy_import.py,
+format detection, usage errors, the CLI (pipeline/convert/legacy.py,
 jobs/import_legacy.py, jobs/cli_ingest.py)."""
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from nmea_builders import sentence, tag_block
 from jobs.cli import cli
 from jobs.common import UsageError
 from jobs.import_legacy import run_import
-from pipeline.io.legacy_import import (
+from pipeline.convert.legacy import (
     AIS_TOPIC,
     CSV_TOPIC,
     NAV_TOPIC,
@@ -29,8 +29,8 @@ from pipeline.io.legacy_import import (
     import_file,
 )
 from pipeline.io.mcap_read import read_mcap_batches
+from pipeline.units import NS
 
-NS = 10**9
 AIS1 = b"!AIVDM,1,1,,A,13RlIW?04F1beOVEFLB9bRvH0L0L,0*6C"
 AIS2 = b"!AIVDM,1,1,,A,33P;Tw0tjBQO22:E7dm66DrB20UP,0*2E"
 HDT = sentence("HEHDT,274.07,T")

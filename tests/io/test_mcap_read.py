@@ -13,8 +13,7 @@ from mcap.writer import CompressionType
 from mcap_fixtures import T0_NS, mixed_file, radar_messages, write_mcap
 
 from pipeline.io.mcap_read import ChannelBatch, read_mcap_batches
-
-NS = 10**9
+from pipeline.units import NS
 
 
 def read_all(path: Path, **window) -> tuple[list[tuple[str, int, bytes]], object]:

@@ -20,8 +20,7 @@ from pipeline.io.mcap_chunks import (
     walk_records,
 )
 from pipeline.io.mcap_read import ChannelBatch, read_mcap_batches, read_mcap_summary
-
-NS = 10**9
+from pipeline.units import NS
 
 
 def _all(path: Path, **kw) -> tuple[list[tuple[int, int, bytes]], object]:

@@ -15,9 +15,9 @@ from mcap.writer import CompressionType, Writer
 
 from jobs.ingest import run_ingest
 from jobs.simulate import run_simulate
+from pipeline.units import NS
 from pipeline.warehouse.delta import read_table
 
-NS = 1_000_000_000
 START = 1_768_435_200 * NS  # 2026-01-15T00:00:00Z
 
 

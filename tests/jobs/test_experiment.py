@@ -14,7 +14,7 @@ import pytest
 from click.testing import CliRunner
 
 from jobs.cli import cli
-from jobs.experiment import (
+from pipeline.maritime.experiment import (
     closed_form_probability,
     identification_experiment,
     velocity_experiment,

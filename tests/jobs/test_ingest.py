@@ -25,21 +25,15 @@ from mcap_fixtures import (
 import jobs.ingest
 import pipeline.warehouse.staged
 from jobs.ingest import IngestSummary, IngestUsageError, run_ingest
-from pipeline.config import load_config
 from pipeline.decode import json_columns
-from pipeline.executors import (
-    HASHER_NICE,
-    SECOND_PARSER_NICE,
-    WRITER_NICE,
-    ExecutorError,
-    UnitResult,
-    make_executor,
-)
+from pipeline.executors import ExecutorError, UnitResult, make_executor
+from pipeline.families import load_config
 from pipeline.io.mcap_read import read_mcap_batches
+from pipeline.threads import HASHER_NICE, SECOND_PARSER_NICE, WRITER_NICE
+from pipeline.units import NS
 from pipeline.warehouse.delta import read_table, table_version
 from pipeline.warehouse.views import VIEWS_FILE
 
-NS = 10**9
 TABLES = ("radar_tracks", "ais_reports", "ais_static", "truth", "rejects", "ingest_ledger")
 
 

@@ -258,7 +258,7 @@ _PEAK_SCRIPT = """
 import sys
 from pathlib import Path
 from jobs.ingest import run_ingest
-from pipeline.config import load_config
+from pipeline.families import load_config
 s = run_ingest([sys.argv[1]], load_config(), Path(sys.argv[2]), executor="serial")
 assert s.exit_code == 0 and s.rows["radar_tracks"] == int(sys.argv[3]), s.render()
 hwm = [ln for ln in Path("/proc/self/status").read_text().splitlines() if ln.startswith("VmHWM")]

@@ -10,9 +10,8 @@ from polars.testing import assert_frame_equal
 
 from jobs.reprocess import run_reprocess
 from pipeline.tables import table_specs
+from pipeline.units import NS
 from pipeline.warehouse.delta import read_table
-
-NS = 1_000_000_000
 
 
 def snapshot(warehouse) -> dict[str, pl.DataFrame]:

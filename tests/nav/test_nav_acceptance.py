@@ -17,9 +17,9 @@ from jobs.report import run_named_report
 from jobs.simulate import run_simulate
 from pipeline.nav.config import ownship_config
 from pipeline.simulate.ownship import simulate_ownship
+from pipeline.units import NS
 from pipeline.warehouse.delta import read_table
 
-NS = 1_000_000_000
 START_NS = 1_768_435_200 * NS  # 2026-01-15T00:00:00Z
 DURATION_S = 1800.0
 SEED = 7

@@ -7,7 +7,8 @@ import tomllib
 
 import pytest
 
-from pipeline.config import ConfigError, _parse
+from pipeline.config import ConfigError
+from pipeline.families import config_from_mapping
 from pipeline.nav.config import ownship_config
 from pipeline.resources import resource_path
 
@@ -28,4 +29,4 @@ def test_bad_value_is_a_config_error():
     raw = tomllib.loads((resource_path("config") / "surveil.toml").read_text())
     raw["ownship"]["gnss_timeout_s"] = "soon"
     with pytest.raises(ConfigError, match="gnss_timeout_s"):
-        ownship_config(_parse(raw, "test"))
+        config_from_mapping(raw, "test")

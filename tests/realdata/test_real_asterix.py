@@ -28,10 +28,10 @@ from pathlib import Path
 import pytest
 from conftest import real_data_dir
 
-from pipeline.config import load_config
+from pipeline.families import load_config
+from pipeline.units import NS
 
 pytestmark = pytest.mark.realdata
-NS = 1_000_000_000
 SUPPORTED = {10, 20, 21, 34, 48, 62, 65}
 SERVICE = {34, 65}
 OTHER_EDITION = {"cat010ed0.24_sensis.bin", "cat021ed0.26.bin", "croatiacontrol_asterix.pcap"}
@@ -99,7 +99,7 @@ def expected(path: Path) -> tuple[int, int, Counter]:
 @pytest.fixture(scope="module")
 def ingested(tmp_path_factory):
     from jobs.ingest import run_ingest
-    from pipeline.io.asterix_import import wrap_asterix_file
+    from pipeline.convert.asterix import wrap_asterix_file
     from pipeline.warehouse.delta import read_table
 
     root = real_data_dir()

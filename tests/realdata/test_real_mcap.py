@@ -20,10 +20,10 @@ import pytest
 from conftest import real_data_dir
 from mcap.reader import make_reader
 
-from pipeline.config import load_config
+from pipeline.families import load_config
+from pipeline.units import NS
 
 pytestmark = pytest.mark.realdata
-NS = 1_000_000_000
 DECODED = {
     "sensor_msgs/NavSatFix": "nav_gnss", "sensor_msgs/Imu": "nav_heading",
     "sensor_msgs/msg/NavSatFix": "nav_gnss", "sensor_msgs/msg/Imu": "nav_heading",

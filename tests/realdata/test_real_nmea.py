@@ -50,7 +50,7 @@ def _inputs(root: Path) -> list[Path]:
 
 @pytest.fixture(scope="module")
 def warehouse(tmp_path_factory) -> tuple[Path, dict[str, dict[str, int]], dict]:
-    from pipeline.config import load_config
+    from pipeline.families import load_config
     from pipeline.warehouse.delta import read_table
 
     root = _real()

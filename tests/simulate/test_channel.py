@@ -17,12 +17,12 @@ from polars.testing import assert_frame_equal
 from jobs.simulate import DEFAULT_START_NS, parse_duration, run_simulate
 from pipeline.config import Config
 from pipeline.frames import TWO_PI, enu_to_polar, geodetic_to_enu, wrap_angle
-from pipeline.io.mcap_write import write_channel_archive
 from pipeline.resources import resource_path
 from pipeline.simulate.ais_traffic import KNOT_MPS
 from pipeline.simulate.channel import ChannelScenario, build_route, simulate_channel
+from pipeline.simulate.channel_mcap import write_channel_archive
+from pipeline.units import NS
 
-NS = 1_000_000_000
 DURATION_S = 900.0
 SEED = 11
 

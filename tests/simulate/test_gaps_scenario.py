@@ -15,15 +15,16 @@ from jobs.simulate import DEFAULT_START_NS, run_simulate
 from pipeline.config import Config
 from pipeline.decode.ais import decode_ais_sentences
 from pipeline.frames import geodetic_to_enu
-from pipeline.gaps import build_geometry, gaps_config
+from pipeline.gaps.config import gaps_config
+from pipeline.gaps.forecast import build_geometry
 from pipeline.simulate.gaps import (
     FIRST_SILENCE_S,
     SILENCE_DURATION_S,
     GapsScenario,
     simulate_gaps,
 )
+from pipeline.units import NS
 
-NS = 1_000_000_000
 DURATION_S = 1800.0
 SEED = 4
 

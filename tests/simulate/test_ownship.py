@@ -25,8 +25,8 @@ from pipeline.simulate.ownship import (
     simulate_ownship,
     vhw_sentences,
 )
+from pipeline.units import NS
 
-NS = 1_000_000_000
 START = 1_768_435_200 * NS
 
 

@@ -14,6 +14,7 @@ from deltalake import DeltaTable
 from mcap_fixtures import DAY, T0, hours, truth_rows
 
 from pipeline.tables import schema
+from pipeline.units import NS
 from pipeline.warehouse.delta import (
     read_table,
     replace_rows,
@@ -25,8 +26,6 @@ from pipeline.warehouse.delta import (
     table_version,
     window_predicate,
 )
-
-NS = 10**9
 
 
 def test_missing_table_reads_empty_with_canonical_schema(tmp_path):

@@ -1,0 +1,133 @@
+"""The airfield family's stage (airfield paper): SMR + MLAT + VASN reports -> fused
+surface tracks and channel health.
+
+One unit per UTC hour: ``airfield_obs`` and ``airfield_truth`` from ``LEAD_IN_S`` before
+the unit (the filter's lead-in: tracks are warm at the unit start) and the stored
+``sensor_error_models``; returns ``airfield_tracks`` and ``channel_health`` for the unit,
+plus batch ``rejects`` rows for reports of sensors that are not in the ``[airfield]``
+config (one row per sensor, with the count). A config without ``[airfield]`` (or a
+warehouse without airfield data) yields empty tables.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import polars as pl
+
+from pipeline.airfield.calibrate import calibrate, stored_models
+from pipeline.airfield.config import AirfieldConfig, parse_airfield_section
+from pipeline.airfield.frames import config_sensor_id, sensor_rows, to_common_frame
+from pipeline.airfield.fusion import fuse_airfield
+from pipeline.airfield.score import score
+from pipeline.config import Config
+from pipeline.family import Family, Inputs, Outputs, TableInput, Window
+
+log = logging.getLogger(__name__)
+
+LEAD_IN_S = 120
+UNIT_S = 3600
+OUTPUTS = ("airfield_tracks", "channel_health")
+
+
+def target_reports(obs: pl.DataFrame) -> pl.DataFrame:
+    """Target reports only (CAT010 status messages carry no position)."""
+    if "message_type" not in obs.columns:
+        return obs
+    return obs.filter(pl.col("message_type").is_null()
+                      | (pl.col("message_type") == "target report"))
+
+
+def unknown_sensor_rejects(obs: pl.DataFrame, cfg: AirfieldConfig, start_ns: int,
+                           end_ns: int) -> pl.DataFrame:
+    """One batch rejects row per sensor whose reports (logged in the window) belong to no
+    configured airfield sensor, with their count: nothing is dropped silently."""
+    inside = obs.filter(pl.col("log_time_ns").is_between(start_ns, end_ns, closed="left"))
+    lost = inside.filter(config_sensor_id(inside, cfg).is_null())
+    if lost.height == 0:
+        return pl.DataFrame()
+    return lost.group_by("sensor_id").agg(
+        pl.col("log_time_ns").min(), pl.col("source_file").first(), pl.col("topic").first(),
+        pl.len().alias("n")).select(
+        "log_time_ns", "source_file", "topic", pl.lit("batch").alias("stage"),
+        pl.lit("unknown_sensor").alias("reason_code"),
+        pl.format("{} airfield_obs reports from sensor {} not in the [airfield] config",
+                  pl.col("n"), pl.col("sensor_id")).alias("reason"))
+
+
+@dataclass(frozen=True, eq=False)
+class StageOutput:
+    tracks: pl.DataFrame
+    health: pl.DataFrame
+    rejects: pl.DataFrame
+    model_source: dict[str, str]
+
+
+def airfield_stage(obs: pl.DataFrame, truth: pl.DataFrame | None, model_rows: pl.DataFrame,
+                   cfg: AirfieldConfig, *, start_ns: int, end_ns: int) -> StageOutput:
+    """The pure airfield stage: raw reports (+ reference, + stored models) -> fused
+    tracks, channel health and rejects for [start_ns, end_ns)."""
+    reports = target_reports(obs)
+    rejects = unknown_sensor_rejects(reports, cfg, start_ns, end_ns)
+    common = to_common_frame(sensor_rows(reports, cfg), cfg)
+    models = stored_models(model_rows, cfg, end_ns)
+    tracks, health = fuse_airfield(common, cfg, models, start_ns=start_ns, end_ns=end_ns)
+    if tracks.height:
+        tracks, health = score(tracks, health, truth, cfg)
+    return StageOutput(tracks, health, rejects, dict(models.source))
+
+
+def inputs(cfg: Config) -> tuple[TableInput, ...]:
+    """Reports and reference from the lead-in before the unit; every stored model."""
+    if cfg.family("airfield") is None:
+        return ()
+    return (
+        TableInput("airfield_obs", before_s=LEAD_IN_S),
+        TableInput("airfield_truth", before_s=LEAD_IN_S),
+        TableInput("sensor_error_models", whole_table=True),
+    )
+
+
+def stage(tables: Inputs, window: Window, cfg: Config) -> Outputs:
+    """``Family.stage`` of the airfield family (nothing without ``[airfield]`` or data)."""
+    acfg = cfg.family("airfield")
+    if acfg is None or tables["airfield_obs"].height == 0:
+        return {}
+    truth = tables["airfield_truth"]
+    out = airfield_stage(tables["airfield_obs"], truth if truth.height else None,
+                         tables["sensor_error_models"], acfg,
+                         start_ns=window.start_ns, end_ns=window.end_ns)
+    log.info("airfield unit %s: models %s", window.start_ns, out.model_source)
+    result = {"airfield_tracks": out.tracks, "channel_health": out.health}
+    if out.rejects.height:
+        result["rejects"] = out.rejects
+    return {k: v for k, v in result.items() if v.height}
+
+
+def _parse(raw: Mapping[str, Any], core: Config) -> AirfieldConfig | None:
+    return parse_airfield_section(raw.get("airfield", {}), core)
+
+
+FAMILY = Family(
+    name="airfield",
+    sections=("airfield",),
+    parse_config=_parse,
+    inputs=inputs,
+    outputs=OUTPUTS,
+    stage=stage,
+    unit_s=UNIT_S,
+)
+
+
+def calibration(obs: pl.DataFrame, truth: pl.DataFrame, cfg: AirfieldConfig, *,
+                start_ns: int, end_ns: int, max_order: int = 4, min_speed_mps: float = 0.0
+                ) -> tuple[pl.DataFrame, dict]:
+    """The pure part of ``surveil calibrate``: each sensor's coloured-error AR models
+    fitted over [start_ns, end_ns) against the reference (airfield paper eq. 2, 7, 8).
+    Returns (``sensor_error_models`` rows, {channel: fit})."""
+    common = to_common_frame(sensor_rows(target_reports(obs), cfg), cfg)
+    return calibrate(common, truth, cfg, start_ns=start_ns, end_ns=end_ns,
+                     max_order=max_order, min_speed_mps=min_speed_mps)

@@ -1,0 +1,1 @@
+"""Legacy captures (NMEA text, AIS CSV, ASTERIX framings, pcap) converted to MCAP."""

@@ -1,0 +1,358 @@
+"""Wrap raw ASTERIX recordings and pcap/pcapng captures into MCAP (one channel per source).
+
+``wrap_asterix_file(path, out_dir)`` writes ``<out_dir>/<file name>.mcap`` whose channels
+follow the ASTERIX channel convention of :mod:`pipeline.decode.asterix`: message encoding
+``asterix``, no schema, one ASTERIX data block per message. Every later stage reads MCAP
+only. The output bytes depend only on the input (fixed header strings, no wall clock); the
+file is written to a temporary name and renamed into place.
+
+Inputs, recognised by their first bytes:
+
+- **pcap** (libpcap, magic ``a1b2c3d4`` µs or ``a1b23c4d`` ns, either byte order) and
+  **pcapng** (Section Header Block ``0a0d0d0a``; Enhanced, Simple and obsolete Packet
+  Blocks; per-interface ``if_tsresol``). Link types: Ethernet (with 802.1Q/802.1ad VLAN
+  tags), Linux cooked SLL/SLL2, BSD loopback, raw IPv4/IPv6. Each UDP datagram's payload
+  is split into data blocks by their LEN fields (a datagram often carries several, e.g.
+  CAT062 + CAT065); bytes that do not frame become one message of their own, which the
+  decoder rejects as ``undecodable``. **log time = the capture timestamp** of the packet
+  (``log_time_source`` = ``pcap``). One channel per UDP flow
+  ``/asterix/<src ip>:<src port>/<dst ip>:<dst port>``, with metadata ``src_ip``,
+  ``src_port``, ``dst_ip``, ``dst_port``. Packets that are not UDP over IPv4/IPv6, and IP
+  fragments (not reassembled), are counted in the file metadata record
+  ``surveil.import`` (``packets_skipped``, by reason), not written.
+- **raw ASTERIX** (``.raw``, ``.ast``, ...: data blocks back to back, no framing, no
+  capture time): one channel ``/asterix/raw``. The file carries no time, so the log time
+  is derived (``log_time_source`` = ``asterix_time_of_day``): ``day`` (default
+  1970-01-01, i.e. unknown) + the time of day of the block's first timed record (see
+  :func:`pipeline.decode.asterix.tod_to_time_ns` for the items), plus one day for each
+  backward jump of the time of day by more than 12 h (midnight crossed); a block without
+  a decodable time takes the previous block's log time (noon of ``day`` before the first
+  timed block). A tail that does not frame becomes one last message (rejected as
+  ``undecodable`` at ingest). The metadata key ``log_date`` records the day used.
+
+Anything else raises ``ValueError`` with the reason (not pcap/pcapng, and the first bytes
+do not frame as an ASTERIX data block, or the file looks like text).
+"""
+
+from __future__ import annotations
+
+import os
+import struct
+import tempfile
+from collections import Counter
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from datetime import UTC, date, datetime
+from pathlib import Path
+
+from mcap.writer import CompressionType, Writer
+
+from pipeline.decode.asterix import EXTRACTORS, parse_block, split_blocks
+from pipeline.units import NS
+
+DAY_NS = 86_400 * NS
+MCAP_LIBRARY = "surveil-pipeline/asterix_import"
+RAW_TOPIC = "/asterix/raw"
+PCAP_MAGICS = {
+    b"\xd4\xc3\xb2\xa1": ("<", 1_000), b"\xa1\xb2\xc3\xd4": (">", 1_000),
+    b"\x4d\x3c\xb2\xa1": ("<", 1), b"\xa1\xb2\x3c\x4d": (">", 1),
+}  # fmt: skip  # magic -> (byte order, ns per timestamp fraction unit)
+PCAPNG_SHB = b"\x0a\x0d\x0d\x0a"
+ETH_IPV4, ETH_IPV6, ETH_VLAN = 0x0800, 0x86DD, (0x8100, 0x88A8)
+
+
+@dataclass(frozen=True)
+class Packet:
+    """One captured frame: capture time (ns since the epoch), link type, frame bytes."""
+
+    time_ns: int
+    link_type: int
+    data: bytes
+
+
+@dataclass
+class _Messages:
+    """Messages per channel topic, in capture order, plus channel metadata."""
+
+    topics: dict[str, dict[str, str]] = field(default_factory=dict)
+    rows: list[tuple[str, int, bytes]] = field(default_factory=list)
+    skipped: Counter = field(default_factory=Counter)
+
+    def add(self, topic: str, meta: dict[str, str], t: int, payload: bytes) -> None:
+        """One message per data block of ``payload``; a tail that does not frame is kept
+        as one message of its own (the decoder rejects it)."""
+        self.topics.setdefault(topic, meta)
+        blocks, rest = split_blocks(payload)
+        self.rows.extend((topic, t, b) for b in blocks)
+        if rest:
+            self.rows.append((topic, t, rest))
+
+
+def wrap_asterix_file(path: Path, out_dir: Path, *, day: date | None = None) -> Path:
+    """Wrap a raw ASTERIX file or a pcap/pcapng capture into ``out_dir/<name>.mcap``.
+
+    ``day``: UTC date of a raw recording (raw files carry only time of day); ignored for
+    captures, which carry their own timestamps. Raises ``ValueError`` when the file is
+    neither a capture nor raw ASTERIX, or holds nothing to write.
+    """
+    path = Path(path)
+    data = path.read_bytes()
+    head = data[:4]
+    if head in PCAP_MAGICS or head == PCAPNG_SHB:
+        msgs = _from_capture(data, path)
+        kind = "pcapng" if head == PCAPNG_SHB else "pcap"
+    else:
+        _check_raw(data, path)
+        msgs = _from_raw(data, day or date(1970, 1, 1))
+        kind = "raw"
+    if not msgs.rows:
+        raise ValueError(f"{path}: {kind} file holds no UDP payload to wrap as ASTERIX")
+    out = Path(out_dir) / f"{path.name}.mcap"
+    meta = {"source": path.name, "input_format": kind, "messages": str(len(msgs.rows))}
+    meta |= {f"packets_skipped_{k}": str(v) for k, v in sorted(msgs.skipped.items())}
+    _write_mcap(out, msgs, meta)
+    return out
+
+
+# -- raw ---------------------------------------------------------------------------------
+
+
+def _check_raw(data: bytes, path: Path) -> None:
+    if not data:
+        raise ValueError(f"{path}: empty file, neither pcap/pcapng nor raw ASTERIX")
+    sample = data[:64]
+    if all(32 <= b < 127 or b in (9, 10, 13) for b in sample):
+        raise ValueError(
+            f"{path}: looks like a text file, neither pcap/pcapng nor raw ASTERIX "
+            "(NMEA text logs are imported by the NMEA importer)"
+        )
+    blocks, _rest = split_blocks(data)
+    if not blocks:
+        n = int.from_bytes(data[1:3], "big") if len(data) >= 3 else None
+        raise ValueError(
+            f"{path}: neither pcap/pcapng nor raw ASTERIX: the first bytes do not frame as "
+            f"an ASTERIX data block (CAT {data[0]}, LEN {n}, file size {len(data)} B)"
+        )
+
+
+def block_time_of_day(block: bytes) -> float | None:
+    """Time of day (s) of the first timed record of a supported-category block."""
+    extract = EXTRACTORS.get(block[0])
+    if extract is None:
+        return None
+    records = parse_block(block)
+    if isinstance(records, str):
+        return None
+    for rec in records:
+        tod = extract(rec).get("tod_s")
+        if tod is not None and 0 <= tod < 86_400:
+            return float(tod)
+    return None
+
+
+def _from_raw(data: bytes, day: date) -> _Messages:
+    """Blocks of a raw file with log times from their time of day (module docstring)."""
+    day_ns = int(datetime(day.year, day.month, day.day, tzinfo=UTC).timestamp()) * NS
+    meta = {"log_time_source": "asterix_time_of_day", "log_date": day.isoformat()}
+    msgs = _Messages()
+    blocks, rest = split_blocks(data)
+    t, offset, prev_tod = day_ns + DAY_NS // 2, day_ns, None
+    # per block: the time of day comes from the decoded records of each block
+    for block in blocks:
+        tod = block_time_of_day(block)
+        if tod is not None:
+            if prev_tod is not None and tod < prev_tod - 43_200:
+                offset += DAY_NS
+            prev_tod = tod
+            t = offset + round(tod * NS)
+        msgs.add(RAW_TOPIC, meta, t, block)
+    if rest:
+        msgs.add(RAW_TOPIC, meta, t, rest)
+    return msgs
+
+
+# -- captures ----------------------------------------------------------------------------
+
+
+def _from_capture(data: bytes, path: Path) -> _Messages:
+    msgs = _Messages()
+    packets = (
+        _pcapng_packets(data, msgs.skipped)
+        if data[:4] == PCAPNG_SHB
+        else (_pcap_packets(data, msgs.skipped))
+    )
+    # per packet: each frame has its own link/IP/UDP headers to strip
+    for pkt in packets:
+        udp = _udp_payload(pkt, msgs.skipped)
+        if udp is None:
+            continue
+        (src, sport, dst, dport), payload = udp
+        topic = f"/asterix/{src}:{sport}/{dst}:{dport}"
+        meta = {
+            "log_time_source": "pcap",
+            "src_ip": src, "src_port": str(sport), "dst_ip": dst, "dst_port": str(dport),
+        }  # fmt: skip
+        msgs.add(topic, meta, pkt.time_ns, payload)
+    return msgs
+
+
+def _pcap_packets(data: bytes, skipped: Counter) -> Iterator[Packet]:
+    """Frames of a libpcap file (stops at a record cut off by the end of the file)."""
+    order, frac_ns = PCAP_MAGICS[data[:4]]
+    if len(data) < 24:
+        skipped["truncated_header"] += 1
+        return
+    (link_type,) = struct.unpack_from(order + "I", data, 20)
+    rec = struct.Struct(order + "IIII")
+    pos = 24
+    while pos + 16 <= len(data):
+        sec, frac, incl, _orig = rec.unpack_from(data, pos)
+        pos += 16
+        if pos + incl > len(data):
+            skipped["truncated_record"] += 1
+            return
+        yield Packet(sec * NS + frac * frac_ns, link_type & 0x0FFFFFFF, data[pos : pos + incl])
+        pos += incl
+    if pos != len(data):
+        skipped["truncated_record"] += 1
+
+
+def _pcapng_packets(data: bytes, skipped: Counter) -> Iterator[Packet]:
+    """Frames of a pcapng file (EPB, SPB, obsolete PB); SHB/IDB set order and units."""
+    order = "<"
+    ifaces: list[tuple[int, tuple[int, int]]] = []  # (link type, if_tsresol (base, exp))
+    pos = 0
+    while pos + 12 <= len(data):
+        if data[pos : pos + 4] == PCAPNG_SHB:
+            order = "<" if data[pos + 8 : pos + 12] == b"\x4d\x3c\x2b\x1a" else ">"
+            ifaces = []
+        btype, blen = struct.unpack_from(order + "II", data, pos)
+        if blen < 12 or blen % 4 or pos + blen > len(data):
+            skipped["truncated_block"] += 1
+            return
+        body = data[pos + 8 : pos + blen - 4]
+        if btype == 1 and len(body) >= 8:  # Interface Description Block
+            link, _res, _snap = struct.unpack_from(order + "HHI", body, 0)
+            ifaces.append((link, _tsresol_ns(body[8:], order)))
+        elif btype in (6, 2) and len(body) >= 20 and ifaces:  # Enhanced / obsolete PB
+            iface, hi, lo, cap, _orig = struct.unpack_from(order + "IIIII", body, 0)
+            if btype == 2:
+                iface &= 0xFFFF
+            if iface < len(ifaces):
+                link, resol = ifaces[iface]
+                yield Packet(_ticks_ns((hi << 32) | lo, resol), link, body[20 : 20 + cap])
+        elif btype == 3:  # Simple Packet Block: no timestamp
+            skipped["no_timestamp"] += 1
+        pos += blen
+
+
+def _tsresol_ns(options: bytes, order: str) -> tuple[int, int]:
+    """An IDB's ``if_tsresol`` option as (base, exponent): a tick is base**-exponent s
+    (default (10, 6), microseconds)."""
+    pos = 0
+    while pos + 4 <= len(options):
+        code, length = struct.unpack_from(order + "HH", options, pos)
+        if code == 0:
+            break
+        if code == 9 and length >= 1:
+            v = options[pos + 4]
+            return (2, v & 0x7F) if v & 0x80 else (10, v & 0x7F)
+        pos += 4 + length + (-length % 4)
+    return (10, 6)
+
+
+def _ticks_ns(ticks: int, resol: tuple[int, int]) -> int:
+    """Integer ns of a pcapng timestamp (exact: no float at 1e18 ns)."""
+    base, exp = resol
+    return ticks * NS // base**exp
+
+
+def _udp_payload(pkt: Packet, skipped: Counter) -> tuple[tuple[str, int, str, int], bytes] | None:
+    """``((src, sport, dst, dport), payload)`` of a UDP frame, else ``None`` (counted)."""
+    ip = _ip_packet(pkt.link_type, pkt.data)
+    if ip is None:
+        skipped["not_ip"] += 1
+        return None
+    version = ip[0] >> 4 if ip else 0
+    if version == 4 and len(ip) >= 20:
+        ihl = (ip[0] & 0x0F) * 4
+        frag = struct.unpack_from(">H", ip, 6)[0]
+        if frag & 0x3FFF:  # MF flag or a fragment offset
+            skipped["ip_fragment"] += 1
+            return None
+        if ip[9] != 17:
+            skipped["not_udp"] += 1
+            return None
+        src, dst, udp = _ipv4(ip[12:16]), _ipv4(ip[16:20]), ip[ihl:]
+    elif version == 6 and len(ip) >= 40:
+        if ip[6] != 17:
+            skipped["not_udp"] += 1
+            return None
+        src, dst, udp = _ipv6(ip[8:24]), _ipv6(ip[24:40]), ip[40:]
+    else:
+        skipped["not_ip"] += 1
+        return None
+    if len(udp) < 8:
+        skipped["truncated_udp"] += 1
+        return None
+    sport, dport, ulen = struct.unpack_from(">HHH", udp, 0)
+    end = ulen if 8 <= ulen <= len(udp) else len(udp)
+    return (src, sport, dst, dport), udp[8:end]
+
+
+def _ip_packet(link_type: int, frame: bytes) -> bytes | None:
+    """The IP packet inside a link-layer frame, ``None`` when it holds no IP."""
+    if link_type == 1:  # Ethernet
+        pos, etype = 14, int.from_bytes(frame[12:14], "big") if len(frame) >= 14 else 0
+        while etype in ETH_VLAN and len(frame) >= pos + 4:
+            etype = int.from_bytes(frame[pos + 2 : pos + 4], "big")
+            pos += 4
+        return frame[pos:] if etype in (ETH_IPV4, ETH_IPV6) else None
+    if link_type == 113:  # Linux cooked SLL
+        etype = int.from_bytes(frame[14:16], "big") if len(frame) >= 16 else 0
+        return frame[16:] if etype in (ETH_IPV4, ETH_IPV6) else None
+    if link_type == 276:  # Linux cooked SLL2
+        etype = int.from_bytes(frame[0:2], "big") if len(frame) >= 20 else 0
+        return frame[20:] if etype in (ETH_IPV4, ETH_IPV6) else None
+    if link_type in (0, 108):  # BSD loopback / OpenBSD loop: 4-byte family
+        return frame[4:] if len(frame) > 4 else None
+    if link_type in (101, 12, 14, 228, 229):  # raw IP
+        return frame
+    return None
+
+
+def _ipv4(b: bytes) -> str:
+    return ".".join(str(x) for x in b)
+
+
+def _ipv6(b: bytes) -> str:
+    import ipaddress
+
+    return str(ipaddress.IPv6Address(b))
+
+
+# -- writing -----------------------------------------------------------------------------
+
+
+def _write_mcap(out: Path, msgs: _Messages, meta: dict[str, str]) -> None:
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            writer = Writer(f, compression=CompressionType.ZSTD)
+            writer.start(profile="", library=MCAP_LIBRARY)
+            ids = {
+                topic: writer.register_channel(topic, "asterix", 0, metadata=m)
+                for topic, m in sorted(msgs.topics.items())
+            }
+            writer.add_metadata("surveil.import", meta)
+            seq: Counter = Counter()
+            for topic, t, payload in msgs.rows:
+                writer.add_message(ids[topic], t, payload, t, seq[topic])
+                seq[topic] += 1
+            writer.finish()
+        os.replace(tmp, out)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise

@@ -1,0 +1,1 @@
+"""Seeded Monte Carlo experiments: simulator + family stages, measured against truth."""

@@ -1,0 +1,82 @@
+"""The contract every sensor family exports to the batch.
+
+A family (``pipeline.maritime``, ``pipeline.airfield``, ``pipeline.nav``,
+``pipeline.gaps``) is one :class:`Family` value, listed in ``pipeline.families``:
+
+- ``sections`` and ``parse_config``: the TOML sections it owns and the function that
+  turns the document into the family's typed, validated config object (run when the
+  config file loads, for every command: a bad value is an exit-2 error at start, never
+  a failed unit);
+- ``inputs(cfg)``: the tables its stage reads, each with the margins it needs around the
+  window (:class:`TableInput`); the batch job reads exactly those;
+- ``stage(inputs, window, cfg)``: a pure function of those tables, the window and the
+  config, returning ``{table: frame}`` for the tables in ``outputs`` (plus ``rejects``);
+- ``outputs``: the derived tables it owns (no other family writes them);
+- ``unit_s``: the work unit length (the window is cut at UTC multiples of it), or
+  ``None`` for one unit per window (filters that need continuity);
+- ``join_units``: how the staged parts of consecutive units join into the window's
+  tables (e.g. system track ids stitched across unit seams), or ``None`` to concatenate.
+
+Nothing here reads files: the job reads the inputs, runs the stage in a worker and
+commits what it returns.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import polars as pl
+
+from pipeline.config import Config
+from pipeline.units import NS
+
+
+@dataclass(frozen=True)
+class Window:
+    """A half-open time window [start_ns, end_ns), int64 ns UTC."""
+
+    start_ns: int
+    end_ns: int
+
+    def __post_init__(self) -> None:
+        if self.end_ns <= self.start_ns:
+            raise ValueError(f"empty window [{self.start_ns}, {self.end_ns})")
+
+
+@dataclass(frozen=True)
+class TableInput:
+    """One table a stage reads: rows whose time lies in
+    [start - before_s, end + after_s) of the unit's window, or every row
+    (``whole_table``, e.g. stored calibrations); ``columns``: None = all."""
+
+    table: str
+    before_s: float = 0.0
+    after_s: float = 0.0
+    columns: tuple[str, ...] | None = None
+    whole_table: bool = False
+
+    def span_ns(self, window: Window) -> tuple[int, int]:
+        return (window.start_ns - round(self.before_s * NS),
+                window.end_ns + round(self.after_s * NS))
+
+
+Inputs = Mapping[str, pl.DataFrame]
+Outputs = dict[str, pl.DataFrame]
+Stage = Callable[[Inputs, Window, Config], Outputs]
+UnitParts = dict[str, list[pl.DataFrame]]
+
+
+@dataclass(frozen=True)
+class Family:
+    """A sensor family as the batch sees it (see the module docstring)."""
+
+    name: str
+    sections: tuple[str, ...]
+    parse_config: Callable[[Mapping[str, Any], Config], Any]
+    inputs: Callable[[Config], tuple[TableInput, ...]]
+    outputs: tuple[str, ...]
+    stage: Stage
+    unit_s: int | None = 3600
+    join_units: Callable[[UnitParts], UnitParts] | None = None

@@ -1,0 +1,374 @@
+"""Track-to-track association across radars, per synchronised epoch, with stable ids.
+
+Gates (multi-radar paper, "determination of common tracks"): two synchronised tracks
+may belong to one ship only when ALL differences are inside gates set from the
+expected accuracies:
+
+- position: squared Mahalanobis distance d^2 = D^T (P_a + P_b)^-1 D below
+  chi2.ppf(gate_probability, 2) (D = difference of positions, m; P in m^2);
+- course: |wrap(C_a - C_b)| <= max_course_difference_rad, skipped when both speeds are
+  below course_gate_min_speed_mps (the course of a stopped ship is noise);
+- speed: |V_a - V_b| <= max_speed_difference_mps.
+
+Among competing pairings the least summed Mahalanobis distance wins (two-radar
+identification paper, eq. 7-16: hypotheses H1..H4 of case A, and cases B/C when one
+radar sees fewer targets). For two radars the paper's per-hypothesis sum
+Sum_i (X_i - X_p)^T P_i^-1 (X_i - X_p), with X_p the fused position, equals the pairwise
+D^T (P_1 + P_2)^-1 D, so minimising it over all hypotheses is the assignment problem
+``scipy.optimize.linear_sum_assignment`` on [d^2 | diag(gate)]: leaving a track
+unpaired costs the gate, which yields cases B and C (and any m x n) naturally.
+
+N radars: sites are taken in a fixed order; site k's tracks are assigned to the
+candidate system tracks built from sites < k (their eq. 14 fused position/course/speed,
+see pipeline.maritime.fuse), unassigned ones start new candidates.
+
+Continuity over epochs: (site_id, local_track_id) -> system_track_id. A local track keeps
+its system track as long as the gates still pass (its pairing gets a bonus that no
+sum of gated distances can outweigh); a candidate takes the id most of its members
+had (a pairing that persisted keeps its id; ties: closer to that track's last fused
+state); a candidate made only of new local tracks joins a system track seen within
+track_timeout_s that it gates with (extrapolated to the epoch), else it gets a new id
+``id_base + counter``. A mapping not refreshed for track_timeout_s is forgotten.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+from itertools import pairwise
+
+import numpy as np
+import polars as pl
+from scipy.optimize import linear_sum_assignment
+from scipy.stats import chi2
+
+from pipeline.frames import wrap_angle
+from pipeline.maritime.config import AssociationConfig
+from pipeline.maritime.sync import extrapolate_position, extrapolation_covariance
+from pipeline.units import NS
+
+#: continuity bonus, in units of the gate: keeps gated persisting pairs whatever the sums
+_BONUS_GATES = 1000.0
+
+
+@dataclass(frozen=True)
+class Kinematics:
+    """Positions, covariances and velocities of n tracks (all arrays (n,)): x_m, y_m
+    (regional ENU), P_xx, P_yy, P_xy (m^2), speed_mps, course_rad."""
+
+    x_m: np.ndarray
+    y_m: np.ndarray
+    P_xx: np.ndarray
+    P_yy: np.ndarray
+    P_xy: np.ndarray
+    speed_mps: np.ndarray
+    course_rad: np.ndarray
+
+    def take(self, idx: np.ndarray) -> Kinematics:
+        return Kinematics(*(np.asarray(getattr(self, f.name))[idx] for f in fields(self)))
+
+
+def gate_threshold(gate_probability: float) -> float:
+    """chi2.ppf(gate_probability, 2): the position gate on d^2 (2 degrees of freedom)."""
+    return float(chi2.ppf(gate_probability, 2))
+
+
+def gated_d2(a: Kinematics, b: Kinematics, cfg: AssociationConfig, gate: float) -> np.ndarray:
+    """(n_a, n_b) squared Mahalanobis distances D^T (P_a + P_b)^-1 D, +inf where the
+    position, course or speed gate fails (broadcast, closed-form 2x2 inverse)."""
+    dx = a.x_m[:, None] - b.x_m[None, :]
+    dy = a.y_m[:, None] - b.y_m[None, :]
+    sxx = a.P_xx[:, None] + b.P_xx[None, :]
+    syy = a.P_yy[:, None] + b.P_yy[None, :]
+    sxy = a.P_xy[:, None] + b.P_xy[None, :]
+    d2 = (syy * dx * dx - 2.0 * sxy * dx * dy + sxx * dy * dy) / (sxx * syy - sxy * sxy)
+    va, vb = a.speed_mps[:, None], b.speed_mps[None, :]
+    slow = (va < cfg.course_gate_min_speed_mps) & (vb < cfg.course_gate_min_speed_mps)
+    dc = np.abs(wrap_angle(a.course_rad[:, None] - b.course_rad[None, :]))
+    ok = (
+        (d2 < gate)
+        & (np.abs(va - vb) <= cfg.max_speed_difference_mps)
+        & (slow | (dc <= cfg.max_course_difference_rad))
+    )
+    return np.where(ok, d2, np.inf)
+
+
+def assign(cost: np.ndarray, miss_cost: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
+    """Least-sum assignment of rows to columns where leaving a row unassigned costs
+    ``miss_cost`` (augmented matrix [cost | diag(miss)]); +inf entries are forbidden.
+    Returns matched (row indices, column indices).
+
+    Gated matrices are sparse: a row whose only admissible column admits only that row
+    is matched directly; ``linear_sum_assignment`` runs on the rest only.
+    """
+    n, m = cost.shape
+    if n == 0 or m == 0:
+        return np.empty(0, int), np.empty(0, int)
+    miss = np.broadcast_to(np.asarray(miss_cost, float), (n,))
+    ok = np.isfinite(cost) & (cost < miss[:, None])
+    row_n, col_n = ok.sum(axis=1), ok.sum(axis=0)
+    col_of = np.argmax(ok, axis=1)
+    lone = (row_n == 1) & (col_n[col_of] == 1)
+    r1, c1 = np.flatnonzero(lone), col_of[lone]
+    rest_r = np.flatnonzero((row_n > 0) & ~lone)
+    rest_c = np.flatnonzero(ok[rest_r].any(axis=0)) if rest_r.size else np.empty(0, int)
+    if rest_r.size == 0:
+        return r1, c1
+    sub = np.where(ok[np.ix_(rest_r, rest_c)], cost[np.ix_(rest_r, rest_c)], np.inf)
+    k, mc = rest_r.size, rest_c.size
+    aug = np.full((k, mc + k), np.inf)
+    aug[:, :mc] = sub
+    aug[np.arange(k), mc + np.arange(k)] = miss[rest_r]
+    rows, cols = linear_sum_assignment(aug)
+    keep = cols < mc
+    r = np.concatenate([r1, rest_r[rows[keep]]])
+    c = np.concatenate([c1, rest_c[cols[keep]]])
+    order = np.argsort(r)
+    return r[order], c[order]
+
+
+class _Candidates:
+    """Candidate system tracks of one epoch, as eq. 14 running sums (arrays of size
+    n_rows of the epoch): weights 1/P_xx, 1/P_yy, 1/sigma_v^2, 1/sigma_c^2."""
+
+    def __init__(self, capacity: int, n_sites: int) -> None:
+        self.n = 0
+        self.sums = np.zeros((capacity, 10))
+        self.prev_ids = np.full((capacity, n_sites), -1, dtype=np.int64)
+
+    def add(
+        self,
+        clusters: np.ndarray,
+        rows: Kinematics,
+        sv: np.ndarray,
+        sc: np.ndarray,
+        prev: np.ndarray,
+        site: int,
+    ) -> None:
+        wx, wy, wv, wc = 1.0 / rows.P_xx, 1.0 / rows.P_yy, sv**-2, sc**-2
+        contrib = np.column_stack(
+            [
+                wx,
+                wx * rows.x_m,
+                wy,
+                wy * rows.y_m,
+                wx * wy * rows.P_xy,
+                wv,
+                wv * rows.speed_mps,
+                wc,
+                wc * np.sin(rows.course_rad),
+                wc * np.cos(rows.course_rad),
+            ]
+        )
+        np.add.at(self.sums, clusters, contrib)
+        self.prev_ids[clusters, site] = prev
+
+    def new(self, k: int) -> np.ndarray:
+        idx = np.arange(self.n, self.n + k)
+        self.n += k
+        return idx
+
+    def state(self) -> tuple[Kinematics, np.ndarray, np.ndarray]:
+        """Fused kinematics of the candidates, with (sigma_speed, sigma_course)."""
+        s = self.sums[: self.n].T
+        kin = Kinematics(
+            s[1] / s[0],
+            s[3] / s[2],
+            1.0 / s[0],
+            1.0 / s[2],
+            s[4] / (s[0] * s[2]),
+            s[6] / s[5],
+            np.mod(np.arctan2(s[8], s[9]), 2 * np.pi),
+        )
+        return kin, s[5] ** -0.5, s[7] ** -0.5
+
+
+@dataclass
+class _Memory:
+    """State carried across epochs: per local-track key and per system track."""
+
+    key_sys: np.ndarray  # (n_keys,) system id index (id - id_base), -1 none
+    key_seen: np.ndarray  # (n_keys,) last epoch ns
+    sys_seen: np.ndarray  # (n_sys,) last epoch ns
+    sys_state: np.ndarray  # (n_sys, 9): x, y, Pxx, Pyy, Pxy, V, C, sigma_V, sigma_C
+    n_sys: int = 0
+
+    def grow(self, k: int) -> np.ndarray:
+        if self.n_sys + k > self.sys_seen.size:
+            cap = max(2 * self.sys_seen.size, self.n_sys + k)
+            self.sys_seen = np.resize(self.sys_seen, cap)
+            self.sys_state = np.resize(self.sys_state, (cap, 9))
+        idx = np.arange(self.n_sys, self.n_sys + k)
+        self.n_sys += k
+        return idx
+
+
+def associate_tracks(synced: pl.DataFrame, *, cfg: AssociationConfig, id_base: int) -> pl.DataFrame:
+    """Assign every synchronised radar track to a system track, epoch by epoch.
+
+    Consumes (from ``synchronise``): time_ns, site_id, local_track_id, x_enu_m, y_enu_m,
+    P_xx, P_yy, P_xy (m^2), course_rad, speed_mps, sigma_course_rad, sigma_speed_mps
+    (other columns pass through).
+
+    Produces the same rows plus system_track_id (int64, stable over time, new ids are
+    ``id_base + counter``) and mahalanobis_d2 (distance to the eq. 14 fused position of
+    the OTHER members of its system track at that epoch; null when alone), sorted by
+    (time_ns, system_track_id, site_id).
+    """
+    df = synced.sort("time_ns", "site_id", "local_track_id")
+    keys = df.select("site_id", "local_track_id").unique(maintain_order=True)
+    df = df.join(keys.with_row_index("_key"), on=["site_id", "local_track_id"], how="left")
+    sites = sorted(df["site_id"].unique().to_list())
+    site_idx = df["site_id"].replace_strict(sites, list(range(len(sites)))).to_numpy()
+    sys_idx = _assign_ids(df, site_idx, keys.height, len(sites), cfg)
+    out = df.drop("_key").with_columns(
+        pl.Series("system_track_id", sys_idx + int(id_base), dtype=pl.Int64)
+    )
+    return _with_leave_one_out_d2(out).sort("time_ns", "system_track_id", "site_id")
+
+
+def _assign_ids(
+    df: pl.DataFrame, site_idx: np.ndarray, n_keys: int, n_sites: int, cfg: AssociationConfig
+) -> np.ndarray:
+    """The epoch loop. Everything inside an epoch is array work (broadcast gates, one
+    linear_sum_assignment per site and one for the ids); epochs must be processed in
+    order because each epoch's ids depend on the previous ones, hence the loop."""
+    t = df["time_ns"].to_numpy()
+    kin = Kinematics(
+        *(
+            df[c].to_numpy().astype(float)
+            for c in ("x_enu_m", "y_enu_m", "P_xx", "P_yy", "P_xy", "speed_mps", "course_rad")
+        )
+    )
+    sv, sc = df["sigma_speed_mps"].to_numpy(), df["sigma_course_rad"].to_numpy()
+    key = df["_key"].to_numpy().astype(np.int64)
+    mem = _Memory(
+        key_sys=np.full(n_keys, -1, np.int64),
+        key_seen=np.full(n_keys, np.iinfo(np.int64).min // 2, np.int64),
+        sys_seen=np.zeros(max(16, n_keys), np.int64),
+        sys_state=np.zeros((max(16, n_keys), 9)),
+    )
+    gate = gate_threshold(cfg.gate_probability)
+    timeout_ns = round(cfg.track_timeout_s * NS)
+    out = np.empty(t.size, np.int64)
+    bounds = np.flatnonzero(np.r_[True, t[1:] != t[:-1], True]) if t.size else np.zeros(1, int)
+    for a, b in pairwise(bounds):
+        rows = np.arange(a, b)
+        prev = np.where(mem.key_seen[key[rows]] >= t[a] - timeout_ns, mem.key_sys[key[rows]], -1)
+        cand, member = _cluster_epoch(
+            kin.take(rows), sv[rows], sc[rows], prev, site_idx[rows], n_sites, cfg, gate
+        )
+        ids = _resolve_ids(cand, mem, int(t[a]), cfg, gate)
+        out[rows] = ids[member]
+        mem.key_sys[key[rows]] = out[rows]
+        mem.key_seen[key[rows]] = t[a]
+        fused, fsv, fsc = cand.state()
+        mem.sys_seen[ids] = t[a]
+        mem.sys_state[ids] = np.column_stack(
+            [
+                fused.x_m,
+                fused.y_m,
+                fused.P_xx,
+                fused.P_yy,
+                fused.P_xy,
+                fused.speed_mps,
+                fused.course_rad,
+                fsv,
+                fsc,
+            ]
+        )
+    return out
+
+
+def _cluster_epoch(
+    rows: Kinematics,
+    sv: np.ndarray,
+    sc: np.ndarray,
+    prev: np.ndarray,
+    site: np.ndarray,
+    n_sites: int,
+    cfg: AssociationConfig,
+    gate: float,
+) -> tuple[_Candidates, np.ndarray]:
+    """Sequential N-radar clustering of one epoch's rows (sorted by site). Returns the
+    candidates and each row's candidate index."""
+    cand = _Candidates(site.size, n_sites)
+    member = np.full(site.size, -1)
+    for s in np.unique(site):
+        r = np.flatnonzero(site == s)
+        if cand.n:
+            fused, _, _ = cand.state()
+            cost = gated_d2(rows.take(r), fused, cfg, gate)
+            persists = (prev[r, None, None] == cand.prev_ids[None, : cand.n, :]).any(-1)
+            persists &= (prev[r] >= 0)[:, None]
+            cost = np.where(persists & np.isfinite(cost), cost - _BONUS_GATES * gate, cost)
+            ri, ci = assign(cost, gate)
+            member[r[ri]] = ci
+        fresh = r[member[r] < 0]
+        member[fresh] = cand.new(fresh.size)
+        cand.add(member[r], rows.take(r), sv[r], sc[r], prev[r], int(s))
+    return cand, member
+
+
+def _resolve_ids(
+    cand: _Candidates, mem: _Memory, t_ns: int, cfg: AssociationConfig, gate: float
+) -> np.ndarray:
+    """System id index (id - id_base) of each candidate, one assignment problem:
+    columns are the system tracks seen within track_timeout_s. A candidate may take
+    an id its members had (cost -10 per member vote; ties between ids go to the older
+    id (+ rank/n_live < 1), ties between candidates for one id to the one closer to
+    that track's last state (+ 0.01 min(d^2/gate, 1))), or, when none of its members
+    had an id, an id it gates with (cost d^2/gate - 1, in [-1, 0)). The rest get new
+    ids."""
+    live = np.flatnonzero(mem.sys_seen[: mem.n_sys] >= t_ns - round(cfg.track_timeout_s * NS))
+    votes = (cand.prev_ids[: cand.n, :, None] == live[None, None, :]).sum(axis=1)
+    fused, _, _ = cand.state()
+    d2 = gated_d2(fused, _predict(mem, live, t_ns), cfg, gate)
+    voted = votes > 0
+    orphan = ~(cand.prev_ids[: cand.n] >= 0).any(axis=1)
+    cost = np.full(votes.shape, np.inf)
+    age_rank = np.broadcast_to(np.arange(live.size) / max(live.size, 1), votes.shape)
+    cost[voted] = -10.0 * votes[voted] + age_rank[voted] + 0.01 * np.minimum(d2[voted] / gate, 1.0)
+    reuse = orphan[:, None] & np.isfinite(d2)
+    cost[reuse] = d2[reuse] / gate - 1.0
+    ids = np.full(cand.n, -1, np.int64)
+    ci, li = assign(cost, 0.0)
+    ids[ci] = live[li]
+    new = np.flatnonzero(ids < 0)
+    ids[new] = mem.grow(new.size)
+    return ids
+
+
+def _predict(mem: _Memory, sys: np.ndarray, t_ns: int) -> Kinematics:
+    """Last fused state of system tracks ``sys`` extrapolated to ``t_ns`` (eq. 9, with
+    the eq. 12 variance inflation for speed and course errors)."""
+    s = mem.sys_state[sys].T
+    dt = (t_ns - mem.sys_seen[sys]) / NS
+    x, y = extrapolate_position(s[0], s[1], s[5], s[6], dt)
+    dxx, dyy, dxy = extrapolation_covariance(s[5], s[6], dt, s[7], s[8], 0.0)
+    return Kinematics(x, y, s[2] + dxx, s[3] + dyy, s[4] + dxy, s[5], s[6])
+
+
+def _with_leave_one_out_d2(df: pl.DataFrame) -> pl.DataFrame:
+    """mahalanobis_d2 of each row to the eq. 14 fusion of the other members of its
+    system track at that epoch (group sums minus the row's own terms); null when alone."""
+    g = ["time_ns", "system_track_id"]
+    wx, wy = 1.0 / pl.col("P_xx"), 1.0 / pl.col("P_yy")
+    ox = wx.sum().over(g) - wx
+    oy = wy.sum().over(g) - wy
+    tmp = df.with_columns(
+        ((wx * pl.col("x_enu_m")).sum().over(g) - wx * pl.col("x_enu_m")).truediv(ox).alias("_xo"),
+        ((wy * pl.col("y_enu_m")).sum().over(g) - wy * pl.col("y_enu_m")).truediv(oy).alias("_yo"),
+        (1.0 / ox).alias("_Pxx"),
+        (1.0 / oy).alias("_Pyy"),
+        (((wx * wy * pl.col("P_xy")).sum().over(g) - wx * wy * pl.col("P_xy")) / (ox * oy)).alias(
+            "_Pxy"
+        ),
+        pl.len().over(g).alias("_n"),
+    )
+    dx, dy = pl.col("x_enu_m") - pl.col("_xo"), pl.col("y_enu_m") - pl.col("_yo")
+    sxx, syy = pl.col("P_xx") + pl.col("_Pxx"), pl.col("P_yy") + pl.col("_Pyy")
+    sxy = pl.col("P_xy") + pl.col("_Pxy")
+    d2 = (syy * dx * dx - 2.0 * sxy * dx * dy + sxx * dy * dy) / (sxx * syy - sxy * sxy)
+    return tmp.with_columns(
+        pl.when(pl.col("_n") > 1).then(d2).otherwise(None).alias("mahalanobis_d2")
+    ).drop("_xo", "_yo", "_Pxx", "_Pyy", "_Pxy", "_n")

@@ -1,0 +1,266 @@
+"""Accuracy scoring of fused and per-radar synchronised points against a reference.
+
+For every fused point (source ``fused``) and every radar's synchronised point of the
+same system track and epoch (source = site_id):
+
+- reference ``truth`` when the log has simulated truth: truth interpolated linearly to
+  the epoch per vessel (and prolonged up to ``truth_extrapolation_s`` past a vessel's
+  last sample, see :func:`truth_at_epochs`); the reference vessel is the truth vessel
+  nearest to the FUSED point at that epoch (within ``max_reference_distance_m``;
+  farther points are false tracks and are not scored here), and the same vessel is the
+  reference for that system track's radar points at that epoch. reference_id = vessel_id,
+  reference_mmsi = the vessel's MMSI (null: no AIS aboard);
+- otherwise reference ``ais``: the AIS report of the system track's identified MMSI
+  (``mmsi`` column of system_tracks), the latest one at most ``max_ais_age_s`` old,
+  extrapolated to the epoch (as in identification); points without identity are
+  skipped. reference_id = reference_mmsi = MMSI.
+
+error = estimate - reference (east, north, m); error_m = its norm; NEES =
+e^T P^-1 e with the point's own position covariance (m^2), chi-square with 2 degrees
+of freedom (mean 2) when the reported covariance is calibrated; the reference's own
+error is not included (negligible for truth; for AIS, NEES measures consistency only).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import polars as pl
+
+from pipeline.config import AisConfig, RegionConfig, Sector
+from pipeline.frames import geodetic_to_enu
+from pipeline.geometry import assign_sectors, position_covariance
+from pipeline.maritime.identity import ais_at_epochs
+from pipeline.maritime.sync import NS, expand_ranges
+
+ERROR_COLUMNS = (
+    "time_ns",
+    "system_track_id",
+    "source",
+    "sector",
+    "reference",
+    "reference_id",
+    "reference_mmsi",
+    "error_east_m",
+    "error_north_m",
+    "error_m",
+    "nees",
+)
+_ERROR_SCHEMA = {
+    "time_ns": pl.Int64,
+    "system_track_id": pl.Int64,
+    "source": pl.String,
+    "sector": pl.String,
+    "reference": pl.String,
+    "reference_id": pl.Int64,
+    "reference_mmsi": pl.Int64,
+    "error_east_m": pl.Float64,
+    "error_north_m": pl.Float64,
+    "error_m": pl.Float64,
+    "nees": pl.Float64,
+}
+
+
+def score_tracks(
+    system_tracks: pl.DataFrame,
+    associations: pl.DataFrame,
+    *,
+    truth: pl.DataFrame | None,
+    ais_reports: pl.DataFrame,
+    region: RegionConfig,
+    sectors: Sequence[Sector],
+    max_reference_distance_m: float = 2000.0,
+    max_ais_age_s: float = 30.0,
+    truth_extrapolation_s: float = 10.0,
+) -> pl.DataFrame:
+    """Errors of fused and radar points against truth (else AIS), track_errors columns.
+
+    Consumes system_tracks: time_ns, system_track_id, x_enu_m, y_enu_m, sigma_x_m,
+    sigma_y_m, cov_xy_m2, optional sector, mmsi (AIS reference only); associations:
+    time_ns, system_track_id, site_id, x_enu_m, y_enu_m, P_xx/P_yy/P_xy (or the sigma
+    form), optional sector; truth: time_ns, vessel_id, mmsi, lat_deg, lon_deg.
+    """
+    fused = _with_sector(system_tracks, sectors, region).with_columns(
+        pl.lit("fused").alias("source")
+    )
+    radar = _with_sector(associations, sectors, region).rename({"site_id": "source"})
+    if truth is not None and truth.height:
+        ref = _truth_reference(
+            fused, truth, region, max_reference_distance_m, truth_extrapolation_s
+        )
+    else:
+        ref = _ais_reference(fused, ais_reports, region, max_ais_age_s)
+    key = ["time_ns", "system_track_id"]
+    parts = [_errors(pts.join(ref, on=key, how="inner")) for pts in (fused, radar) if pts.height]
+    if not parts:
+        return pl.DataFrame(schema=_ERROR_SCHEMA)
+    return pl.concat(parts).sort("time_ns", "system_track_id", "source")
+
+
+def _with_sector(df: pl.DataFrame, sectors: Sequence[Sector], region: RegionConfig) -> pl.DataFrame:
+    return df if "sector" in df.columns else assign_sectors(df, sectors, region)
+
+
+def truth_at_epochs(
+    truth: pl.DataFrame,
+    epochs_ns: np.ndarray,
+    region: RegionConfig,
+    *,
+    extrapolate_s: float = 0.0,
+) -> pl.DataFrame:
+    """Truth interpolated linearly to each epoch inside each vessel's sampled span, and
+    extrapolated linearly (velocity of its last two samples) up to ``extrapolate_s``
+    past its last sample: a radar report made just before a vessel left the scene is
+    synchronised up to two scans later, when the simulator no longer logs its truth.
+
+    Returns time_ns (epoch), vessel_id, mmsi, ref_x_m, ref_y_m (regional ENU, m).
+    """
+    epochs = np.unique(np.asarray(epochs_ns, np.int64))
+    tr = (
+        truth.select("time_ns", "vessel_id", "mmsi", "lat_deg", "lon_deg")
+        .sort("vessel_id", "time_ns")
+        .unique(["vessel_id", "time_ns"], keep="last", maintain_order=True)
+    )
+    x, y = geodetic_to_enu(
+        tr["lat_deg"].to_numpy(),
+        tr["lon_deg"].to_numpy(),
+        region.origin_lat_deg,
+        region.origin_lon_deg,
+    )
+    t = tr["time_ns"].to_numpy()
+    vessel = tr["vessel_id"].to_numpy()
+    last = np.r_[vessel[1:] != vessel[:-1], True]
+    single = last & np.r_[True, vessel[1:] != vessel[:-1]]
+    idx_all = np.arange(t.size)
+    nxt = np.where(last, idx_all, idx_all + 1)
+    # the segment of a last sample is its previous one, prolonged past its end
+    seg0 = np.where(last & ~single, idx_all - 1, idx_all)
+    seg1 = np.where(last, idx_all, nxt)
+    lo = np.searchsorted(epochs, t, "left")
+    end = np.where(last, t + np.where(single, 0, round(extrapolate_s * NS)), t[nxt])
+    hi = np.where(last, np.searchsorted(epochs, end, "right"), np.searchsorted(epochs, end, "left"))
+    row, idx = expand_ranges(lo, hi)
+    e, a, b = epochs[idx], seg0[row], seg1[row]
+    f = (e - t[a]) / np.where(b == a, 1, t[b] - t[a])
+    return pl.DataFrame(
+        {
+            "time_ns": e,
+            "vessel_id": vessel[row],
+            "mmsi": tr["mmsi"].gather(row),
+            "ref_x_m": x[a] + f * (x[b] - x[a]),
+            "ref_y_m": y[a] + f * (y[b] - y[a]),
+        },
+        schema_overrides={"time_ns": pl.Int64, "vessel_id": pl.Int64, "mmsi": pl.Int64},
+    )
+
+
+def _truth_reference(
+    fused: pl.DataFrame,
+    truth: pl.DataFrame,
+    region: RegionConfig,
+    max_dist_m: float,
+    extrapolate_s: float,
+) -> pl.DataFrame:
+    """Nearest truth vessel to each fused point (grid-cell join: the 3x3 cells of size
+    max_dist_m around the point hold every vessel within max_dist_m)."""
+    at = truth_at_epochs(
+        truth, fused["time_ns"].unique().to_numpy(), region, extrapolate_s=extrapolate_s
+    )
+    cell = pl.lit(max_dist_m)
+    at = at.with_columns(
+        (pl.col("ref_x_m") / cell).floor().cast(pl.Int64).alias("cx"),
+        (pl.col("ref_y_m") / cell).floor().cast(pl.Int64).alias("cy"),
+    )
+    shifts = pl.DataFrame({"sx": np.repeat([-1, 0, 1], 3), "sy": np.tile([-1, 0, 1], 3)})
+    at = at.join(shifts, how="cross").with_columns(
+        pl.col("cx") + pl.col("sx"), pl.col("cy") + pl.col("sy")
+    )
+    pts = fused.select(
+        "time_ns",
+        "system_track_id",
+        "x_enu_m",
+        "y_enu_m",
+        (pl.col("x_enu_m") / cell).floor().cast(pl.Int64).alias("cx"),
+        (pl.col("y_enu_m") / cell).floor().cast(pl.Int64).alias("cy"),
+    )
+    dist = (
+        (pl.col("x_enu_m") - pl.col("ref_x_m")) ** 2 + (pl.col("y_enu_m") - pl.col("ref_y_m")) ** 2
+    ).sqrt()
+    return (
+        pts.join(at, on=["time_ns", "cx", "cy"], how="inner")
+        .with_columns(dist.alias("_d"))
+        .filter(pl.col("_d") <= max_dist_m)
+        .sort("time_ns", "system_track_id", "_d", "vessel_id")
+        .unique(["time_ns", "system_track_id"], keep="first", maintain_order=True)
+        .select(
+            "time_ns",
+            "system_track_id",
+            "ref_x_m",
+            "ref_y_m",
+            pl.lit("truth").alias("reference"),
+            pl.col("vessel_id").alias("reference_id"),
+            pl.col("mmsi").alias("reference_mmsi"),
+        )
+    )
+
+
+def _ais_reference(
+    fused: pl.DataFrame, ais_reports: pl.DataFrame, region: RegionConfig, max_age_s: float
+) -> pl.DataFrame:
+    """The identified MMSI's AIS report extrapolated to the epoch (skipped: no identity)."""
+    ident = fused.filter(pl.col("mmsi").is_not_null()) if "mmsi" in fused.columns else None
+    if ident is None or ident.height == 0 or ais_reports.height == 0:
+        return pl.DataFrame(
+            schema={
+                "time_ns": pl.Int64,
+                "system_track_id": pl.Int64,
+                "ref_x_m": pl.Float64,
+                "ref_y_m": pl.Float64,
+                "reference": pl.String,
+                "reference_id": pl.Int64,
+                "reference_mmsi": pl.Int64,
+            }
+        )
+    cfg = AisConfig(max_report_age_s=max_age_s)
+    ais = ais_at_epochs(ais_reports, ident["time_ns"].unique().to_numpy(), cfg=cfg, region=region)
+    return (
+        ident.select("time_ns", "system_track_id", "mmsi")
+        .join(
+            ais.select(
+                "time_ns",
+                "mmsi",
+                pl.col("x_enu_m").alias("ref_x_m"),
+                pl.col("y_enu_m").alias("ref_y_m"),
+            ),
+            on=["time_ns", "mmsi"],
+            how="inner",
+        )
+        .select(
+            "time_ns",
+            "system_track_id",
+            "ref_x_m",
+            "ref_y_m",
+            pl.lit("ais").alias("reference"),
+            pl.col("mmsi").alias("reference_id"),
+            pl.col("mmsi").alias("reference_mmsi"),
+        )
+    )
+
+
+def _errors(pts: pl.DataFrame) -> pl.DataFrame:
+    """error = estimate - reference; NEES = e^T P^-1 e with the point's own covariance."""
+    ex = pts["x_enu_m"].to_numpy() - pts["ref_x_m"].to_numpy()
+    ey = pts["y_enu_m"].to_numpy() - pts["ref_y_m"].to_numpy()
+    P_xx, P_yy, P_xy = position_covariance(pts)
+    nees = (P_yy * ex * ex - 2.0 * P_xy * ex * ey + P_xx * ey * ey) / (P_xx * P_yy - P_xy**2)
+    return (
+        pts.with_columns(
+            pl.Series("error_east_m", ex),
+            pl.Series("error_north_m", ey),
+            pl.Series("error_m", np.hypot(ex, ey)),
+            pl.Series("nees", nees),
+        )
+        .select(ERROR_COLUMNS)
+        .cast(_ERROR_SCHEMA)
+    )

@@ -1,1 +1,0 @@
-"""Evaluation metrics of the fused picture against truth."""
