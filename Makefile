@@ -21,6 +21,7 @@ demo: setup
 
 test: setup
 	$(BIN)/ruff check pipeline jobs tests bench
+	$(BIN)/lint-imports
 	$(BIN)/pytest
 
 bench: setup

@@ -6,6 +6,7 @@ import ctypes
 import ctypes.util
 import json
 import logging
+import re
 import sys
 from datetime import UTC, datetime
 
@@ -60,6 +61,29 @@ def parse_time_ns(text: str) -> int:
         dt = dt.replace(tzinfo=UTC)
     delta = dt - datetime(1970, 1, 1, tzinfo=UTC)
     return (delta.days * 86_400 + delta.seconds) * 1_000_000_000 + delta.microseconds * 1000
+
+
+_DURATION = re.compile(
+    r"^(?:(?P<h>\d+(?:\.\d+)?)h)?(?:(?P<m>\d+(?:\.\d+)?)m)?(?:(?P<s>\d+(?:\.\d+)?)s)?$")
+
+
+def parse_duration(text: str) -> float:
+    """``"1h"``, ``"30m"``, ``"90s"``, ``"2h30m"``, ``"1.5h"`` or plain seconds
+    (``"600"``) -> seconds. Raises ValueError for anything else or a zero duration."""
+    t = text.strip().lower()
+    try:
+        seconds = float(t)
+    except ValueError:
+        m = _DURATION.match(t)
+        if not t or m is None:
+            raise ValueError(
+                f"invalid duration {text!r}: use e.g. 1h, 30m, 90s, 2h30m or seconds"
+            ) from None
+        seconds = (float(m["h"] or 0) * 3600.0 + float(m["m"] or 0) * 60.0
+                   + float(m["s"] or 0))
+    if not seconds > 0 or seconds == float("inf"):
+        raise ValueError(f"invalid duration {text!r}: must be positive and finite")
+    return seconds
 
 
 def iso(t_ns: int) -> str:

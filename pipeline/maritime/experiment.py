@@ -8,11 +8,11 @@ and asks whether the association pairs radar 1's report of target t with radar 2
 report of target t, for both targets ("correct identification"). Three estimates:
 
 - ``probability_correct``: the batch association, ``associate_tracks`` of
-  pipeline/associate/track_to_track.py, exactly as ``surveil batch`` runs it (every
+  pipeline/maritime/associate.py, exactly as ``surveil batch`` runs it (every
   trial is one synchronised epoch; epochs are 60 s apart, beyond the track timeout, so
   trials do not share state). It includes the chi-square gate: a correct pair beyond
   the gate is not formed and the trial counts as wrong.
-- ``hypothesis_test``: the paper's test as written (pipeline/associate/hypothesis.py,
+- ``hypothesis_test``: the paper's test as written (pipeline/maritime/hypothesis.py,
   least Sigma_k over H1..H4, eq. 12-16), no gate.
 - ``closed_form``: an independent, separately coded value. With equal isotropic sigmas
   and the targets' vectors unknown (maximum likelihood), the right pairing wins iff

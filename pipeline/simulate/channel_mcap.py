@@ -27,8 +27,9 @@ from pathlib import Path
 
 import polars as pl
 
+from pipeline.config import Config
 from pipeline.io.mcap_write import archive_file_name, json_payloads, schema_bytes, write_mcap_file
-from pipeline.simulate.channel import ChannelScenario
+from pipeline.simulate.channel import ChannelScenario, simulate_channel
 from pipeline.units import NS
 
 RADAR_SCHEMA_NAME = "surveil.RadarTrackReport"
@@ -137,3 +138,11 @@ def write_channel_archive(
         write_mcap_file(path, channels, schemas, meta, df)
         paths.append(path)
     return paths
+
+
+def simulate_channel_archive(
+    cfg: Config, start_ns: int, duration_s: float, seed: int, out_dir: Path
+) -> list[Path]:
+    """Simulate the ``channel`` scenario and write it under ``out_dir``; return the files."""
+    scenario = simulate_channel(cfg, start_ns=start_ns, duration_s=duration_s, seed=seed)
+    return write_channel_archive(scenario, out_dir, scenario_name="channel")

@@ -1,6 +1,6 @@
 """``surveil import``: NMEA text logs and AIS CSV tables -> MCAP with honest log times;
 format detection, usage errors, the CLI (pipeline/convert/legacy.py,
-jobs/import_legacy.py, jobs/cli_ingest.py)."""
+jobs/import_legacy.py, jobs/cli.py)."""
 
 from __future__ import annotations
 
