@@ -349,7 +349,8 @@ def _with_leave_one_out_d2(df: pl.DataFrame) -> pl.DataFrame:
     g = ["time_ns", "system_track_id"]
     own = channel_information_of_columns()
     others = own.map(lambda t: t.sum().over(g)) - own
-    tmp = df.with_columns(*others.aliased("_o_"), pl.len().over(g).alias("_n"))
+    o_cols = others.aliased("_o_")
+    tmp = df.with_columns(*o_cols, pl.len().over(g).alias("_n"))
     o = Information.columns("_o_").estimate()
     dx, dy = pl.col("x_enu_m") - o.x_m, pl.col("y_enu_m") - o.y_m
     sxx, syy = pl.col("P_xx") + o.P_xx, pl.col("P_yy") + o.P_yy
@@ -357,4 +358,4 @@ def _with_leave_one_out_d2(df: pl.DataFrame) -> pl.DataFrame:
     d2 = (syy * dx * dx - 2.0 * sxy * dx * dy + sxx * dy * dy) / (sxx * syy - sxy * sxy)
     return tmp.with_columns(
         pl.when(pl.col("_n") > 1).then(d2).otherwise(None).alias("mahalanobis_d2")
-    ).drop(*(c for c in tmp.columns if c.startswith("_o_")), "_n")
+    ).drop(*(e.meta.output_name() for e in o_cols), "_n")
