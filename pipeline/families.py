@@ -18,8 +18,14 @@ from pipeline.family import Family
 from pipeline.gaps.stage import FAMILY as GAPS
 from pipeline.maritime.stage import FAMILY as MARITIME
 from pipeline.nav.stage import FAMILY as NAV
+from pipeline.reports import parse_reports_section
+from pipeline.requirements import parse_requirements
 
 FAMILIES: tuple[Family, ...] = (MARITIME, AIRFIELD, GAPS, NAV)
+
+# Sections parsed at load like a family's, that belong to no family: what reports are
+# judged against ([requirements]) and the user's report folders ([reports]).
+SECTIONS: dict[str, Any] = {"requirements": parse_requirements, "reports": parse_reports_section}
 
 
 def family(name: str) -> Family:
@@ -31,7 +37,7 @@ def family(name: str) -> Family:
 
 
 def _parsers() -> dict[str, Any]:
-    return {f.name: f.parse_config for f in FAMILIES}
+    return {**{f.name: f.parse_config for f in FAMILIES}, **SECTIONS}
 
 
 def load_config(path: str | Path | None = None) -> Config:
