@@ -342,7 +342,7 @@ def report(st: _State, name, from_, to, sector, fmt, params, list_) -> None:
         raise UsageError(str(exc)) from exc
     if table.num_rows == 0:
         why = explain_empty(st.warehouse, load_report(name, dirs), start_ns=start, end_ns=end,
-                            sector=sector)
+                            sector=sector, cfg=st.cfg)
         click.echo(f"{name}: no rows. {why}", err=True)
     click.echo(format_report(table, fmt, title=name), nl=fmt != "table")
 

@@ -8,6 +8,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from jobs.batch import BatchSummary, run_batch
+from jobs.common import iso
 from jobs.ingest import IngestSummary, run_ingest
 from jobs.report import format_report, run_named_report
 from jobs.simulate import DEFAULT_START_NS, run_simulate
@@ -55,4 +56,7 @@ def run_demo(
     echo(
         f"warehouse: {warehouse} (open {warehouse / 'surveil.duckdb'} in DuckDB for your own SQL)"
     )
+    window = f"--from {iso(start_ns)} --to {iso(end_ns)}"
+    echo(f"audit page: surveil audit {window} --out audit/   (docs/audit.md)")
+    echo(f"Foxglove:   surveil export {window} --out demo.mcap   (docs/foxglove.md)")
     return DemoResult(archive=files, ingest=ingest, batch=batch)

@@ -62,14 +62,14 @@ def run_named_report(
 
 
 def explain_empty(warehouse: Path, report: ReportSql, *, start_ns: int | None,
-                  end_ns: int | None, sector: str | None) -> str:
+                  end_ns: int | None, sector: str | None, cfg: Config | None = None) -> str:
     """Why ``report`` has no rows in the window: what its source tables hold and which
     command writes them."""
     con = open_warehouse(warehouse)
     try:
         return explain_empty_report(
             con, report, start_ns=ALL_TIME[0] if start_ns is None else start_ns,
-            end_ns=ALL_TIME[1] if end_ns is None else end_ns, sector=sector)
+            end_ns=ALL_TIME[1] if end_ns is None else end_ns, sector=sector, cfg=cfg)
     finally:
         con.close()
 

@@ -13,6 +13,7 @@ from collections.abc import Iterable
 
 import duckdb
 
+from pipeline.config import Config
 from pipeline.families import FAMILIES
 from pipeline.reports import ReportSql
 from pipeline.tables import spec, table_specs
@@ -60,6 +61,22 @@ def _count(con: duckdb.DuckDBPyConnection, table: str, start_ns: int | None = No
     return int(con.execute(sql, params).fetchall()[0][0])
 
 
+def _empty_inputs(con: duckdb.DuckDBPyConnection, table: str, cfg: Config | None,
+                  start_ns: int, end_ns: int) -> list[str]:
+    """The inputs of the family that writes ``table`` that have no rows in the window."""
+    if cfg is None:
+        return []
+    for fam in FAMILIES:
+        if table in fam.outputs:
+            try:
+                inputs = [ti.table for ti in fam.inputs(cfg) if not ti.whole_table]
+            except Exception:  # a family that cannot say without its config section
+                return []
+            return [t for t in inputs if t in table_specs()
+                    and _count(con, t, start_ns, end_ns) == 0]
+    return []
+
+
 def why_empty(
     con: duckdb.DuckDBPyConnection,
     tables: Iterable[str],
@@ -67,9 +84,10 @@ def why_empty(
     start_ns: int,
     end_ns: int,
     sector: str | None = None,
+    cfg: Config | None = None,
 ) -> str:
     """One or two sentences: why queries over ``tables`` have nothing in the window
-    (``con`` has the warehouse views)."""
+    (``con`` has the warehouse views; ``cfg`` lets a derived table name its empty inputs)."""
     reasons = []
     for table in tables:
         if table not in table_specs():
@@ -83,7 +101,13 @@ def why_empty(
         if in_window:
             continue
         total = _count(con, table)
-        if total:
+        missing = _empty_inputs(con, table, cfg, start_ns, end_ns)
+        if missing:
+            first = missing[0]
+            reasons.append(f"{table} has no rows because its input {first} has none in the "
+                           f"window: {producer(first)} first, then "
+                           "`surveil batch --from T --to T`")
+        elif total:
             reasons.append(f"{table} has no rows in the window ({total} rows at other times): "
                            f"run {producer(table)} for this window")
         else:
@@ -95,7 +119,8 @@ def why_empty(
 
 
 def explain_empty_report(con: duckdb.DuckDBPyConnection, report: ReportSql, *, start_ns: int,
-                         end_ns: int, sector: str | None = None) -> str:
+                         end_ns: int, sector: str | None = None, cfg: Config | None = None
+                         ) -> str:
     """Why report ``report`` has no rows, from the tables its header names."""
     return why_empty(con, report.source_tables(), start_ns=start_ns, end_ns=end_ns,
-                     sector=sector)
+                     sector=sector, cfg=cfg)

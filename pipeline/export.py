@@ -145,10 +145,13 @@ def geometry_geojson(cfg: Config) -> dict[str, Any]:
         pts = [[p[1], p[0]] for p in poly]
         return [*pts, pts[0]]
 
+    def polygon(poly: Any) -> dict[str, Any]:
+        return {"type": "Polygon", "coordinates": [ring(poly)]}
+
     feats = []
     for s in cfg.sectors:
         feats.append({"type": "Feature", "properties": {"kind": "sector", "name": s.name},
-                      "geometry": {"type": "Polygon", "coordinates": [ring(s.polygon_lat_lon_deg)]}})
+                      "geometry": polygon(s.polygon_lat_lon_deg)})
     for leg in cfg.fairway_legs:
         feats.append({"type": "Feature", "properties": {"kind": "fairway_leg", "name": leg.leg_id},
                       "geometry": {"type": "LineString", "coordinates": [
@@ -158,13 +161,12 @@ def geometry_geojson(cfg: Config) -> dict[str, Any]:
     for s in getattr(airfield, "sectors", ()) or ():
         feats.append({"type": "Feature",
                       "properties": {"kind": "airfield_area", "name": s.name, "area": s.area},
-                      "geometry": {"type": "Polygon", "coordinates": [ring(s.polygon_lat_lon_deg)]}})
+                      "geometry": polygon(s.polygon_lat_lon_deg)})
     gaps = (cfg.families or {}).get("gaps")
     for kind in ("admissible", "islands"):
         for p in getattr(gaps, kind, ()) or ():
             feats.append({"type": "Feature", "properties": {"kind": kind, "name": p.name},
-                          "geometry": {"type": "Polygon",
-                                       "coordinates": [ring(p.polygon_lat_lon_deg)]}})
+                          "geometry": polygon(p.polygon_lat_lon_deg)})
     return {"type": "FeatureCollection", "features": feats}
 
 

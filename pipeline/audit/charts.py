@@ -132,11 +132,9 @@ def identification_bars(rows: list[dict[str, Any]], req: RequirementsConfig
                  / 100)
     _limit_line(fig, req.maritime_identification_share,
                 f"target: ≥ {req.maritime_identification_share:g} correct (ships with AIS)")
-    fig = _layout(fig, "Identification: share of fused track time by MMSI verdict",
-                  barmode="stack", yaxis_title="share of track time")
+    fig = _layout(fig, f"Identification: share of fused track time by MMSI verdict (axis from "
+                       f"{bottom:.0%})", barmode="stack", yaxis_title="share of track time")
     fig.update_yaxes(range=[bottom, 1.0], tickformat=".0%")
-    fig.add_annotation(text=f"axis starts at {bottom:.0%}", xref="paper", yref="paper", x=0,
-                       y=-0.22, showarrow=False, font=dict(size=10, color="#666"))
     return fig
 
 

@@ -71,7 +71,7 @@ def collect(con: duckdb.DuckDBPyConnection, cfg: Config, warehouse: Path, *, sta
         reports[name] = table
         if table.num_rows == 0:
             reasons[name] = explain_empty_report(con, report, start_ns=start_ns, end_ns=end_ns,
-                                                 sector=sector)
+                                                 sector=sector, cfg=cfg)
     airfield = (cfg.families or {}).get("airfield") is not None
     verdicts = evaluate(
         reports, req,
