@@ -35,6 +35,9 @@ from pipeline.config import Config, ConfigError
 from pipeline.families import load_config
 
 LOG_LEVELS = ("DEBUG", "INFO", "WARNING", "ERROR", "CRITICAL")
+# the scenarios of pipeline.simulate.scenarios.SCENARIOS (a test checks), named here so
+# that `surveil --help` does not import every simulator
+SCENARIO_NAMES = ("channel", "airfield", "gaps", "ownship")
 
 
 class _State:
@@ -187,7 +190,7 @@ def cli(ctx: click.Context, config_path, warehouse, log_level, log_json) -> None
 
 
 @cli.command()
-@click.option("--scenario", type=click.Choice(["channel", "airfield", "gaps", "ownship"]),
+@click.option("--scenario", type=click.Choice(SCENARIO_NAMES),
               default="channel", show_default=True)
 @click.option("--duration", default="1h", show_default=True, help="e.g. 1h, 30m, 90s")
 @click.option("--seed", type=int, default=7, show_default=True)
@@ -290,14 +293,22 @@ def reprocess(st: _State, from_, to, executor) -> None:
 @cli.command()
 @click.option("--seed", type=int, default=7, show_default=True)
 @click.option("--duration", default="1h", show_default=True)
+@click.option("--scenarios", default="channel,airfield,ownship", show_default=True,
+              help="comma-separated scenarios to simulate (channel, airfield, gaps, ownship)")
 @_EXECUTOR
 @click.pass_obj
-def demo(st: _State, seed, duration, executor) -> None:
-    """Simulate one hour, ingest, batch, and print the accuracy and identification reports."""
+def demo(st: _State, seed, duration, scenarios, executor) -> None:
+    """Simulate one hour, ingest, batch, and print the accuracy and identification reports
+    (then `surveil audit` draws the hour: the command is printed at the end)."""
     from jobs.demo import run_demo
 
+    chosen = [s.strip() for s in scenarios.split(",") if s.strip()]
+    unknown = [s for s in chosen if s not in SCENARIO_NAMES]
+    if unknown or not chosen:
+        raise UsageError(f"--scenarios: unknown {', '.join(unknown) or '(none given)'}; "
+                         f"choose from {', '.join(SCENARIO_NAMES)}")
     result = run_demo(st.cfg, st.warehouse, seed=seed, duration_s=_duration_s(duration),
-                      echo=click.echo, executor_kind=executor)
+                      echo=click.echo, executor_kind=executor, scenarios=chosen)
     sys.exit(result.exit_code)
 
 

@@ -1,6 +1,6 @@
 """Progress bars with ETA on stderr (rich), only when stderr is a terminal: ingest in
-bytes, batch in work units. A job takes an optional ``progress`` and calls its hooks;
-``None`` (tests, cron, pipes) shows nothing."""
+bytes (advanced as each file is committed), batch in work units. A job takes an optional
+``progress`` and calls its hooks; ``None`` (tests, cron, pipes) shows nothing."""
 
 from __future__ import annotations
 
@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from rich import filesize
 from rich.console import Console
 from rich.progress import (
     BarColumn,
@@ -43,7 +44,8 @@ class TerminalProgress:
 
     def ingest_total(self, paths: list[Path]) -> None:
         total = sum(os.path.getsize(p) for p in paths)
-        self._ingest = self._bars.add_task("ingest", total=total, done="")
+        self._ingest = self._bars.add_task(
+            "ingest", total=total, done=f"0/{filesize.decimal(total)} in {len(paths)} file(s)")
         self._bytes = DownloadColumn()
 
     def ingest_result(self, res: Any) -> None:
@@ -55,7 +57,7 @@ class TerminalProgress:
         self._bars.update(self._ingest, done=self._bytes.render(task).plain)
 
     def batch_units(self, n: int) -> None:
-        self._batch = self._bars.add_task("batch", total=n, done="")
+        self._batch = self._bars.add_task("batch", total=n, done=f"0/{n} units")
         self._units = MofNCompleteColumn()
 
     def batch_result(self, res: Any) -> None:

@@ -110,8 +110,8 @@ def test_shell_completion_offers_report_names():
 
 
 def test_scenario_choices_are_the_registered_scenarios():
-    from jobs.cli import simulate
+    from jobs.cli import SCENARIO_NAMES, simulate
     from pipeline.simulate.scenarios import SCENARIOS
 
     choice = next(p for p in simulate.params if p.name == "scenario").type
-    assert sorted(choice.choices) == sorted(SCENARIOS)
+    assert sorted(choice.choices) == sorted(SCENARIOS) == sorted(SCENARIO_NAMES)
