@@ -163,7 +163,7 @@ def run_batch(
     ``progress``: the CLI's :class:`~jobs.progress.TerminalProgress` (or None)."""
     if end_ns <= start_ns:
         raise ValueError("--to must be after --from")
-    warm_up()  # the views file's DuckDB instance, built while the batch runs
+    warm_up(warehouse)  # the views file's DuckDB instance, built while the batch runs
     staging = warehouse / "_staging" / f"batch-{start_ns}-{end_ns}"
     shutil.rmtree(staging, ignore_errors=True)
     units = plan_units(warehouse, cfg, start_ns, end_ns, staging)

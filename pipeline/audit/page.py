@@ -123,7 +123,9 @@ table.verdicts td.num { text-align: right; font-variant-numeric: tabular-nums;
 .nes { background: #eee; color: #555; }
 .summary span { margin-right: 14px; } nav a { margin-right: 10px; font-size: 13px; }
 .chart { margin: 6px 0 14px; break-inside: avoid; }
-@media print { body { max-width: none; } nav { display: none; } h2 { break-before: auto; } }
+@page { size: A4; margin: 12mm; }
+@media print { body { max-width: none; padding: 0; } nav, .modebar { display: none !important; }
+               h2, .caption { break-after: avoid; } tr { break-inside: avoid; } }
 """
 
 _ERRORS_JS = """

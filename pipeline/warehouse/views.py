@@ -26,6 +26,7 @@ three or four of ~30 tables); a missing or unreadable file is built from scratch
 from __future__ import annotations
 
 import contextlib
+import functools
 import hashlib
 import os
 import re
@@ -145,6 +146,7 @@ _DESCRIBE_SQL = (
 )
 
 
+@functools.cache
 def _docs_digest() -> str:
     """Digest of every ``main`` view statement and the describe macro: a change of the
     schemas' docs rewrites them all."""
@@ -163,15 +165,21 @@ def register_tables(
     return list(statements)
 
 
-def warm_up() -> None:
+def warm_up(warehouse: Path | None = None) -> None:
     """Create the DuckDB instance :func:`rebuild_views_file` works through, in a daemon
-    thread (DuckDB does it without the GIL), so that a job's decoding hides its cost."""
-    threading.Thread(target=_warm, name="duckdb-warm-up", daemon=True).start()
+    thread (DuckDB does it without the GIL), so that a job's decoding hides its cost.
+    Given a ``warehouse`` without a views file yet, also the documented views a new file
+    copies (~1 s of CPU: only then is it worth spending while the job works)."""
+    new_file = warehouse is not None and not (Path(warehouse) / VIEWS_FILE).exists()
+    threading.Thread(target=_warm, args=(new_file,), name="duckdb-warm-up",
+                     daemon=True).start()
 
 
-def _warm() -> None:
+def _warm(with_template: bool = False) -> None:
     with _engine_lock:
-        _docs_template_locked(_engine_locked())
+        con = _engine_locked()
+        if with_template:
+            _docs_template_locked(con)
 
 
 _TEMPLATE = "views_template"  # in-memory database: the documented views of a new file
@@ -238,8 +246,9 @@ def rebuild_views_file(warehouse: Path) -> Path:
             con = _engine_locked()
             copied = _attach_copy_or_new(con, target, tmp)
             try:
-                docs_digest = _docs_template_locked(con)
+                docs_digest = _docs_digest()
                 if not copied:  # a new file: the documented views from the template
+                    _docs_template_locked(con)
                     con.execute(f"COPY FROM DATABASE {_TEMPLATE} TO {_ATTACHED} (SCHEMA)")
                 written = _view_digests(con)  # (the query costs ~10 ms)
                 main = _main_comments(con)
