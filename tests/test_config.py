@@ -1,6 +1,6 @@
 """The config file is validated when it loads, for every command: types, ranges, unknown
 and missing keys and sections, each problem with its key path and line, all at once
-(pipeline/configspec.py)."""
+(pipeline/configspec.py); ``surveil config check`` prints it resolved."""
 
 from __future__ import annotations
 
@@ -130,6 +130,17 @@ def test_every_value_declares_its_valid_range():
     assert loose == []
 
 
+def test_resolved_config_loads_back_to_the_same_config(tmp_path):
+    from jobs.config_check import resolved_config
+
+    text = resolved_config(None)
+    path = tmp_path / "resolved.toml"
+    path.write_text(text, encoding="utf-8")
+    assert _reprs(load_config(path)) == _reprs(load_config())
+    assert "max_course_difference_deg = 30.0\n" in text  # file units
+    assert "min_track_share = 0.8  # default\n" in text  # not in the shipped file
+
+
 # --- each defect, through the real CLI -------------------------------------------------------
 
 CASES = {  # name: (old, new, nth line starting with, expected message after "line N: ")
@@ -190,7 +201,8 @@ def test_bad_value_is_exit_2_naming_key_path_and_line(case, tmp_path, monkeypatc
     old, new, (needle, nth), message = CASES[case]
     path, text = edited(tmp_path, old, new)
     for args in (("--config", str(path), "--warehouse", str(tmp_path / "wh"), "batch",
-                  "--from", "2026-01-15T00:00:00Z", "--to", "2026-01-15T00:01:00Z"),):
+                  "--from", "2026-01-15T00:00:00Z", "--to", "2026-01-15T00:01:00Z"),
+                 ("config", "check", str(path))):
         code, out, err = surveil(monkeypatch, capsys, *args)
         assert code == 2, (args, out, err)
         assert err == f"error: {path} line {line_of(text, needle, nth)}: {message}\n"
@@ -250,6 +262,22 @@ def test_report_validates_the_config_too(args, tmp_path, monkeypatch, capsys):
                              "--warehouse", str(tmp_path), *args)
     assert code == 2 and out == ""
     assert "[validation].max_speed_mps: must be > 0, got -5" in err
+
+
+def test_config_check_prints_the_resolved_config(tmp_path, monkeypatch, capsys):
+    path = tmp_path / "small.toml"
+    path.write_text(TEXT[:TEXT.index("[sync]")], encoding="utf-8")  # region + radar sites
+    code, out, err = surveil(monkeypatch, capsys, "config", "check", str(path))
+    assert (code, err) == (0, "")
+    assert out.startswith(f"# {path}: ok.")
+    for line in ("[region]\nname = \"demo-estuary\"\n", "[sync]\nsigma_dt_s = 0.1  # default\n",
+                 "max_course_difference_deg = 30.0  # default\n",
+                 "[gaps]\ngap_threshold_s = 600.0  # default\n", "[ownship.scenario]\n"):
+        assert line in out
+    assert "[airfield]" not in out  # no section: the airfield family writes nothing
+    # --config is what `config check` checks when no FILE is given
+    code, out2, _ = surveil(monkeypatch, capsys, "--config", str(path), "config", "check")
+    assert (code, out2) == (0, out)
 
 
 def test_installed_command_exits_2_instead_of_aborting(tmp_path):
