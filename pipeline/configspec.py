@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+import functools
 import json
 import math
 import re
@@ -259,7 +260,7 @@ class Document:
             return None
         self._shown.setdefault(path, {})
         before = self._reported
-        hints = typing.get_type_hints(cls)
+        hints = _hints(cls)
         kw = {}
         for f in dataclasses.fields(cls):
             spec = f.metadata.get("setting")
@@ -366,11 +367,13 @@ class Document:
         if not variadic and len(raw) != len(args):
             self.problem(at, f"expected {len(args)} values, got {len(raw)}")
             return _BAD
+        tables = variadic and dataclasses.is_dataclass(args[0])
         items = []
         for i, v in enumerate(raw):
-            self._seen.add((*at, i))
+            if tables:  # (the unknown-key walk descends only into arrays of tables)
+                self._seen.add((*at, i))
             items.append(self._typed(args[0] if variadic else args[i], v, (*at, i)))
-        if variadic and dataclasses.is_dataclass(args[0]):
+        if tables:
             self._unique(args[0], raw, at)
         return _BAD if any(x is _BAD for x in items) else tuple(items)
 
@@ -435,6 +438,12 @@ class Document:
             hint = f"; did you mean {close[0]!r}?" if close else ""
             text = f"{render_path(path, table=True)} unknown key {key!r}{hint}"
         self._add(text, (*path, key))
+
+
+@functools.cache
+def _hints(cls: type) -> dict[str, Any]:
+    """The field annotations of a config dataclass, resolved (once per class)."""
+    return typing.get_type_hints(cls)
 
 
 _EXPECTED = {bool: "true or false", int: "an integer", float: "a number", str: "a string"}
