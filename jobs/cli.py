@@ -346,6 +346,26 @@ def gaps_montecarlo(st: _State, runs, first_seed, duration, particles, by_lead, 
     click.echo(format_report(table.to_arrow(), fmt, title="gaps Monte Carlo"))
 
 
+# --- configuration ------------------------------------------------------------------------
+
+
+@cli.group("config")
+def config_group() -> None:
+    """The configuration file."""
+
+
+@config_group.command("check")
+@click.argument("file", required=False, type=click.Path(dir_okay=False))
+@click.pass_obj
+def config_check(st: _State, file: str | None) -> None:
+    """Validate FILE (default: the --config file) as every command does and print it
+    resolved: every section, values in file units, defaults marked. Exit 0, or 2
+    listing every problem."""
+    from jobs.config_check import resolved_config
+
+    click.echo(resolved_config(file or st.cfg.source), nl=False)
+
+
 def main() -> None:
     """Console entry point: map errors to exit codes instead of tracebacks."""
     try:
