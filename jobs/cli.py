@@ -90,7 +90,7 @@ def _set_warehouse(ctx: click.Context, _param: click.Parameter, value: str | Non
         ctx.find_object(_State).warehouse_option = value
 
 
-def _global_options(cmd: click.Command) -> click.Command:
+def _global_options(cmd: click.Command, validate: bool = True) -> click.Command:
     """``--config`` / ``--warehouse`` after the subcommand, too; the config is loaded
     and validated once every option is parsed, before the command's body runs."""
     body = cmd.callback
@@ -99,7 +99,8 @@ def _global_options(cmd: click.Command) -> click.Command:
         click.get_current_context().find_object(_State).cfg  # noqa: B018 (exit 2 when bad)
         return body(*args, **kwargs)
 
-    cmd.callback = functools.update_wrapper(validated, body) if body else None
+    if validate and body is not None:
+        cmd.callback = functools.update_wrapper(validated, body)
     cmd.params += [
         click.Option(["--config"], type=click.Path(dir_okay=False), expose_value=False,
                      callback=_set_config, is_eager=True,
@@ -622,9 +623,30 @@ def gaps_montecarlo(st: _State, runs, first_seed, duration, particles, by_lead, 
     click.echo(format_report(table.to_arrow(), fmt, title="gaps Monte Carlo"))
 
 
+# --- configuration ------------------------------------------------------------------------
+
+
+@cli.group("config")
+def config_group() -> None:
+    """The configuration file."""
+
+
+@config_group.command("check")
+@click.argument("file", required=False, type=click.Path(dir_okay=False))
+@click.pass_obj
+def config_check(st: _State, file: str | None) -> None:
+    """Validate FILE (default: the --config file) as every command does and print it
+    resolved: every section, values in file units, defaults marked. Exit 0, or 2
+    listing every problem."""
+    from jobs.config_check import resolved_config
+
+    click.echo(resolved_config(file or st.config_path), nl=False)
+
+
 for _cmd in [*cli.commands.values(), *experiment.commands.values()]:
     if not isinstance(_cmd, click.Group):
         _global_options(_cmd)
+_global_options(config_check, validate=False)  # it validates FILE (or --config) itself
 
 
 def main() -> None:

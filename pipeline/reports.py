@@ -27,8 +27,8 @@ from typing import Any
 import duckdb
 import pyarrow as pa
 
-from pipeline.config import ConfigError
-from pipeline.requirements import RequirementsConfig
+from pipeline.configspec import Document, setting
+from pipeline.requirements import ConfigSection, RequirementsConfig
 from pipeline.resources import resource_path
 
 _HEADER = re.compile(r"^--\s*(\w[\w ]*?):\s*(.*)$")
@@ -110,35 +110,42 @@ class ReportSql:
         return [t.strip() for t in text.split("(")[0].split(",") if _NAME.fullmatch(t.strip())]
 
 
+def _folders(dirs: tuple[str, ...]) -> str | None:
+    return None if all(d.strip() for d in dirs) else "folder paths must not be empty"
+
+
+@dataclass(frozen=True)
+class _ReportsSection:
+    """``[reports]`` as written: ``dirs``, folder paths relative to the config file."""
+
+    dirs: tuple[str, ...] = setting([], check=_folders)
+
+
 @dataclass(frozen=True)
 class ReportsConfig:
-    """``[reports]``: user report folders (``dirs``, relative to the config file),
-    listed and run beside the shipped ``sql/``."""
+    """``[reports]``: user report folders (absolute), listed and run beside ``sql/``."""
 
     dirs: tuple[Path, ...] = ()
 
 
-def parse_reports_section(raw: Mapping[str, Any], core: Any = None) -> ReportsConfig:
-    """``[reports]`` of the whole TOML document -> :class:`ReportsConfig`."""
-    sec = raw.get("reports", {})
-    if not isinstance(sec, Mapping):
-        raise ConfigError("[reports] must be a table")
-    unknown = set(sec) - {"dirs"}
-    if unknown:
-        raise ConfigError(f"[reports] unknown key(s) {', '.join(sorted(unknown))}; known: dirs")
-    dirs = sec.get("dirs", [])
-    if not isinstance(dirs, list) or not all(isinstance(d, str) for d in dirs):
-        raise ConfigError("[reports] dirs must be a list of folder paths")
-    source = getattr(core, "source", "") or ""
-    base = Path(source).parent if source and not source.startswith("(") else Path.cwd()
+def parse_reports_section(doc: Document, core: Any = None) -> ReportsConfig | None:
+    """``[reports]`` (no folders when absent); each folder must exist."""
+    got = doc.read(_ReportsSection, "reports")
+    if got is None:
+        return None
+    base = Path(doc.source).parent if doc.source and not doc.source.startswith("(") \
+        else Path.cwd()
     out = []
-    for d in dirs:
+    for i, d in enumerate(got.dirs):
         p = Path(d).expanduser()
         p = p if p.is_absolute() else base / p
         if not p.is_dir():
-            raise ConfigError(f"[reports] dirs: {p} is not a folder")
+            doc.problem(("reports", "dirs", i), f"{p} is not a folder")
         out.append(p.resolve())
     return ReportsConfig(tuple(out))
+
+
+REPORTS_SECTION = ConfigSection("reports", ("reports",), parse_reports_section)
 
 
 def reports_config(cfg: Any) -> ReportsConfig:

@@ -27,13 +27,13 @@ n >= 3 / (1 - p) samples are needed before a pass can mean anything (3000 for 0.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping
-from dataclasses import dataclass, field
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass
 from typing import Any
 
 import pyarrow as pa
 
-from pipeline.config import ConfigError
+from pipeline.configspec import Document, count, positive, setting
 
 SECTION = "requirements"
 AREAS = ("manoeuvring", "apron_taxiway", "stand")  # ED-87 area classes ([[airfield.sectors]] area)
@@ -46,112 +46,108 @@ def rule_of_three_samples(p_min: float) -> int:
 
 
 @dataclass(frozen=True)
+class ConfigSection:
+    """A config section read at load like a family's, owned by no family (what the
+    loader needs: ``name``, the top-level ``sections``, ``parse_config(doc, core)``)."""
+
+    name: str
+    sections: tuple[str, ...]
+    parse_config: Callable[[Document, Any], Any]
+
+
+def _share(default: float) -> Any:
+    """A share or probability in (0, 1]."""
+    return setting(default, gt=0.0, le=1.0)
+
+
+@dataclass(frozen=True)
+class Ed87Limits:
+    """``[requirements.ed87_position_p95_m]``: 95% limit of the fused surface position
+    error per ED-87 area class, m."""
+
+    manoeuvring: float = positive(12.0)
+    apron_taxiway: float = positive(20.0)
+    stand: float = positive(25.0)
+
+
+@dataclass(frozen=True)
+class AirfieldRequirements:
+    """``[requirements.airfield]``: sensor level (ED-116/117), m; P(ID) (ED-87) and the
+    samples it needs (0 or absent: the rule of three, 3 / (1 - P))."""
+
+    sensor_position_p95_m: float = positive(7.5)
+    p_identification: float = _share(0.999)
+    p_identification_min_samples: int = setting(0, ge=0)
+
+
+@dataclass(frozen=True)
+class MaritimeRequirements:
+    """``[requirements.maritime]``: OUR targets for the VTS picture (module docstring)."""
+
+    position_p95_m: float = positive(100.0)
+    identification_share: float = _share(0.99)
+    cross_track_rms_60s_p95_m: float = positive(50.0)
+    siap_completeness: float = _share(0.95)
+
+
+@dataclass(frozen=True)
 class RequirementsConfig:
-    """``[requirements]``: limits in SI units, one value per line of the config.
+    """``[requirements]``: limits in SI units, as in the file. ``min_samples``: fewest
+    samples behind any verdict. Read through the flat properties below."""
 
-    ``ed87_position_p95_m``: area class -> 95th-percentile limit of the fused surface
-    position error, m. ``sensor_position_p95_m``: each airfield channel, m.
-    ``p_identification``: fused, cooperative targets. ``maritime_*``: our VTS targets
-    (module docstring). ``min_samples``: fewest samples behind any verdict;
-    ``p_identification_min_samples``: for P(ID) (default: rule of three)."""
+    min_samples: int = count(100)
+    ed87: Ed87Limits = setting({}, key="ed87_position_p95_m", factory=Ed87Limits)
+    airfield: AirfieldRequirements = setting({}, factory=AirfieldRequirements)
+    maritime: MaritimeRequirements = setting({}, factory=MaritimeRequirements)
 
-    min_samples: int = 100
-    ed87_position_p95_m: Mapping[str, float] = field(
-        default_factory=lambda: {"manoeuvring": 12.0, "apron_taxiway": 20.0, "stand": 25.0})
-    sensor_position_p95_m: float = 7.5
-    p_identification: float = 0.999
-    p_identification_min_samples: int = 3000
-    maritime_position_p95_m: float = 100.0
-    maritime_identification_share: float = 0.99
-    maritime_cross_track_rms_60s_p95_m: float = 50.0
-    maritime_siap_completeness: float = 0.95
+    @property
+    def ed87_position_p95_m(self) -> dict[str, float]:
+        """Area class -> 95% limit, m."""
+        return {a: float(getattr(self.ed87, a)) for a in AREAS}
+
+    @property
+    def sensor_position_p95_m(self) -> float:
+        return self.airfield.sensor_position_p95_m
+
+    @property
+    def p_identification(self) -> float:
+        return self.airfield.p_identification
+
+    @property
+    def p_identification_min_samples(self) -> int:
+        n = self.airfield.p_identification_min_samples
+        return n or rule_of_three_samples(self.p_identification)
+
+    @property
+    def maritime_position_p95_m(self) -> float:
+        return self.maritime.position_p95_m
+
+    @property
+    def maritime_identification_share(self) -> float:
+        return self.maritime.identification_share
+
+    @property
+    def maritime_cross_track_rms_60s_p95_m(self) -> float:
+        return self.maritime.cross_track_rms_60s_p95_m
+
+    @property
+    def maritime_siap_completeness(self) -> float:
+        return self.maritime.siap_completeness
 
     def sql_params(self) -> dict[str, float]:
         """The parameters reports bind (``$ed87_manoeuvring_p95_m``, ...)."""
-        out = {f"ed87_{area}_p95_m": float(v) for area, v in self.ed87_position_p95_m.items()}
+        out = {f"ed87_{area}_p95_m": v for area, v in self.ed87_position_p95_m.items()}
         out["sensor_p95_m"] = float(self.sensor_position_p95_m)
         out["p_identification_min"] = float(self.p_identification)
         return out
 
 
-_MARITIME_KEYS = {
-    "position_p95_m": "maritime_position_p95_m",
-    "identification_share": "maritime_identification_share",
-    "cross_track_rms_60s_p95_m": "maritime_cross_track_rms_60s_p95_m",
-    "siap_completeness": "maritime_siap_completeness",
-}
-_AIRFIELD_KEYS = {
-    "sensor_position_p95_m": "sensor_position_p95_m",
-    "p_identification": "p_identification",
-    "p_identification_min_samples": "p_identification_min_samples",
-}
+def parse_requirements(doc: Document, core: Any = None) -> RequirementsConfig | None:
+    """``[requirements]`` (defaults when absent); problems go to ``doc``."""
+    return doc.read(RequirementsConfig, SECTION)
 
 
-def parse_requirements(raw: Mapping[str, Any], core: Any = None) -> RequirementsConfig:
-    """``[requirements]`` of the whole TOML document -> :class:`RequirementsConfig`
-    (defaults when absent). ConfigError names the bad key."""
-    sec = raw.get(SECTION, {})
-    if not isinstance(sec, Mapping):
-        raise ConfigError("[requirements] must be a table")
-    kw: dict[str, Any] = {}
-    for key, value in sec.items():
-        if key == "min_samples":
-            kw["min_samples"] = _count(value, "[requirements] min_samples")
-        elif key == "ed87_position_p95_m":
-            kw[key] = _areas(value)
-        elif key in ("airfield", "maritime"):
-            names = _AIRFIELD_KEYS if key == "airfield" else _MARITIME_KEYS
-            if not isinstance(value, Mapping):
-                raise ConfigError(f"[requirements.{key}] must be a table")
-            for k, v in value.items():
-                if k not in names:
-                    raise ConfigError(f"[requirements.{key}] unknown key {k!r}; known: "
-                                      f"{', '.join(names)}")
-                what = f"[requirements.{key}] {k}"
-                kw[names[k]] = _count(v, what) if k.endswith("min_samples") else _number(v, what)
-        else:
-            raise ConfigError(f"[requirements] unknown key {key!r}; known: min_samples, "
-                              "ed87_position_p95_m, airfield, maritime")
-    if "p_identification" in kw and "p_identification_min_samples" not in kw:
-        kw["p_identification_min_samples"] = rule_of_three_samples(kw["p_identification"])
-    req = RequirementsConfig(**kw)
-    for name in ("p_identification", "maritime_identification_share",
-                 "maritime_siap_completeness"):
-        if not 0.0 < getattr(req, name) <= 1.0:
-            raise ConfigError(f"[requirements] {name} must be in (0, 1]")
-    for name in ("sensor_position_p95_m", "maritime_position_p95_m",
-                 "maritime_cross_track_rms_60s_p95_m"):
-        if not getattr(req, name) > 0:
-            raise ConfigError(f"[requirements] {name} must be positive")
-    return req
-
-
-def _number(v: Any, what: str) -> float:
-    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
-        raise ConfigError(f"{what} must be a finite number, not {v!r}")
-    return float(v)
-
-
-def _count(v: Any, what: str) -> int:
-    if isinstance(v, bool) or not isinstance(v, int) or v < 1:
-        raise ConfigError(f"{what} must be a positive integer, not {v!r}")
-    return v
-
-
-def _areas(value: Any) -> dict[str, float]:
-    what = "[requirements.ed87_position_p95_m]"
-    if not isinstance(value, Mapping):
-        raise ConfigError(f"{what} must be a table of area class = metres")
-    unknown = set(value) - set(AREAS)
-    missing = set(AREAS) - set(value)
-    if unknown or missing:
-        raise ConfigError(f"{what} needs exactly the area classes {', '.join(AREAS)}"
-                          + (f"; unknown: {', '.join(sorted(unknown))}" if unknown else "")
-                          + (f"; missing: {', '.join(sorted(missing))}" if missing else ""))
-    out = {a: _number(value[a], f"{what} {a}") for a in AREAS}
-    if any(v <= 0 for v in out.values()):
-        raise ConfigError(f"{what} limits must be positive")
-    return out
+REQUIREMENTS_SECTION = ConfigSection(SECTION, (SECTION,), parse_requirements)
 
 
 def requirements_config(cfg: Any) -> RequirementsConfig:

@@ -41,13 +41,13 @@ def test_shipped_requirements_are_the_ed87_figures(cfg):
 
 
 @pytest.mark.parametrize("section, match", [
-    ({"ed87_position_p95_m": {"manoeuvring": 12.0}}, "missing"),
+    ({"ed87_position_p95_m": {"stand": -1}}, r"ed87_position_p95_m\]\.stand: must be > 0"),
     ({"ed87_position_p95_m": {"manoeuvring": 12, "apron_taxiway": 20, "stand": 25,
-                              "hangar": 3}}, "unknown: hangar"),
-    ({"airfield": {"p_identification": 1.5}}, "p_identification"),
-    ({"maritime": {"position_p95": 10}}, "unknown key"),
-    ({"min_samples": 0}, "positive integer"),
-    ({"typo": 1}, "unknown key"),
+                              "hangar": 3}}, "unknown key 'hangar'"),
+    ({"airfield": {"p_identification": 1.5}}, r"p_identification: must be in \(0, 1\]"),
+    ({"maritime": {"position_p95": 10}}, "did you mean 'position_p95_m'"),
+    ({"min_samples": 0}, "min_samples: must be >= 1"),
+    ({"typo": 1}, "unknown key 'typo'"),
 ])
 def test_bad_requirements_fail_the_load(section, match):
     raw = _raw()
@@ -64,8 +64,12 @@ def test_limits_are_bound_not_written_in_sql(e2e):
         assert literal not in body
     raw = _raw()
     raw["requirements"]["ed87_position_p95_m"]["stand"] = 30.0
+    raw["requirements"]["airfield"] = {"p_identification": 0.99}
     cfg = config_from_mapping(raw)
-    assert requirements_config(cfg).sql_params()["ed87_stand_p95_m"] == 30.0
+    req = requirements_config(cfg)
+    assert req.sql_params()["ed87_stand_p95_m"] == 30.0
+    assert req.sql_params()["p_identification_min"] == 0.99
+    assert req.p_identification_min_samples == 300  # rule of three for the new P
 
 
 def test_verdicts_pass_fail_and_not_enough_samples():
