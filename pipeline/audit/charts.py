@@ -346,8 +346,11 @@ def gap_errors(rows: list[dict[str, Any]]) -> go.Figure | None:
                         customdata=[[r["mmsi"], r["reference"]] for r in scored],
                         hovertemplate="MMSI %{customdata[0]}, lead %{x} min: error %{y} m vs "
                                       "%{customdata[1]}<extra></extra>")
-    fig = _layout(fig, "Data-gap forecasts: error vs the 90% region (red: reference outside "
-                       "the region)", xaxis_title="lead time, min", yaxis_title="m")
+    title = ("Data-gap forecasts: error vs the 90% region (red: reference outside the region)"
+             if scored else "Data-gap forecasts: size of the 90% region by lead time (nothing "
+                            "to score them against in this window)")
+    fig = _layout(fig, title, xaxis_title="lead time, min", yaxis_title="m (log scale)",
+                  showlegend=True)
     fig.update_yaxes(type="log")
     return fig
 
