@@ -27,11 +27,14 @@ from pipeline.maritime.associate import (
     _cluster_epoch,
     assign,
     associate_tracks,
+    association_gate,
     gate_threshold,
     gated_d2,
+    velocity_covariance,
 )
 from pipeline.maritime.config import AssociationConfig, maritime_config
 from pipeline.maritime.fuse import fuse
+from pipeline.maritime.hypothesis import state_vectors
 from pipeline.maritime.sync import synchronise
 
 ID_BASE = 5_000
@@ -91,6 +94,55 @@ def test_gated_d2_inline_and_gates():
     assert np.isinf(d2[0, 2])  # speed differs by 4 m/s
     a_slow = replace(a, speed_mps=np.array([0.3]))
     assert np.isfinite(gated_d2(a_slow, b, cfg, gate)[0, 3])  # both slow: no course gate
+
+
+def _kin(x, y, pxx, pyy, pxy, v, c, sv, sc) -> Kinematics:
+    return Kinematics(*(np.atleast_1d(np.asarray(a, float)) for a in (x, y, pxx, pyy, pxy, v, c,
+                                                                      sv, sc)))
+
+
+def test_gated_d2_position_and_velocity_against_the_4x4_form():
+    """Two paths agree: the broadcast d^2 (position + velocity, closed-form 2x2 blocks) and
+    D^T (P_a + P_b)^-1 D with the 4x4 state covariances of the hypothesis module
+    (velocity covariance J diag(sigma_V^2, sigma_C^2) J^T), recomputed with numpy."""
+    cfg = AssociationConfig()
+    assert cfg.velocity_cost and association_gate(cfg) == pytest.approx(chi2.ppf(0.999, 4))
+    a = _kin(0.0, 0.0, 400.0, 900.0, 120.0, 6.0, np.radians(40.0), 0.3, np.radians(3.0))
+    b = _kin([30.0, -20.0, 50.0], [10.0, 40.0, -30.0], [300.0, 250.0, 500.0],
+             [700.0, 300.0, 200.0], [90.0, -40.0, 0.0], [6.4, 5.2, 7.0],
+             np.radians([48.0, 35.0, 20.0]), [0.2, 0.25, 0.4], np.radians([2.0, 4.0, 2.5]))
+    d2 = gated_d2(a, b, cfg, 1e9)
+    Xa, Pa = state_vectors(a.x_m, a.y_m, a.P_xx, a.P_yy, a.P_xy, a.speed_mps, a.course_rad,
+                           a.sigma_speed_mps, a.sigma_course_rad)
+    Xb, Pb = state_vectors(b.x_m, b.y_m, b.P_xx, b.P_yy, b.P_xy, b.speed_mps, b.course_rad,
+                           b.sigma_speed_mps, b.sigma_course_rad)
+    for j in range(3):
+        D = Xa[0] - Xb[j]
+        assert d2[0, j] == pytest.approx(D @ np.linalg.solve(Pa[0] + Pb[j], D), rel=1e-9)
+    # velocity_cost = false, or a side without velocity sigmas: the position d^2 alone
+    pos = gated_d2(a, b, replace(cfg, velocity_cost=False), 1e9)
+    for j in range(3):
+        D = Xa[0, :2] - Xb[j, :2]
+        assert pos[0, j] == pytest.approx(D @ np.linalg.solve(Pa[0, :2, :2] + Pb[j, :2, :2], D))
+    no_sigmas = replace(b, sigma_speed_mps=None, sigma_course_rad=None)
+    np.testing.assert_allclose(gated_d2(a, no_sigmas, cfg, 1e9), pos)
+    # the 4-dof gate: a pair whose courses differ by 20 deg at 6 m/s (sigmas 3 and 2 deg)
+    # passes the course gate (30 deg) but not chi2.ppf(0.999, 4)
+    c = _kin(0.0, 0.0, 400.0, 400.0, 0.0, 6.0, np.radians(60.0), 0.25, np.radians(2.0))
+    assert np.isinf(gated_d2(a, c, cfg, association_gate(cfg))[0, 0])
+    assert np.isfinite(gated_d2(a, c, replace(cfg, velocity_cost=False),
+                                gate_threshold(cfg.gate_probability))[0, 0])
+
+
+def test_velocity_covariance_of_a_stopped_ship_is_not_degenerate():
+    """sigma_V along, V sigma_C across the course; below course_gate_min_speed_mps the
+    course is noise and the across-course sigma is at least sigma_V."""
+    k = _kin([0.0, 0.0], [0.0, 0.0], [1.0, 1.0], [1.0, 1.0], [0.0, 0.0], [8.0, 0.2],
+             [0.0, 0.0], [0.3, 0.3], [np.radians(2.0)] * 2)
+    vxx, vyy, vxy = velocity_covariance(k, 1.0)
+    assert vyy.tolist() == pytest.approx([0.09, 0.09])  # along the course (north)
+    assert vxx[0] == pytest.approx((8.0 * np.radians(2.0)) ** 2)  # across: V sigma_C
+    assert vxx[1] == pytest.approx(0.09) and np.allclose(vxy, 0.0)  # slow: sigma_V
 
 
 def test_least_summed_distance_beats_greedy_case_a():
@@ -274,7 +326,7 @@ def test_candidate_state_equals_fuse_for_the_same_members(seed):
     site = syn["site_id"].replace_strict(["R1", "R2", "R3"], [0, 1, 2]).to_numpy()
     cand, member = _cluster_epoch(
         kin, syn["sigma_speed_mps"].to_numpy(), syn["sigma_course_rad"].to_numpy(),
-        np.full(syn.height, -1), site, 3, cfg, gate_threshold(cfg.gate_probability))
+        np.full(syn.height, -1), site, 3, cfg, association_gate(cfg))
     assert cand.n == 6 and np.bincount(member).tolist() == [3] * 6  # one per ship
     state, sigma_v, sigma_c = cand.state()
     fused = fuse(syn.with_columns(pl.Series("system_track_id", member, pl.Int64)))
@@ -305,7 +357,7 @@ def test_candidate_state_is_the_matrix_form_not_per_axis():
         "x_enu_m", "y_enu_m", "P_xx", "P_yy", "P_xy", "speed_mps", "course_rad")))
     cand, member = _cluster_epoch(
         kin, syn["sigma_speed_mps"].to_numpy(), syn["sigma_course_rad"].to_numpy(),
-        np.full(3, -1), np.arange(3), 3, cfg, gate_threshold(cfg.gate_probability))
+        np.full(3, -1), np.arange(3), 3, cfg, association_gate(cfg))
     assert member.tolist() == [0, 0, 0]
     state, _, _ = cand.state()
     np.testing.assert_allclose([state.x_m[0], state.y_m[0]], p_hat, rtol=0, atol=1e-9)
