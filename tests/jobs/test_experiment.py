@@ -69,6 +69,13 @@ def test_velocity_raises_the_probability(cfg):
     pos, vel = r["position_only"], r["position_velocity"]
     assert vel["ci_low"] > pos["ci_high"], r
     assert pos["ci_low"] <= closed_form_probability(30.0, 30.0, 0.0) <= pos["ci_high"]
+    # the batch association with the velocity cost (default) follows the d = 4 test, with
+    # the position cost the d = 2 one (same draws; they differ only by the gate)
+    batch, batch_pos = r["batch_association"], r["batch_association_position_cost"]
+    assert r["batch_velocity_cost"] is True
+    assert abs(batch["correct"] - vel["correct"]) <= 5
+    assert abs(batch_pos["correct"] - pos["correct"]) <= 5
+    assert batch["ci_low"] > batch_pos["ci_high"]
 
 
 def test_wilson_interval():
