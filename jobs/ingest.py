@@ -167,7 +167,7 @@ class IngestSummary:
         lines.append("rows:    " + _fmt(self.rows))
         lines.append("rejects: " + (_fmt(self.rejects) or "none"))
         if self.not_stored:
-            lines.append("AIS messages not stored (by type): " + _fmt(self.not_stored))
+            lines.append("valid, not stored (by type): " + _fmt(self.not_stored))
         for path, err in self.failed[:10]:
             lines.append(f"FAILED {path}: {err}")
         if len(self.failed) > 10:
@@ -281,7 +281,7 @@ def _decode_and_stage(
         message_count=status.messages_read,
         rows={n: stager.rows.get(n, 0) for n in (*RAW_TABLES, *stager.rows)},
         rejects_by_reason=dict(reasons),
-        not_stored={f"ais_type_{k}": v for k, v in sorted(decoder.not_stored.items())},
+        not_stored=dict(sorted(decoder.not_stored.items())),
         start_time_ns=status.start_time_ns,
         end_time_ns=status.end_time_ns,
         staged=by_table,
@@ -381,6 +381,7 @@ def commit_file(
             rejects_count=m.rows.get("rejects", 0),
             start_time_ns=m.start_time_ns,
             end_time_ns=m.end_time_ns,
+            not_stored=m.not_stored,
         )
         write_entry(warehouse, entry)
 

@@ -71,7 +71,11 @@ ASTERIX_CATEGORIES = frozenset(
     {1, 2, 4, 8, 9, 10, 11, 15, 16, 17, 18, 19, 20, 21, 23, 25, 30, 31, 32, 34, 48, 62, 63,
      65, 150, 205, 238, 239, 240, 247, 252}
 )  # fmt: skip
-_NMEA_LINE = re.compile(rb"(^|[\s\\,;\]])[$!][A-Z][A-Z0-9]{2,5},", re.MULTILINE)
+# an NMEA 0183 address: any 2-character talker (letters or digits: NMEA 2000 gateways write
+# "$04HDM", "$24HDG") + a 3-letter formatter, or a proprietary "$P" + maker + sentence
+_NMEA_LINE = re.compile(
+    rb"(^|[\s\\,;\]])[$!](?:[A-Z0-9]{2}[A-Z]{3}|P[A-Z0-9]{3,})[,*]", re.MULTILINE
+)
 LEADING_TS = (
     r"^\s*\[?(\d{13}|\d{9,10}(?:\.\d+)?|\d{4}-\d{2}-\d{2}[T ]\d{2}:\d{2}:\d{2}(?:\.\d+)?"
     r"(?:Z|[+-]\d{2}:?\d{2})?)\]?[\s,;]*"

@@ -223,7 +223,7 @@ class AisJsonChannelDecoder:
             source_file=self.source_file,
             topic=self.topic,
         )
-        self.not_stored.update(not_stored)
+        self.not_stored.update({f"ais_type_{k}": v for k, v in not_stored.items()})
         return {k: v for k, v in tables.items() if v.num_rows}
 
     def finish(self) -> dict[str, pa.Table]:

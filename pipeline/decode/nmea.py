@@ -8,10 +8,15 @@ module frames the lines and routes each sentence:
 - GGA RMC VTG GSA GLL ZDA -> ``nav_gnss``; HDT HDG HDM THS ROT -> ``nav_heading``;
   VHW VBW -> ``nav_speed_log``; TTM TLL -> ``arpa_targets``; OSD -> ``arpa_own_ship``
   (field decoding in :mod:`pipeline.decode.nav_nmea`);
-- anything else -> ``rejects``.
+- any other well-formed sentence (GSV, MWV, DBT, proprietary ``$P...``, ...): valid but
+  not used, so it is COUNTED per sentence type in ``not_stored`` (``nmea_GSV``,
+  ``nmea_PGRME``; the ingest ledger's ``not_stored_json``), not stored as a reject;
+- what cannot be used -> ``rejects``.
 
 Framing (NMEA 0183 v4.10 §5.3; IEC 61162-1): a sentence starts with ``$`` or ``!``, its
-address field is a 2-letter talker + 3-letter formatter (``$P...`` proprietary), and ends
+address field is a talker of any 2 characters, letters or digits (NMEA 2000 gateways
+write ``$04HDM``, ``$24HDG``) + a 3-letter formatter, or ``P`` + a proprietary sentence
+name (``$PGRME``, ``$PASHR``), and ends
 with ``*hh``, the XOR of every character between the start character and ``*``. An IEC
 62320-1 / NMEA 4 tag block ``\\s:src,c:unix_s,g:1-2-9*hh\\`` may precede it; its ``*hh``
 is the XOR of its content. A line holding several sentences (``$GPGGA...*hh$GPRMC...*hh``,
@@ -23,8 +28,7 @@ is kept). One-digit or lower-case checksums are accepted when their value is rig
 
 Rejects (``reason_code``): ``undecodable`` (garbage, empty line, bad address field, a
 field that is not a number, a bad hemisphere/time), ``bad_checksum`` (sentence or tag
-block checksum missing or wrong), ``unsupported_sentence`` (a well-formed sentence we do
-not decode: GSV, MWV, DBT, proprietary ``$P...``, ...), ``out_of_range`` (latitude beyond
+block checksum missing or wrong), ``out_of_range`` (latitude beyond
 ±90°, longitude beyond ±180°, a speed above ``NmeaLimits.max_speed_mps``, a heading
 outside [0°, 360°], and a sentence UTC time that goes backwards against the previous
 sentence of the same talker+formatter by more than ``max_time_backstep_s``),
@@ -114,11 +118,12 @@ class NmeaCarry:
 
 @dataclass(frozen=True)
 class NmeaDecoded:
-    """Rows per table (every name of ``NMEA_TABLES``, conformed), AIS message ids decoded
-    but not stored (id -> count), and the carry for the channel's next batch."""
+    """Rows per table (every name of ``NMEA_TABLES``, conformed), valid messages decoded
+    but not stored (``ais_type_<id>`` / ``nmea_<formatter>`` -> count), and the carry for
+    the channel's next batch."""
 
     tables: dict[str, pa.Table]
-    not_stored: dict[int, int]
+    not_stored: dict[str, int]
     carry: NmeaCarry
 
 
@@ -219,8 +224,9 @@ def _parse_pieces(pieces: pl.DataFrame) -> pl.DataFrame:
         tag_c=pl.col("tag_text").str.extract(r"(?:^|,)c:(\d+)", 1).cast(pl.Int64, strict=False),
         tag_source=pl.col("tag_text").str.extract(r"(?:^|,)s:([^,*]*)", 1),
     )
-    proprietary = pl.col("address").str.starts_with("P")
-    std = pl.col("address").str.contains(r"^[A-Z0-9]{5}$")
+    # talker: any 2 characters, letters or digits ("04HDM" from an NMEA 2000 gateway)
+    proprietary = pl.col("address").str.contains(r"^P[A-Z0-9]+$")
+    std = pl.col("address").str.contains(r"^[A-Z0-9]{2}[A-Z]{3}$")
     p = p.with_columns(
         talker=pl.when(proprietary)
         .then(pl.lit("P"))
@@ -342,7 +348,7 @@ def decode_nmea(
     good = pieces.filter(pl.col("code").is_null())
     is_ais = pl.col("formatter").is_in(list(AIS_FORMATTERS))
     is_nav = pl.col("formatter").is_in(list(_nav_decoders()))
-    rejects.append(_unsupported_rejects(good.filter(~is_ais & ~is_nav), ctx))
+    not_stored = _not_stored(good.filter(~is_ais & ~is_nav))
     ais = _decode_ais(good.filter(is_ais), carry, final, ctx)
     nav, nav_rejects, anchor, last = _decode_nav(good.filter(is_nav), carry, limits, ctx)
     rejects += [ais.rejects, nav_rejects]
@@ -351,7 +357,8 @@ def decode_nmea(
     new_carry = NmeaCarry(
         ais=ais.carry, anchor_ns=anchor[0], anchor_recv_ns=anchor[1], last_time_ns=last
     )
-    return NmeaDecoded(tables=tables, not_stored=ais.not_stored, carry=new_carry)
+    not_stored.update({f"ais_type_{k}": v for k, v in ais.not_stored.items()})
+    return NmeaDecoded(tables=tables, not_stored=not_stored, carry=new_carry)
 
 
 def _nav_decoders() -> dict:
@@ -407,17 +414,13 @@ def _framing_rejects(pieces: pl.DataFrame, ctx: _Ctx) -> pa.Table:
     return _rejects_of(pieces.filter(pl.col("code").is_not_null()), ctx, "piece")
 
 
-def _unsupported_rejects(pieces: pl.DataFrame, ctx: _Ctx) -> pa.Table:
-    p = pieces.with_columns(
-        code=pl.lit("unsupported_sentence"),
-        reason=pl.format("{}{} sentence is not decoded", "talker", "formatter"),
-    )
-    p = p.with_columns(
-        reason=pl.when(pl.col("talker") == "P")
-        .then(pl.format("proprietary sentence {} is not decoded", "formatter"))
-        .otherwise("reason")
-    )
-    return _rejects_of(p, ctx, "piece")
+def _not_stored(pieces: pl.DataFrame) -> dict[str, int]:
+    """Well-formed sentences of a formatter we do not decode, counted per sentence type
+    (``nmea_GSV``; proprietary ``nmea_PGRME``): valid input, not a reject."""
+    if not pieces.height:
+        return {}
+    counts = pieces.group_by("formatter").len()
+    return {f"nmea_{f}": int(n) for f, n in counts.sort("formatter").iter_rows()}
 
 
 # -- AIS ---------------------------------------------------------------------------------

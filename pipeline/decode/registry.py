@@ -181,7 +181,8 @@ class FileDecoder:
     objects), up to ``JSON_BATCH`` undecoded radar/truth JSON messages (of at most
     ``JSON_MAX_CHUNKS`` chunks: memory does not grow with the file), and per AIS topic at
     most a few trailing fragments of a multi-part message that continues in the next
-    chunk. ``not_stored`` counts valid AIS messages of types we do not keep.
+    chunk. ``not_stored`` counts valid messages we do not keep, per type (``ais_type_4``,
+    ``nmea_GSV``, ``asterix_cat004``): the ledger's ``not_stored_json``.
     """
 
     source_file: str

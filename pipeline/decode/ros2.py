@@ -50,6 +50,7 @@ schema text cannot be compiled -> one ``undecodable`` row per batch with the cou
 
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -379,6 +380,7 @@ class Ros2ChannelDecoder:
     dialect: str = "cdr"
     nmea_carry: Any = None
     _nmea_open: bool = field(default=False)
+    not_stored: Counter = field(default_factory=Counter)
 
     @classmethod
     def for_channel(cls, batch: ChannelBatch, source_file: str) -> Ros2ChannelDecoder:
@@ -436,6 +438,7 @@ class Ros2ChannelDecoder:
             carry=self.nmea_carry, final=final,
         )  # fmt: skip
         self.nmea_carry = out.carry
+        self.not_stored.update(out.not_stored)
         self._nmea_open = True
         tables = dict(out.tables)
         tables["rejects"] = pa.concat_tables([tables.get("rejects", empty("rejects")), rejects])
