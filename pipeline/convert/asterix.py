@@ -36,18 +36,16 @@ do not frame as an ASTERIX data block, or the file looks like text).
 
 from __future__ import annotations
 
-import os
 import struct
-import tempfile
 from collections import Counter
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from datetime import UTC, date, datetime
 from pathlib import Path
 
-from mcap.writer import CompressionType, Writer
-
+from pipeline.convert.output import Message, write_converted
 from pipeline.decode.asterix import EXTRACTORS, parse_block, split_blocks
+from pipeline.io.mcap_write import ChannelSpec
 from pipeline.units import NS
 
 DAY_NS = 86_400 * NS
@@ -75,17 +73,24 @@ class _Messages:
     """Messages per channel topic, in capture order, plus channel metadata."""
 
     topics: dict[str, dict[str, str]] = field(default_factory=dict)
-    rows: list[tuple[str, int, bytes]] = field(default_factory=list)
+    rows: list[Message] = field(default_factory=list)
     skipped: Counter = field(default_factory=Counter)
 
-    def add(self, topic: str, meta: dict[str, str], t: int, payload: bytes) -> None:
+    def add(
+        self, topic: str, meta: dict[str, str], t: int, payload: bytes,
+        reject: tuple[str, str] | None = None,
+    ) -> None:  # fmt: skip
         """One message per data block of ``payload``; a tail that does not frame is kept
-        as one message of its own (the decoder rejects it)."""
+        as one message of its own (the decoder rejects it). ``reject``: why the payload
+        cannot be a message (it then goes to the rejects channel whole)."""
         self.topics.setdefault(topic, meta)
+        if reject is not None:
+            self.rows.append(Message(topic, t, payload, reject))
+            return
         blocks, rest = split_blocks(payload)
-        self.rows.extend((topic, t, b) for b in blocks)
+        self.rows.extend(Message(topic, t, b) for b in blocks)
         if rest:
-            self.rows.append((topic, t, rest))
+            self.rows.append(Message(topic, t, rest))
 
 
 def wrap_asterix_file(path: Path, out_dir: Path, *, day: date | None = None) -> Path:
@@ -331,28 +336,12 @@ def _ipv6(b: bytes) -> str:
     return str(ipaddress.IPv6Address(b))
 
 
-# -- writing -----------------------------------------------------------------------------
+# -- writing ----------------------------------------------------------------------------
 
 
 def _write_mcap(out: Path, msgs: _Messages, meta: dict[str, str]) -> None:
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            writer = Writer(f, compression=CompressionType.ZSTD)
-            writer.start(profile="", library=MCAP_LIBRARY)
-            ids = {
-                topic: writer.register_channel(topic, "asterix", 0, metadata=m)
-                for topic, m in sorted(msgs.topics.items())
-            }
-            writer.add_metadata("surveil.import", meta)
-            seq: Counter = Counter()
-            for topic, t, payload in msgs.rows:
-                writer.add_message(ids[topic], t, payload, t, seq[topic])
-                seq[topic] += 1
-            writer.finish()
-        os.replace(tmp, out)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    channels = [
+        ChannelSpec(topic, "asterix", metadata=m) for topic, m in sorted(msgs.topics.items())
+    ]
+    write_converted(out, channels, msgs.rows, metadata={"surveil.import": meta},
+                    library=MCAP_LIBRARY)  # fmt: skip

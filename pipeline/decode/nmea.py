@@ -69,7 +69,7 @@ import pyarrow as pa
 
 from pipeline.decode.registry import make_rejects
 from pipeline.tables import conform, empty
-from pipeline.units import NS
+from pipeline.units import NS, TIME_MAX_NS
 
 DAY_NS = 86_400 * NS
 AIS_FORMATTERS = frozenset({"VDM", "VDO"})
@@ -236,9 +236,15 @@ def _parse_pieces(pieces: pl.DataFrame) -> pl.DataFrame:
         .then(pl.col("address"))
         .when(std)
         .then(pl.col("address").str.slice(2, 3)),
-        tag_c_ns=pl.when(pl.col("tag_c") > 100_000_000_000)
+        # the c: digits are checked against the range BEFORE the multiplication (polars
+        # int64 arithmetic wraps around silently); 20+ digits do not even cast
+        tag_c_ns=pl.when(pl.col("tag_c").is_between(100_000_000_001, TIME_MAX_NS // 1_000_000))
         .then(pl.col("tag_c") * 1_000_000)
-        .otherwise(pl.col("tag_c") * NS),
+        .when(pl.col("tag_c").is_between(0, TIME_MAX_NS // NS))
+        .then(pl.col("tag_c") * NS),
+    ).with_columns(
+        tag_c_bad=pl.col("tag_text").str.contains(r"(?:^|,)c:\d").fill_null(False)
+        & pl.col("tag_c_ns").is_null(),
     )
     code, reason = _framing_problem()
     return p.with_columns(code=code, reason=reason).select(
@@ -268,6 +274,14 @@ def _framing_problem() -> tuple[pl.Expr, pl.Expr]:
             pl.lit("no 1-2 hex digit checksum at the end of the sentence"),
         ),
         (~c("body_ok"), "bad_checksum", pl.format("NMEA checksum *{} is wrong", "ck_hex")),
+        (
+            c("tag_c_bad"),
+            "out_of_range",
+            pl.format(
+                "tag block time c:{} is outside 1970-01-01 .. 2262-04-11 UTC",
+                c("tag_text").str.extract(r"(?:^|,)c:(\d+)", 1).str.slice(0, 24),
+            ),
+        ),
         (
             c("talker").is_null(),
             "undecodable",
