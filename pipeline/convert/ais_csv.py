@@ -64,7 +64,9 @@ COLUMN_NAMES: dict[str, tuple[str, ...]] = {
     "time": ("time", "timestamp", "basedatetime", "datetime", "datetimeutc", "timestamputc",
              "timeutc", "utc", "utctime", "ts", "eventtime", "msgtime", "messagetime",
              "receivedtime", "receivetime", "rxtime", "reporttime", "postime", "epoch",
-             "epochtime", "unixtime", "timeepoch", "tagblocktimestamp", "datetimestamp"),
+             "epochtime", "unixtime", "timeepoch", "tagblocktimestamp", "datetimestamp",
+             "epochms", "epochs", "timestampms", "timems", "unixtimems", "unixms",
+             "timestamps", "times", "timesec", "unixtimestamp", "epochseconds", "utcseconds"),
     "date": ("date", "utcdate", "dateutc"),
     "time_of_day": ("timeofday", "tod", "utctimeofday", "hhmmss"),
     "mmsi": ("mmsi", "userid", "sourcemmsi", "vesselmmsi", "shipmmsi", "mmsinumber",
@@ -243,17 +245,17 @@ def time_parser(df: pl.DataFrame, col: str, forced: str | None) -> tuple[str, pl
     if forced:
         return forced, _parse_us(cell, forced)
     sample = df.head(_SAMPLE_ROWS).select(cell.alias("t"))
-    best, best_n = (
-        "epoch",
-        sample.select(
-            _epoch_ns(pl.col("t")).is_not_null().sum()
-            * pl.col("t").str.contains(r"^\d+(\.\d+)?$").all()
-        ).item(),
-    )
-    for fmt in _ISO_FORMATS:
+    best, best_n = _ISO_FORMATS[0], -1
+    for fmt in _ISO_FORMATS:  # calendar formats first: "20240131120000" is a date
         n = sample.select(_parse_us(pl.col("t"), fmt).is_not_null().sum()).item()
         if n > best_n:
             best, best_n = fmt, n
+    epoch_n = sample.select(
+        _epoch_ns(pl.col("t")).is_not_null().sum()
+        * pl.col("t").str.contains(r"^\d+(\.\d+)?$").all()
+    ).item()
+    if epoch_n > best_n:
+        best = "epoch"
     return best, (_epoch_ns(cell) if best == "epoch" else _parse_us(cell, best))
 
 
@@ -376,11 +378,7 @@ def read_ais_csv(path: Path, options: CsvOptions | None = None) -> CsvTable:
             f"be placed: {', '.join(repr(c) for c in unplaced) or 'none'} (name them in "
             '[import.csv] columns of the config, e.g. "Zeit" = "time")'
         )
-    df = pl.read_csv(
-        io.BytesIO(data.encode()), separator=sep, infer_schema=False,
-        truncate_ragged_lines=True, quote_char='"', has_header=True,
-    )  # fmt: skip
-    df = df.rename(dict(zip(df.columns, cells, strict=False)))
+    df = _read_cells(data, sep, cells)
     columns = list(df.columns)
     df, parser = time_ns(df, placed, options.time_format)
     time_col = placed.get("time", "_datetime")
@@ -400,6 +398,25 @@ def read_ais_csv(path: Path, options: CsvOptions | None = None) -> CsvTable:
     if time_col == "_datetime":
         time_col = f"{placed['date']}+{placed['time_of_day']}"
     return CsvTable(out.select(*fields, "_time_reject"), kind, time_col, parser, unplaced)
+
+
+def _read_cells(data: str, sep: str, cells: list[str]) -> pl.DataFrame:
+    """Every cell as text, columns named by the header cells. polars reads the file in
+    one go; a file it refuses (a stray character after a closing quote, ...) is read by
+    the more lenient ``csv`` module instead, row by row."""
+    names = [f"{c}#{i}" if c in cells[:i] else c for i, c in enumerate(cells)]
+    try:
+        df = pl.read_csv(
+            io.BytesIO(data.encode()), separator=sep, infer_schema=False,
+            truncate_ragged_lines=True, quote_char='"', has_header=True,
+        )  # fmt: skip
+        return df.rename(dict(zip(df.columns, names, strict=False)))
+    except pl.exceptions.PolarsError:
+        pass
+    rows = list(csv.reader(io.StringIO(data), delimiter=sep))[1:]  # per row: the fallback
+    rows = [r for r in rows if any(c.strip() for c in r)]
+    cols = {name: [r[i] if i < len(r) else None for r in rows] for i, name in enumerate(names)}
+    return pl.DataFrame(cols, schema=dict.fromkeys(names, pl.String))
 
 
 def schema_fields() -> list[str]:
