@@ -74,13 +74,15 @@ def expand_inputs(paths: Sequence[Path | str]) -> tuple[list[Path], list[Path]]:
             ok = [q for q in found if detect_format(q) != "unknown"]
             if not ok:
                 raise UsageError(
-                    f"no importable files (NMEA text, AIS CSV, ASTERIX, pcap) under directory: {p}"
+                    "no importable files (NMEA text, AIS CSV, ASTERIX, pcap, ROS 1 bag) under "
+                    f"directory: {p}"
                 )
             files += ok
             skipped += [q for q in found if q not in ok]
         elif detect_format(p) == "unknown":
             raise UsageError(
-                f"not an importable file (NMEA 0183 text, AIS CSV, raw ASTERIX or pcap/pcapng): {p}"
+                "not an importable file (NMEA 0183 text, AIS CSV, ASTERIX raw / framed / "
+                f"pcap, ROS 1 bag): {p}"
             )
         else:
             files.append(p)

@@ -55,6 +55,7 @@ import numpy as np
 import polars as pl
 
 from pipeline.convert.ais_csv import CsvOptions, looks_like_ais_csv, read_ais_csv
+from pipeline.convert.asterix_framing import ASTERIX_CATEGORIES, detect_framing
 from pipeline.convert.config import ImportOptions
 from pipeline.convert.output import Message, write_converted
 from pipeline.io.mcap_write import ChannelSpec
@@ -68,10 +69,6 @@ AIS_SCHEMA_NAME = "surveil.AisReport"
 _SAMPLE = 65_536
 PCAP_MAGICS = (b"\xa1\xb2\xc3\xd4", b"\xd4\xc3\xb2\xa1", b"\xa1\xb2\x3c\x4d",
                b"\x4d\x3c\xb2\xa1", b"\x0a\x0d\x0d\x0a")  # fmt: skip
-ASTERIX_CATEGORIES = frozenset(
-    {1, 2, 4, 8, 9, 10, 11, 15, 16, 17, 18, 19, 20, 21, 23, 25, 30, 31, 32, 34, 48, 62, 63,
-     65, 150, 205, 238, 239, 240, 247, 252}
-)  # fmt: skip
 # an NMEA 0183 address: any 2-character talker (letters or digits: NMEA 2000 gateways write
 # "$04HDM", "$24HDG") + a 3-letter formatter, or a proprietary "$P" + maker + sentence
 _NMEA_LINE = re.compile(
@@ -121,6 +118,8 @@ def detect_format(path: Path) -> str:
         if looks_like_ais_csv(first):
             return "ais_csv"
         return "nmea_text" if _NMEA_LINE.search(sample) else "unknown"
+    if detect_framing(sample) is not None:  # GPS, FINAL, IOSS, HDLC, ORADIS recordings
+        return "asterix"
     if len(sample) >= 3 and sample[0] in ASTERIX_CATEGORIES:
         length = int.from_bytes(sample[1:3], "big")
         if 3 <= length <= size:
@@ -145,13 +144,22 @@ def import_file(
     if kind == "ais_csv":
         return wrap_ais_csv(path, out_dir, options=options.csv)
     if kind == "asterix":
-        from pipeline.convert.asterix import wrap_asterix_file
+        from datetime import UTC, datetime
 
-        out = wrap_asterix_file(path, Path(out_dir))
-        return ImportedFile(str(path), str(out), "asterix", {}, {})
+        from pipeline.convert.asterix import wrap_asterix
+
+        day = datetime.fromtimestamp(base_time_ns // NS, tz=UTC).date()
+        w = wrap_asterix(path, Path(out_dir), day=day)
+        return ImportedFile(
+            str(path), str(w.output), f"asterix:{w.kind}", w.messages, w.log_time_source
+        )
+    if kind == "ros1_bag":
+        from pipeline.convert.rosbag import wrap_ros1_bag
+
+        return wrap_ros1_bag(path, Path(out_dir))
     raise ValueError(
-        f"{path}: not an importable file (neither NMEA 0183 text, a known AIS CSV, raw "
-        "ASTERIX nor a pcap/pcapng capture)"
+        f"{path}: not an importable file (neither NMEA 0183 text, an AIS CSV, ASTERIX "
+        "(raw, framed or pcap/pcapng) nor a ROS 1 bag)"
     )
 
 
