@@ -44,6 +44,7 @@ from datetime import UTC, date, datetime
 from pathlib import Path
 
 from pipeline.convert.asterix_framing import (
+    blocks_fill,
     detect_framing,
     oradis_time,
     oradis_time_unit,
@@ -322,8 +323,19 @@ def _from_capture(data: bytes, path: Path) -> _Messages:
             "log_time_source": "pcap",
             "src_ip": src, "src_port": str(sport), "dst_ip": dst, "dst_port": str(dport),
         }  # fmt: skip
-        msgs.add(topic, meta, pkt.time_ns, payload)
+        for content in _oradis_unwrapped(payload):
+            msgs.add(topic, meta, pkt.time_ns, content)
     return msgs
+
+
+def _oradis_unwrapped(payload: bytes) -> list[bytes]:
+    """The ASTERIX content of a UDP payload: itself, or, when it is a run of ORADIS
+    packets (CroatiaControl's ``--oradispcap``: 6-octet header before the blocks), their
+    contents (the capture time stays the log time)."""
+    if blocks_fill(payload) or not payload:
+        return [payload]
+    records, tail = walk(payload, "oradis")
+    return [r.content for r in records] if records and tail is None else [payload]
 
 
 def _pcap_packets(data: bytes, skipped: Counter) -> Iterator[Packet]:

@@ -215,3 +215,15 @@ def test_random_binary_and_text_are_not_framings():
     assert detect_framing(noise) is None
     text = b"$GPGGA,123519,4807.038,N,01131.000,E,1,08,0.9,545.4*47\r\n" * 100
     assert detect_framing(text) is None
+
+
+def test_oradis_packets_inside_a_pcap_are_unwrapped(tmp_path):
+    from test_asterix import _udp_frame, write_pcap
+
+    blks = blocks()[:2]
+    payload = oradis_file(blks, [1, 2])
+    t = DAY_NS + 43_200 * NS
+    path = write_pcap(tmp_path / "o.pcap", [(t, _udp_frame(payload))])
+    w = wrap_asterix(path, tmp_path / "out")
+    (msgs,) = _messages(w.output).values()
+    assert msgs == [(t, blks[0]), (t, blks[1])]
