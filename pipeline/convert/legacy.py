@@ -107,12 +107,15 @@ def _looks_text(sample: bytes) -> bool:
 
 
 def detect_format(path: Path) -> str:
-    """``nmea_text`` | ``ais_csv`` | ``asterix`` (raw blocks, pcap, pcapng) | ``unknown``."""
+    """``nmea_text`` | ``ais_csv`` | ``asterix`` (raw blocks, framed recordings, pcap,
+    pcapng) | ``ros1_bag`` | ``unknown``."""
     with open(path, "rb") as f:
         sample = f.read(_SAMPLE)
     size = path.stat().st_size
     if sample[:4] in PCAP_MAGICS:
         return "asterix"
+    if sample.startswith(b"#ROSBAG V2.0\n"):
+        return "ros1_bag"
     if _looks_text(sample):
         first = re.split(rb"\r\n|\n|\r", sample.lstrip(), maxsplit=1)[0].decode("latin-1")
         if looks_like_ais_csv(first):

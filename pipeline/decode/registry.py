@@ -23,6 +23,7 @@ message encoding  schema encoding  schema name                 decoder -> tables
 ``json``          ``jsonschema``   ``foxglove.LocationFix``    foxglove_json -> nav_gnss
 ``ros1``          ``ros1msg``      ``sensor_msgs/NavSatFix``   ros1 -> nav_gnss
 ``ros1``          ``ros1msg``      ``sensor_msgs/Imu``         ros1 -> nav_heading
+``ros1``          ``ros1msg``      ``nmea_msgs/Sentence``      ros1 -> (NMEA tables)
 ``json``          ``jsonschema``   ``surveil.VasnReport``      vasn -> airfield_obs
 ``json``          ``jsonschema``   ``surveil.AirfieldTruth``   airfield_truth -> airfield_truth
 ``json``          ``jsonschema``   ``surveil.GyroSignals``     ownship -> nav_gyro_signals
@@ -89,7 +90,8 @@ _KINDS[("json", "jsonschema", "foxglove.LocationFix")] = "foxglove_json"
 _KINDS[("json", "jsonschema", "surveil.VasnReport")] = "vasn"
 _KINDS[("json", "jsonschema", "surveil.AirfieldTruth")] = "airfield_truth"
 _KINDS.update({("ros1", "ros1msg", n): "ros1" for n in ("sensor_msgs/NavSatFix",
-                                                        "sensor_msgs/Imu")})  # fmt: skip
+                                                        "sensor_msgs/Imu",
+                                                        "nmea_msgs/Sentence")})  # fmt: skip
 CHANNEL_DECODERS = {
     "nmea": "pipeline.decode.nmea:NmeaChannelDecoder",
     "ais_json": "pipeline.decode.ais_json:AisJsonChannelDecoder",
