@@ -18,8 +18,10 @@ between leaves a ledger without the new hash, so the next run redoes the file.
 ``<warehouse>/surveil.duckdb`` is rebuilt once at the end.
 
 Ledger: a file whose size and SHA-256 match its ledger row (status ok/partial) is skipped
-without any commit, unless ``force``. Status: ``ok``; ``partial`` (chunks lost, file cut
-off); ``quarantined`` (not MCAP, or nothing readable: one rejects row says why).
+without any commit, unless ``force``, or unless an optional decoder was missing when it was
+read (error "decoder not installed": it may be installed now). Status: ``ok``;
+``partial`` (chunks lost, file cut off, channels whose decoder is not installed);
+``quarantined`` (not MCAP, or nothing readable: one rejects row says why).
 
 Time window ``[start_ns, end_ns)``: rows are kept when the table's time column is inside
 (``time_ns``; ``log_time_ns`` for rejects) and the replace predicate is source_file AND
@@ -73,6 +75,7 @@ keep_freed_memory()
 WINDOW_READ_MARGIN_NS = 60 * 10**9
 FILE_LEVEL_CODES = frozenset({"not_mcap", "corrupt_chunk", "truncated", "unknown_schema"})
 _MAGIC_SAMPLE = 64  # bytes of a not-MCAP file kept in its rejects row
+MISSING_DECODER = "decoder not installed"
 
 
 class IngestUsageError(UsageError):
@@ -168,6 +171,9 @@ class IngestSummary:
         lines.append("rejects: " + (_fmt(self.rejects) or "none"))
         if self.not_stored:
             lines.append("valid, not stored (by type): " + _fmt(self.not_stored))
+        if self.rejects.get("decoder_missing"):
+            lines.append("WARNING: ASTERIX channels not decoded: the ASTERIX decoder is not "
+                         "installed; pip install 'surveil-pipeline[asterix]'")  # fmt: skip
         for path, err in self.failed[:10]:
             lines.append(f"FAILED {path}: {err}")
         if len(self.failed) > 10:
@@ -224,6 +230,7 @@ def ingest_file(unit: IngestUnit) -> FileManifest:
             prior is not None
             and prior["status"] in ("ok", "partial")
             and prior["size_bytes"] == size
+            and MISSING_DECODER not in (prior["error"] or "")  # a decoder may be there now
         ):
             sha = file_fingerprint(path)[1]
             if sha == prior["sha256"]:
@@ -272,12 +279,17 @@ def _decode_and_stage(
     index = None
     if not unit.windowed:
         index = mcap_index_rows(unit.path, size, scan.summary, scan.channels, status)
+    file_status, error = status.status, status.error
+    if decoder.missing_decoders:  # partly read: exit 1, and read again once installed
+        missing = f"{MISSING_DECODER}: {', '.join(sorted(decoder.missing_decoders))}"
+        file_status = "partial" if file_status == "ok" else file_status
+        error = missing if error is None else f"{error}; {missing}"
     return FileManifest(
         source_file=unit.path,
         size_bytes=size,
         sha256=sha if isinstance(sha, str) else sha.result(),
-        status=status.status,
-        error=status.error,
+        status=file_status,
+        error=error,
         message_count=status.messages_read,
         rows={n: stager.rows.get(n, 0) for n in (*RAW_TABLES, *stager.rows)},
         rejects_by_reason=dict(reasons),

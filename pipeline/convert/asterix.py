@@ -52,7 +52,13 @@ from pipeline.convert.asterix_framing import (
     walk_hdlc,
 )
 from pipeline.convert.output import Message, write_converted
-from pipeline.decode.asterix import EXTRACTORS, parse_block, split_blocks
+from pipeline.decode.asterix import (
+    EXTRACTORS,
+    INSTALL_HINT,
+    decoder_available,
+    parse_block,
+    split_blocks,
+)
 from pipeline.io.mcap_write import ChannelSpec
 from pipeline.units import NS
 
@@ -176,15 +182,6 @@ def _check_raw(data: bytes, path: Path) -> None:
         )
 
 
-def decoder_available() -> bool:
-    """``asterix_decoder`` (the optional extra ``surveil-pipeline[asterix]``) imports."""
-    try:
-        import asterix  # noqa: F401
-    except ImportError:
-        return False
-    return True
-
-
 def block_time_of_day(block: bytes) -> float | None:
     """Time of day (s) of the first timed record of a supported-category block (needs
     the ``asterix`` extra: ``None`` without it)."""
@@ -207,8 +204,7 @@ def _need_decoder(path: Path, kind: str) -> None:
     if not decoder_available():
         raise ValueError(
             f"{path}: {kind} ASTERIX carries no time outside its records, and reading their "
-            "time of day needs the ASTERIX decoder: pip install 'surveil-pipeline[asterix]' "
-            "(asterix_decoder, GPL)"
+            f"time of day needs the ASTERIX decoder: {INSTALL_HINT}"
         )
 
 

@@ -188,12 +188,15 @@ class FileDecoder:
     most a few trailing fragments of a multi-part message that continues in the next
     chunk. ``not_stored`` counts valid messages we do not keep, per type (``ais_type_4``,
     ``nmea_GSV``, ``asterix_cat004``): the ledger's ``not_stored_json``.
+    ``missing_decoders``: optional decoders the file needed but this installation lacks
+    (its channels got a ``decoder_missing`` reject; ingest marks the file partial).
     """
 
     source_file: str
     validation: ValidationConfig
     parts: dict[str, list[pa.Table]] = field(default_factory=dict)
     not_stored: Counter = field(default_factory=Counter)
+    missing_decoders: set[str] = field(default_factory=set)
     _unknown: dict[int, _UnknownChannel] = field(default_factory=dict)
     _json: list[ChannelBatch] = field(default_factory=list)
     _json_count: int = 0
@@ -285,6 +288,8 @@ class FileDecoder:
             for name, table in dec.finish().items():
                 self._add(name, table)
             self.not_stored.update(getattr(dec, "not_stored", {}))
+            if getattr(dec, "missing_decoder", None):
+                self.missing_decoders.add(dec.missing_decoder)
         self._channels.clear()
         for u in self._unknown.values():
             self._add(
