@@ -54,6 +54,7 @@ import pyarrow.compute as pc
 
 from jobs.common import UsageError, keep_freed_memory
 from pipeline.config import Config, ValidationConfig
+from pipeline.convert.config import parse_editions
 from pipeline.decode.registry import RAW_TABLES, FileDecoder, make_rejects
 from pipeline.executors import Executor, UnitResult, make_executor
 from pipeline.io.mcap_index import mcap_index_rows
@@ -93,6 +94,7 @@ class IngestUnit:
     start_ns: int | None = None
     end_ns: int | None = None
     force: bool = False
+    asterix_editions: tuple[tuple[int, str], ...] = ()  # config [asterix] editions
 
     @property
     def windowed(self) -> bool:
@@ -250,7 +252,8 @@ def _decode_and_stage(
 ) -> FileManifest:
     lo, hi = _read_window(unit)
     scan = read_mcap_batches(path, start_ns=lo, end_ns=hi)
-    decoder = FileDecoder(source_file=unit.path, validation=unit.validation)
+    decoder = FileDecoder(source_file=unit.path, validation=unit.validation,
+                          asterix_editions=dict(unit.asterix_editions))  # fmt: skip
     stager = TableStager(_stage_folder(unit))
     reasons: Counter = Counter()
 
@@ -426,8 +429,12 @@ def run_ingest(
     warehouse = Path(warehouse).resolve()
     staging = warehouse / "_staging" / f"ingest-{os.getpid()}-{time.time_ns()}"
     ex = _executor(executor, cfg, len(files))
+    editions = tuple(sorted(parse_editions(cfg.section("asterix")).items()))
     units = [
-        IngestUnit(str(f), str(warehouse), str(staging), cfg.validation, start_ns, end_ns, force)
+        IngestUnit(
+            str(f), str(warehouse), str(staging), cfg.validation, start_ns, end_ns, force,
+            editions,
+        )
         for f in files
     ]
     summary = IngestSummary(files_total=len(units))

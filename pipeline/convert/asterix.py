@@ -55,8 +55,9 @@ from pipeline.convert.output import Message, write_converted
 from pipeline.decode.asterix import (
     EXTRACTORS,
     INSTALL_HINT,
+    candidate_editions,
     decoder_available,
-    parse_block,
+    extract_block,
     split_blocks,
 )
 from pipeline.io.mcap_write import ChannelSpec
@@ -187,16 +188,17 @@ def block_time_of_day(block: bytes) -> float | None:
     the ``asterix`` extra: ``None`` without it)."""
     if not decoder_available():
         return None
-    extract = EXTRACTORS.get(block[0])
-    if extract is None:
+    if block[0] not in EXTRACTORS:
         return None
-    records = parse_block(block)
-    if isinstance(records, str):
+    for ed in candidate_editions(block[0], {}, {}) or [None]:
+        rows = extract_block(block, ed)
+        if isinstance(rows, tuple):
+            continue
+        for row in rows:
+            tod = row.get("tod_s")
+            if tod is not None and 0 <= tod < 86_400:
+                return float(tod)
         return None
-    for rec in records:
-        tod = extract(rec).get("tod_s")
-        if tod is not None and 0 <= tod < 86_400:
-            return float(tod)
     return None
 
 

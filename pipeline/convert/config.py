@@ -62,7 +62,7 @@ def parse_import_options(raw: Mapping[str, Any]) -> ImportOptions:
 def parse_editions(section: Mapping[str, Any]) -> dict[int, str]:
     """``[asterix] editions`` -> {category: edition}; validated against the editions the
     decoder knows."""
-    from pipeline.decode.asterix_editions import EDITIONS
+    from pipeline.decode.asterix_editions import known_editions
 
     unknown = set(section) - {"editions"}
     if unknown:
@@ -73,7 +73,7 @@ def parse_editions(section: Mapping[str, Any]) -> dict[int, str]:
             c = int(str(cat))
         except ValueError:
             raise ConfigError(f"[asterix] editions: {cat!r} is not a category number") from None
-        known = sorted(EDITIONS.get(c, {}))
+        known = known_editions(c)
         if str(ed) not in known:
             raise ConfigError(
                 f"[asterix] editions: CAT{c:03d} edition {ed!r} is not one we decode "

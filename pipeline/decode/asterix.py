@@ -87,6 +87,12 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
+from pipeline.decode.asterix_editions import (
+    DEFAULT_EDITIONS,
+    definition_file,
+    known_editions,
+    parse_edition_metadata,
+)
 from pipeline.decode.registry import make_rejects
 from pipeline.io.mcap_read import ChannelBatch
 from pipeline.tables import conform, empty
@@ -183,21 +189,60 @@ def _ensure_definitions() -> None:
         if patched is None:
             continue
         fd, tmp = tempfile.mkstemp(prefix=f"surveil_{name}_", suffix=".xml")
-        try:
-            with os.fdopen(fd, "w") as f:
-                f.write(patched)
-            asterix.init(tmp)
-        finally:
-            os.unlink(tmp)
+        with os.fdopen(fd, "w") as f:
+            f.write(patched)
+        _SHIPPED_FILES[int(name[3:])] = tmp  # kept: loaded again after another edition
+        asterix.init(tmp)
     _DEFINITIONS_READY = True
 
 
-def parse_block(block: bytes) -> list[dict] | str:
-    """Records of one data block as ``asterix_decoder`` dicts (``verbose=False``), or the
-    reason why the block does not decode."""
+_SHIPPED_FILES: dict[int, str] = {}
+_LOADED: dict[int, str] = {}  # category -> edition loaded in asterix_decoder (else default)
+
+
+def shipped_file(cat: int) -> str:
+    """The decoder's definition file of ``cat`` (our patched copy for CAT048/065)."""
     import asterix
 
     _ensure_definitions()
+    return _SHIPPED_FILES.get(cat) or asterix.get_configuration_file(f"cat{cat:03d}_")
+
+
+def use_edition(cat: int, edition: str) -> None:
+    """Load ``edition`` of ``cat`` into ``asterix_decoder`` unless it is loaded (the
+    decoder keeps one definition per category: :mod:`pipeline.decode.asterix_editions`)."""
+    import asterix
+
+    _ensure_definitions()
+    default = DEFAULT_EDITIONS.get(cat)
+    if _LOADED.get(cat, default) == edition:
+        return
+    if edition == default:
+        asterix.init(shipped_file(cat))
+    else:
+        asterix.init(definition_file(cat, edition, shipped_file(cat)))
+    _LOADED[cat] = edition
+
+
+def restore_default_editions() -> None:
+    """Load the shipped edition again wherever another one is loaded (~3 ms per
+    category), so that direct ``asterix.parse`` callers see the decoder's defaults."""
+    for cat, ed in list(_LOADED.items()):
+        if ed != DEFAULT_EDITIONS.get(cat):
+            use_edition(cat, DEFAULT_EDITIONS[cat])
+
+
+def parse_block(block: bytes, edition: str | None = None) -> list[dict] | str:
+    """Records of one data block as ``asterix_decoder`` dicts (``verbose=False``), or the
+    reason why the block does not decode; ``edition`` of the block's category (default:
+    the edition the decoder ships)."""
+    import asterix
+
+    _ensure_definitions()
+    cat = block[0] if block else 0
+    edition = edition or DEFAULT_EDITIONS.get(cat)
+    if edition is not None:
+        use_edition(cat, edition)
     try:
         records = asterix.parse(block, verbose=False)
     except Exception as exc:  # the C extension raises on malformed input
@@ -207,7 +252,7 @@ def parse_block(block: bytes) -> list[dict] | str:
         return f"CAT{cat:03d} block of {len(block)} B holds no record"
     for i, rec in enumerate(records):
         if rec.get("hexdata") is None or rec.get("category") != cat:
-            return f"CAT{cat:03d} record {i + 1} does not parse under the supported edition"
+            return f"CAT{cat:03d} record {i + 1} does not parse under edition {edition}"
         if not any(k.startswith("I") for k in rec):
             return f"CAT{cat:03d} record {i + 1} has no data item (empty FSPEC)"
     filled = sum(int(r["len"]) for r in records)
@@ -339,6 +384,7 @@ def _cat021(rec: Mapping[str, Any]) -> dict[str, Any]:
             _v(rec, "I073", "time_reception_position"),
             _v(rec, "I075", "time_reception_velocity"),
             _v(rec, "I077", "time_report_transmission"),
+            _v(rec, "I030", "ToD"),  # edition 0.26
         ) if t is not None),
         None,
     )  # fmt: skip
@@ -385,6 +431,9 @@ def _cat048(rec: Mapping[str, Any]) -> dict[str, Any]:
 def _cat062(rec: Mapping[str, Any]) -> dict[str, Any]:
     """CAT062 ed 1.18 (SDPS system tracks); x/y in the system's reference frame."""
     callsign = _text(_v(rec, "I245", "TId")) or _text(_v(rec, "I380", "ID", "ACID"))
+    vx, vy = _f(_v(rec, "I185", "Vx")), _f(_v(rec, "I185", "Vy"))
+    if vx is None:  # edition 0.17: polar velocity I180 (speed m/s, heading deg)
+        vx, vy = _ground_vector(_f(_v(rec, "I180", "Spd")), _v(rec, "I180", "Hdg"))
     return {
         **_source(rec),
         "tod_s": _v(rec, "I070", "ToT"),
@@ -395,8 +444,8 @@ def _cat062(rec: Mapping[str, Any]) -> dict[str, Any]:
         "callsign": callsign,
         "x_m": _f(_v(rec, "I100", "X")),
         "y_m": _f(_v(rec, "I100", "Y")),
-        "vx_mps": _f(_v(rec, "I185", "Vx")),
-        "vy_mps": _f(_v(rec, "I185", "Vy")),
+        "vx_mps": vx,
+        "vy_mps": vy,
         "lat_deg": _f(_v(rec, "I105", "Lat")),
         "lon_deg": _f(_v(rec, "I105", "Lon")),
         "sigma_x_m": _f(_v(rec, "I500", "APC", "APC_X")),
@@ -645,14 +694,21 @@ def decode_asterix(
     source_file: str,
     topic: str,
     metadata: Mapping[str, str] | None = None,
+    editions: Mapping[int, str] | None = None,
+    learned: dict[int, str] | None = None,
 ) -> AsterixDecoded:
     """Decode one channel's ASTERIX payloads (one data block each) with their log times.
 
     ``metadata``: the channel's MCAP metadata; ``sensor_id`` / ``sensor_kind`` there
-    override the record's SAC/SIC and kind. See the module docstring for the mapping and
-    the reject rules.
+    override the record's SAC/SIC and kind, ``asterix_editions`` (``"010=0.24"``) forces
+    editions. ``editions``: forced editions per category (the config's; they win over the
+    metadata); ``learned``: the edition that decoded each category's last block (updated;
+    pass the same dict for every batch of a channel). See the module docstring for the
+    mapping and the reject rules.
     """
     meta = metadata or {}
+    forced = {**parse_edition_metadata(meta.get("asterix_editions")), **(editions or {})}
+    learned = {} if learned is None else learned
     ctx = _Context(source_file, topic, meta.get("sensor_id"), meta.get("sensor_kind"))
     times = np.asarray(log_time_ns, dtype=np.int64)
     obs, svc, rej = _Rows(OBS_COLUMNS), _Rows(SERVICE_COLUMNS), _Rejects()
@@ -668,7 +724,7 @@ def decode_asterix(
             n_blocks += 1
             cat = block[0]
             if cat in SUPPORTED_CATEGORIES:
-                _decode_block(block, t, obs, svc, rej)
+                _decode_block(block, t, obs, svc, rej, forced, learned)
             else:
                 u = Unsupported(1, t, block)
                 unsupported[cat] = unsupported[cat].plus(u) if cat in unsupported else u
@@ -682,14 +738,14 @@ def decode_asterix(
     )  # fmt: skip
 
 
-def _decode_block(block: bytes, t: int, obs: _Rows, svc: _Rows, rej: _Rejects) -> None:
-    """Records of one block into ``obs`` (target reports) or ``svc`` (service and status
-    messages, CAT010 status messages included); the block or a record into ``rej``."""
+def extract_block(block: bytes, edition: str | None) -> tuple[str, str] | list[dict[str, Any]]:
+    """Rows of a block under one edition, or ``(reason code, reason)`` when it does not
+    decode under it (records do not parse / fill the block: ``undecodable``; a value its
+    encoding should never carry: ``out_of_range``)."""
     cat = block[0]
-    records = parse_block(block)
+    records = parse_block(block, edition)
     if isinstance(records, str):
-        rej.add(t, "undecodable", records, block)
-        return
+        return "undecodable", records
     extracted = [EXTRACTORS[cat](rec) for rec in records]
     if cat == 10:  # status messages of CAT010 are service messages
         extracted = [
@@ -699,8 +755,46 @@ def _decode_block(block: bytes, t: int, obs: _Rows, svc: _Rows, rej: _Rejects) -
     for k, row in enumerate(extracted):
         why = implausible(row)
         if why is not None:  # the whole block: its records share one source and edition
-            rej.add(t, "out_of_range", f"CAT{cat:03d} record {k + 1}: {why}", block)
-            return
+            return "out_of_range", f"CAT{cat:03d} record {k + 1}: {why}"
+    return extracted
+
+
+def candidate_editions(
+    cat: int, forced: Mapping[int, str], learned: Mapping[int, str]
+) -> list[str]:
+    """Editions to try for a block of ``cat``: the forced one alone (config, channel
+    metadata), else the one that decoded the channel's previous block, the shipped one,
+    then the others (:mod:`pipeline.decode.asterix_editions`)."""
+    if cat in forced:
+        return [forced[cat]]
+    out = [learned[cat]] if cat in learned else []
+    return out + [e for e in known_editions(cat) if e not in out]
+
+
+def _decode_block(
+    block: bytes, t: int, obs: _Rows, svc: _Rows, rej: _Rejects,
+    forced: Mapping[int, str] | None = None, learned: dict[int, str] | None = None,
+) -> None:  # fmt: skip
+    """Records of one block into ``obs`` (target reports) or ``svc`` (service and status
+    messages, CAT010 status messages included); the block or a record into ``rej``. The
+    first candidate edition under which the block decodes is taken (and learned)."""
+    cat = block[0]
+    learned = {} if learned is None else learned
+    eds = candidate_editions(cat, forced or {}, learned) or [None]
+    first: tuple[str, str] | None = None
+    for ed in eds:
+        out = extract_block(block, ed)
+        if not isinstance(out, tuple):
+            if ed is not None:
+                learned[cat] = ed
+            extracted = out
+            break
+        first = first or out
+    else:
+        assert first is not None
+        tried = f" (editions tried: {', '.join(e for e in eds if e)})" if len(eds) > 1 else ""
+        rej.add(t, first[0], first[1] + tried, block)
+        return
     for k, row in enumerate(extracted):
         target = cat in TARGET_CATEGORIES and row.get("message_type") == TARGET_REPORT
         if target and not has_position(row):
@@ -786,11 +880,16 @@ class AsterixChannelDecoder:
     unsupported: dict[int, Unsupported] = field(default_factory=dict)
     not_stored: Counter = field(default_factory=Counter)
     missing_decoder: str | None = None
+    editions: Mapping[int, str] = field(default_factory=dict)
+    learned: dict[int, str] = field(default_factory=dict)
     _missing: list[int] = field(default_factory=list)  # [count, first log time]
+    takes_editions = True  # the registry passes the config's [asterix] editions
 
     @classmethod
-    def for_channel(cls, batch: ChannelBatch, source_file: str) -> AsterixChannelDecoder:
-        return cls(source_file, batch.topic, dict(batch.metadata))
+    def for_channel(
+        cls, batch: ChannelBatch, source_file: str, editions: Mapping[int, str] | None = None
+    ) -> AsterixChannelDecoder:
+        return cls(source_file, batch.topic, dict(batch.metadata), editions=dict(editions or {}))
 
     def feed(self, batch: ChannelBatch) -> dict[str, pa.Table]:
         if not decoder_available():
@@ -802,7 +901,7 @@ class AsterixChannelDecoder:
             return {}
         out = decode_asterix(
             batch.payloads, batch.log_time_ns, source_file=self.source_file, topic=self.topic,
-            metadata=self.metadata,
+            metadata=self.metadata, editions=self.editions, learned=self.learned,
         )  # fmt: skip
         for cat, u in out.unsupported.items():
             prev = self.unsupported.get(cat)
@@ -810,6 +909,8 @@ class AsterixChannelDecoder:
         return {"airfield_obs": out.obs, "asterix_service": out.service, "rejects": out.rejects}
 
     def finish(self) -> dict[str, pa.Table]:
+        if any(ed != DEFAULT_EDITIONS.get(c) for c, ed in self.learned.items()):
+            restore_default_editions()  # once per channel that needed another edition
         for c, u in sorted(self.unsupported.items()):
             self.not_stored[f"asterix_cat{c:03d}"] += u.count
         self.unsupported = {}

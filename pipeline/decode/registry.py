@@ -51,7 +51,7 @@ at ingest: ``undecodable``, ``out_of_range``, ``bad_checksum``, ``truncated_mult
 from __future__ import annotations
 
 from collections import Counter
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -129,7 +129,11 @@ def decoder_kind(message_encoding: str, schema_encoding: str, schema_name: str) 
 
 
 def _open_channel_decoder(
-    kind: str, batch: ChannelBatch, source_file: str, validation: ValidationConfig | None = None
+    kind: str,
+    batch: ChannelBatch,
+    source_file: str,
+    validation: ValidationConfig | None = None,
+    asterix_editions: Mapping[int, str] | None = None,
 ) -> Any:
     """The stateful decoder of ``CHANNEL_DECODERS[kind]`` for ``batch``'s channel."""
     import importlib
@@ -138,6 +142,8 @@ def _open_channel_decoder(
     factory = getattr(importlib.import_module(module), cls)
     if getattr(factory, "takes_validation", False):
         return factory.for_channel(batch, source_file, validation)
+    if getattr(factory, "takes_editions", False):
+        return factory.for_channel(batch, source_file, asterix_editions)
     return factory.for_channel(batch, source_file)
 
 
@@ -194,6 +200,7 @@ class FileDecoder:
 
     source_file: str
     validation: ValidationConfig
+    asterix_editions: Mapping[int, str] = field(default_factory=dict)
     parts: dict[str, list[pa.Table]] = field(default_factory=dict)
     not_stored: Counter = field(default_factory=Counter)
     missing_decoders: set[str] = field(default_factory=set)
@@ -235,7 +242,7 @@ class FileDecoder:
             dec = self._channels.get(batch.channel_id)
             if dec is None:
                 dec = self._channels[batch.channel_id] = _open_channel_decoder(
-                    kind, batch, self.source_file, self.validation
+                    kind, batch, self.source_file, self.validation, self.asterix_editions
                 )
             for name, table in dec.feed(batch).items():
                 self._add(name, table)

@@ -11,9 +11,9 @@ Expected counts are established without the decoder under test:
   record's FSPEC ``bf df ff 02`` and SAC/SIC ``19 64`` start at byte 0x43 of the file) and
   1 CAT065 record; the other CroatiaControl raw files hold one record per block;
 - editions: SOURCES.md and the jASTERIX file names give each block's edition; the blocks
-  of editions the decoder does not read (CAT010 0.24 Sensis, CAT021 0.26, the 2008
-  CAT062 capture) must each end as ONE rejects row (``undecodable`` or ``out_of_range``,
-  depending on where the other edition's layout breaks), never as rows.
+  of editions the shipped decoder does not read (CAT010 0.24 Sensis, CAT021 0.26, the
+  2008 CAT062 capture, pre-1.0) are decoded with the editions we declare
+  (``pipeline/decode/asterix_editions.py``) and checked against jASTERIX's tests.
 """
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ from pipeline.units import NS
 pytestmark = pytest.mark.realdata
 SERVICE = {2, 19, 23, 25, 31, 34, 63, 65, 247, 252}
 SUPPORTED = {10, 20, 21, 48, 62} | SERVICE
-OTHER_EDITION = {"cat010ed0.24_sensis.bin", "cat021ed0.26.bin", "croatiacontrol_asterix.pcap"}
+OTHER_EDITION: set[str] = set()  # every edition of the samples is decoded now
 # records per block where a file's blocks hold more than one (see the module docstring)
 RECORDS = {
     "croatiacontrol_cat_062_065.pcap": {62: 2, 65: 1},
@@ -182,6 +182,42 @@ def test_croatiacontrol_reference_decode_matches_field_by_field(ingested):
     assert svc["service_id"] == item["I015"]["SID"]
     assert svc["batch_number"] == item["I020"]["BTN"]
     assert svc["time_ns"] == day + round(item["I030"]["ToD"] * NS)
+
+
+def test_cat010_edition_024_matches_the_jasterix_expectations(ingested):
+    """hpuhr/jASTERIX src/test/test_cat010_0.24_sensis.cpp."""
+    _, _, tables, by_source = ingested
+    (r,) = _rows_of(tables["airfield_obs"], by_source)["cat010ed0.24_sensis.bin"]
+    assert (r["sac"], r["sic"], r["track_number"]) == (0, 0, 922)
+    assert r["lat_deg"] == pytest.approx(25.62264827080070972443, abs=1e-10)
+    assert r["lon_deg"] == pytest.approx(22.1754983067512512207, abs=1e-10)
+    assert (r["x_m"], r["y_m"]) == (-1423.0, 1368.0)
+    assert (r["vx_mps"], r["vy_mps"]) == (-8.0, 1.0)
+    assert r["target_address"] == 4672673
+    assert (r["sigma_x_m"], r["sigma_y_m"]) == (2.5, 3.25)
+    assert r["time_ns"] == round(84080.484375 * NS)
+
+
+def test_cat021_edition_026_matches_the_jasterix_expectations(ingested):
+    """hpuhr/jASTERIX src/test/test_cat021_0.26.cpp."""
+    _, _, tables, by_source = ingested
+    (r,) = _rows_of(tables["airfield_obs"], by_source)["cat021ed0.26.bin"]
+    assert (r["sac"], r["sic"], r["target_address"]) == (0, 5, 4811822)
+    assert r["lat_deg"] == pytest.approx(38.77732336521148681641, abs=1e-12)
+    assert r["lon_deg"] == pytest.approx(-9.131237268447875976563, abs=1e-12)
+    assert r["time_ns"] == round(14418.484375 * NS)
+
+
+def test_2008_cat062_capture_decodes_with_the_pre_1_0_edition(ingested):
+    """The 2008 CroatiaControl capture: 100 system tracks of SAC/SIC 25/100, each within
+    a second of its capture time, over the Adriatic / Balkans, at airliner speeds."""
+    _, _, tables, by_source = ingested
+    rows = _rows_of(tables["airfield_obs"], by_source)["croatiacontrol_asterix.pcap"]
+    assert len(rows) == 100 and {(r["sac"], r["sic"]) for r in rows} == {(25, 100)}
+    assert all(abs(r["time_ns"] - r["log_time_ns"]) < NS for r in rows)
+    assert all(40 < r["lat_deg"] < 48 and 12 < r["lon_deg"] < 22 for r in rows)
+    speeds = [math.hypot(r["vx_mps"], r["vy_mps"]) for r in rows if r["vx_mps"] is not None]
+    assert len(speeds) > 50 and 50 < sorted(speeds)[len(speeds) // 2] < 300
 
 
 def test_cat010_matches_the_jasterix_expectations(ingested):
