@@ -38,7 +38,7 @@ from __future__ import annotations
 
 import struct
 from collections import Counter
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from datetime import UTC, date, datetime
 from pathlib import Path
@@ -124,13 +124,21 @@ def wrap_asterix_file(path: Path, out_dir: Path, *, day: date | None = None) -> 
     return wrap_asterix(path, out_dir, day=day).output
 
 
-def wrap_asterix(path: Path, out_dir: Path, *, day: date | None = None) -> WrappedAsterix:
+def wrap_asterix(
+    path: Path,
+    out_dir: Path,
+    *,
+    day: date | None = None,
+    editions: Mapping[int, str] | None = None,
+) -> WrappedAsterix:
     """Wrap a raw ASTERIX file, a framed recording (GPS, FINAL, IOSS, HDLC, ORADIS) or a
     pcap/pcapng capture into ``out_dir/<name>.mcap``.
 
     ``day``: UTC date of a recording whose records carry only the time of day (raw and
-    framed files); ignored for captures, which carry their own timestamps. Raises
-    ``ValueError`` when the file is none of these, or holds nothing to write.
+    framed files); ignored for captures, which carry their own timestamps. ``editions``:
+    the config's ``[asterix] editions``, written to every channel's metadata
+    (``asterix_editions``) for ingest. Raises ``ValueError`` when the file is none of
+    these, or holds nothing to write.
     """
     path = Path(path)
     data = path.read_bytes()
@@ -154,6 +162,10 @@ def wrap_asterix(path: Path, out_dir: Path, *, day: date | None = None) -> Wrapp
     out = Path(out_dir) / f"{path.name}.mcap"
     meta = {"source": path.name, "input_format": kind, "messages": str(len(msgs.rows))}
     meta |= {f"packets_skipped_{k}": str(v) for k, v in sorted(msgs.skipped.items())}
+    if editions:
+        text = ",".join(f"{c:03d}={e}" for c, e in sorted(editions.items()))
+        for m in msgs.topics.values():
+            m["asterix_editions"] = text
     counts = _write_mcap(out, msgs, meta)
     sources = {t: m.get("log_time_source", "") for t, m in msgs.topics.items()}
     return WrappedAsterix(out, kind, counts, sources)

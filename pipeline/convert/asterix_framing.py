@@ -14,7 +14,7 @@ framing    one record                                                           
            block (CAT, LEN, ...) followed by 10 "GPS post" octets                time of day,
                                                                                  1/128 s
 ``final``  byte count (2, the whole record), board number (1), line number (1),  time of day,
-           recording day (1), time (3), data blocks, padding ``A5 A5 A5 A5``     10 ms units
+           recording day (1), time (3), data blocks, padding (4, ``A5 A5 A5 A5``)  10 ms units
 ``ioss_seq``  byte count (2, whole record), sequence number (4), unknown (1),    time of day,
            board number (1), recording day (1), time (3), data blocks, padding   10 ms units
            (4)
@@ -29,11 +29,11 @@ framing    one record                                                           
 Detection (:func:`detect_framing`): a framing is taken when its walk from offset 0 reads
 complete records whose content frames exactly as data blocks (LEN by LEN), for the first
 :data:`PROBE_RECORDS` records or up to the end of the file (a truncated last record is
-allowed: the file is damaged, not of another kind); FINAL and IOSS also need their padding;
-HDLC needs a frame with a good FCS at offset 0 and good frames in at least half of the
-first 64 KiB (a frame with a bad FCS is skipped, not the end of the file). Candidates
-are tried FINAL, IOSS-seq, HDLC, ORADIS, GPS; raw data blocks
-(no framing) are recognised by the caller.
+allowed: the file is damaged, not of another kind). The FINAL padding is not checked
+(``A5 A5 A5 A5`` in CroatiaControl's description; neither reader checks it). HDLC needs a
+frame with a good FCS at offset 0 and good frames in at least half of the first 64 KiB (a
+frame with a bad FCS is skipped, not the end of the file). Candidates are tried FINAL,
+IOSS-seq, HDLC, ORADIS, GPS; raw data blocks (no framing) are recognised by the caller.
 
 Walking (:func:`walk`): records in file order; a record that does not frame ends the walk
 and the rest of the file is returned as one damaged tail (the importer rejects it with the
@@ -125,8 +125,6 @@ def _final_like(header: int) -> Callable[[bytes, int], Step]:
         if pos + n > len(data):
             return f"byte count {n} runs past the end of the file (cut off?)"
         content = data[pos + header : pos + n - FINAL_PAD]
-        if header == FINAL_HEADER and data[pos + n - FINAL_PAD : pos + n] != PAD:
-            return "padding is not A5 A5 A5 A5"
         if not blocks_fill(content):
             return "content does not frame as ASTERIX data blocks"
         t = int.from_bytes(data[pos + header - 3 : pos + header], "big")

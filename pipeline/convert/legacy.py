@@ -152,7 +152,7 @@ def import_file(
         from pipeline.convert.asterix import wrap_asterix
 
         day = datetime.fromtimestamp(base_time_ns // NS, tz=UTC).date()
-        w = wrap_asterix(path, Path(out_dir), day=day)
+        w = wrap_asterix(path, Path(out_dir), day=day, editions=options.asterix_editions)
         return ImportedFile(
             str(path), str(w.output), f"asterix:{w.kind}", w.messages, w.log_time_source
         )

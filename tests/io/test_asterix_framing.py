@@ -227,3 +227,32 @@ def test_oradis_packets_inside_a_pcap_are_unwrapped(tmp_path):
     w = wrap_asterix(path, tmp_path / "out")
     (msgs,) = _messages(w.output).values()
     assert msgs == [(t, blks[0]), (t, blks[1])]
+
+
+def test_final_padding_is_not_required_to_be_a5(tmp_path):
+    blks = blocks()
+    data = final_file(blks, TODS).replace(b"\xa5" * 4, b"\x00" * 4)
+    assert detect_framing(data) == "final"
+    records, tail = walk(data, "final")
+    assert [r.content for r in records] == blks and tail is None
+
+
+def test_config_editions_reach_the_channel_metadata(tmp_path):
+    src = tmp_path / "rec.final"
+    src.write_bytes(final_file(blocks(), TODS))
+    w = wrap_asterix(src, tmp_path / "out", day=DAY, editions={10: "0.24", 62: "0.17"})
+    (b,) = list(read_mcap_batches(w.output))
+    assert b.metadata["asterix_editions"] == "010=0.24,062=0.17"
+
+
+def test_raw_asterix_without_the_decoder_is_refused_with_exit_1(tmp_path, monkeypatch):
+    src = tmp_path / "x.ast"
+    src.write_bytes(b"".join(blocks()))
+    monkeypatch.setitem(sys.modules, "asterix", None)
+    summary = run_import([src], tmp_path / "out")
+    assert summary.exit_code == 1
+    ((_, err),) = summary.failed
+    assert "pip install 'surveil-pipeline[asterix]'" in err
+    final = tmp_path / "rec.final"  # header times: no decoder needed to import
+    final.write_bytes(final_file(blocks(), TODS))
+    assert run_import([final], tmp_path / "out2").exit_code == 0
