@@ -66,8 +66,11 @@ COLUMN_NAMES: dict[str, tuple[str, ...]] = {
              "receivedtime", "receivetime", "rxtime", "reporttime", "postime", "epoch",
              "epochtime", "unixtime", "timeepoch", "tagblocktimestamp", "datetimestamp",
              "epochms", "epochs", "timestampms", "timems", "unixtimems", "unixms",
-             "timestamps", "times", "timesec", "unixtimestamp", "epochseconds", "utcseconds"),
+             "timestamps", "times", "timesec", "unixtimestamp", "epochseconds", "utcseconds",
+             "receivedat", "utctimestamp", "timestampz", "datetimeiso", "isotime",
+             "recordtime", "dt"),
     "date": ("date", "utcdate", "dateutc"),
+    "millisecond": ("millisecond", "milliseconds", "msec", "ms"),
     "time_of_day": ("timeofday", "tod", "utctimeofday", "hhmmss"),
     "mmsi": ("mmsi", "userid", "sourcemmsi", "vesselmmsi", "shipmmsi", "mmsinumber",
              "mmsiid"),
@@ -88,7 +91,8 @@ COLUMN_NAMES: dict[str, tuple[str, ...]] = {
     "callsign": ("callsign", "callsignascii", "call", "radiocallsign"),
     "shipname": ("vesselname", "shipname", "name", "vessel", "shipnameascii", "nameascii"),
     "ship_type": ("vesseltype", "shiptype", "shipandcargotype", "shipcargotype",
-                  "typeofship", "shiptypecode", "shipandcargo", "shipcargo"),
+                  "typeofship", "shiptypecode", "shipandcargo", "shipcargo",
+                  "vesseltypegeneric", "vesseltypecode"),
     "length": ("length", "lengthm", "len", "shiplength", "loa"),
     "width": ("width", "widthm", "beam", "breadth", "shipwidth"),
     "draught": ("draught", "draft", "draughtm", "draftm", "staticdraught"),
@@ -106,7 +110,8 @@ FIELD_ALIASES = {  # config values may also use the schema's own names
 REQUIRED = ("time", "mmsi")
 _ISO_FORMATS = (
     "%Y-%m-%dT%H:%M:%S%.f%:z", "%Y-%m-%dT%H:%M:%S%.f", "%Y-%m-%d %H:%M:%S%.f%:z",
-    "%Y-%m-%d %H:%M:%S%.f", "%Y%m%dT%H%M%S%.f", "%Y%m%d%H%M%S", "%d/%m/%Y %H:%M:%S%.f",
+    "%Y-%m-%d %H:%M:%S%.f", "%Y%m%dT%H%M%S%.f", "%Y%m%d%H%M%S", "%Y%m%d_%H%M%S",
+    "%d/%m/%Y %H:%M:%S%.f",
     "%m/%d/%Y %H:%M:%S%.f", "%d.%m.%Y %H:%M:%S%.f", "%Y/%m/%d %H:%M:%S%.f",
     "%d-%m-%Y %H:%M:%S%.f", "%Y-%m-%dT%H:%M", "%Y-%m-%d %H:%M", "%d/%m/%Y %H:%M",
 )  # fmt: skip
@@ -276,6 +281,9 @@ def time_ns(
         digits = _txt(placed["time"]).str.contains(r"^\d+(\.\d+)?$")
         df = df.with_columns(_t_ns=expr, _t_us=pl.when(digits).then(pl.lit(0, pl.Int64)))
         return df, name
+    if "millisecond" in placed:  # exactEarth / aisdb: "Time" to the second + "Millisecond"
+        ms = _f(placed["millisecond"])
+        expr = expr + pl.when(ms.is_between(0, 999)).then(ms * 1000).otherwise(0).cast(pl.Int64)
     df = df.with_columns(_t_us=expr)
     ok = pl.col("_t_us").is_between(0, TIME_MAX_NS // 1000)
     sub_us = _txt(placed["time"]).str.extract(r"[.,]\d{6}(\d{1,3})", 1).str.pad_end(3, "0")
@@ -380,6 +388,7 @@ def read_ais_csv(path: Path, options: CsvOptions | None = None) -> CsvTable:
         )
     df = _read_cells(data, sep, cells)
     columns = list(df.columns)
+    placed = _message_or_ship_type(df, placed)
     df, parser = time_ns(df, placed, options.time_format)
     time_col = placed.get("time", "_datetime")
     kind = flavor(cells)
@@ -398,6 +407,21 @@ def read_ais_csv(path: Path, options: CsvOptions | None = None) -> CsvTable:
     if time_col == "_datetime":
         time_col = f"{placed['date']}+{placed['time_of_day']}"
     return CsvTable(out.select(*fields, "_time_reject"), kind, time_col, parser, unplaced)
+
+
+def _message_or_ship_type(df: pl.DataFrame, placed: dict[str, str]) -> dict[str, str]:
+    """A bare ``type`` column is the AIS message id in message-level exports but the ship
+    type in vessel tables (AISHub): values above 27 (ship type codes are 20..99) make it
+    the ship type, when no other column is."""
+    col = placed.get("msg_type")
+    if col is None or normalise(col) != "type" or "ship_type" in placed:
+        return placed
+    values = df.head(_SAMPLE_ROWS).select(_i(col).alias("v"))["v"].drop_nulls()
+    if len(values) and (values > 27).any():
+        out = {k: v for k, v in placed.items() if k != "msg_type"}
+        out["ship_type"] = col
+        return out
+    return placed
 
 
 def _read_cells(data: str, sep: str, cells: list[str]) -> pl.DataFrame:

@@ -139,3 +139,42 @@ def test_known_dialects_keep_their_names_and_ignore_is_honoured(tmp_path):
     assert placed == {"mmsi": "MMSI"} and unplaced == ["Extra"]
     table = read_ais_csv(src, CsvOptions(columns={"VesselName": "ignore"}))
     assert "shipname" not in table.rows.columns
+
+
+EXACTEARTH = (
+    "MMSI,Message_ID,Repeat_indicator,Time,Millisecond,Region,Country,Base_station,"
+    "Online_data,Group_code,Sequence_ID,Channel,Data_length,Vessel_Name,Call_sign,IMO,"
+    "Ship_Type,Dimension_to_Bow,Dimension_to_stern,Dimension_to_port,Dimension_to_starboard,"
+    "Draught,Destination,AIS_version,Navigational_status,ROT,SOG,Accuracy,Longitude,"
+    "Latitude,COG,Heading,Regional,Maneuver,RAIM_flag,Communication_flag\n"
+    "316001234,1,0,20240131_120000,250,66,CA,003669701,,,,A,168,,,,,,,,,,,,0,0,10.5,1,"
+    "-63.5,44.6,90.0,91,0,0,0,0\n"
+    "316001234,5,0,20240131_120001,0,66,CA,003669701,,,,B,424,SHIP ONE,VCAB2,9123456,70,"
+    "100,20,10,10,7.5,HALIFAX,0,,,,,,,,,,,,\n"
+    "3160001,4,0,20240131_120002,0,66,CA,003669701,,,,A,168,,,,,,,,,,,,,,,,-63.0,44.0,,,,,,\n"
+)
+
+
+def test_exactearth_aisdb_message_level_csv(tmp_path):
+    """The wide message-level CSV aisdb reads (exactEarth): Time to the second plus a
+    Millisecond column, one row per message with its Message_ID."""
+    src = _write(tmp_path, "ee.csv", EXACTEARTH)
+    assert detect_format(src) == "ais_csv"
+    res = import_file(src, tmp_path / "out")
+    docs = _docs(Path(res.output))
+    assert [t for t, _ in docs] == [T * NS + 250_000_000, (T + 1) * NS, (T + 2) * NS]
+    out = _ingest(tmp_path, Path(res.output))
+    (rep,) = out["ais_reports"]
+    assert (rep["mmsi"], rep["lat_deg"], rep["lon_deg"]) == (316001234, 44.6, -63.5)
+    (static,) = out["ais_static"]
+    assert (static["shipname"], static["callsign"], static["imo"]) == ("SHIP ONE", "VCAB2",
+                                                                      9123456)  # fmt: skip
+    assert out["rejects"] == []
+    assert json.loads(out["ingest_ledger"][0]["not_stored_json"]) == {"ais_type_4": 1}
+
+
+def test_a_bare_type_column_of_ship_type_codes_is_the_ship_type(tmp_path):
+    src = _write(tmp_path, "hub.csv", "MMSI,TIME,LONGITUDE,LATITUDE,TYPE,NAME\n"
+                                      "244660000,2024-01-31 12:00:00 GMT,4.2,52.1,70,X\n")
+    ((t, doc),) = _docs(Path(import_file(src, tmp_path / "out").output))
+    assert t == T * NS and doc["ship_type"] == 70 and doc.get("msg_type") is None
