@@ -31,16 +31,20 @@ metadata ``platform_id`` (the file name without its extension), ``source_file`` 
 
 The first available source in that order is used for the whole file.
 
-**AIS CSV tables** (Stone Soup ``Time,MMSI,Latitude_degrees,...``; NOAA MarineCadastre
-``MMSI,BaseDateTime,LAT,...``; Danish Maritime Authority aisdk ``# Timestamp,Type of
-mobile,MMSI,...``): one JSON message per row on ``/ais/csv`` (schema
-``surveil.AisReport``, ``schemas/ais_report.schema.json``), log time = the row's time
-(``log_time_source`` ``csv:<column>``, UTC; DMA dates are dd/mm/yyyy). Source units and
-not-available codes are kept; empty-meaning text cells (``''``, ``' '``, ``Unknown``,
-``Undefined``) become null.
+**AIS CSV tables** of other tools (a header with an MMSI column; columns placed by
+header name, :mod:`pipeline.convert.ais_csv`): one JSON message per row on ``/ais/csv``
+(schema ``surveil.AisReport``, ``schemas/ais_report.schema.json``), log time = the row's
+time (``log_time_source`` ``csv:<column>``, UTC). Source units and not-available codes
+are kept; empty-meaning text cells (``''``, ``' '``, ``Unknown``, ``Undefined``) become
+null.
 
-**ASTERIX** raw files and pcap/pcapng captures:
-:func:`pipeline.convert.asterix.wrap_asterix_file`.
+**ASTERIX** raw files, framed recordings (GPS, FINAL, IOSS, HDLC, ORADIS) and pcap/pcapng
+captures: :func:`pipeline.convert.asterix.wrap_asterix`. **ROS 1 bags**:
+:func:`pipeline.convert.rosbag.wrap_ros1_bag`.
+
+Every converter writes through :func:`pipeline.convert.output.write_converted`: a piece
+whose log time is outside 1970 .. 2262 (or that carries a reason) goes to the
+``/import/rejects`` channel and becomes a ``rejects`` row at ingest, never a traceback.
 """
 
 from __future__ import annotations
