@@ -281,7 +281,8 @@ def _decode_and_stage(
     status = scan.status
     index = None
     if not unit.windowed:
-        index = mcap_index_rows(unit.path, size, scan.summary, scan.channels, status)
+        index = mcap_index_rows(unit.path, size, scan.summary, scan.channels, status,
+                                decoder.not_stored_by_channel)  # fmt: skip
     file_status, error = status.status, status.error
     if decoder.missing_decoders:  # partly read: exit 1, and read again once installed
         missing = f"{MISSING_DECODER}: {', '.join(sorted(decoder.missing_decoders))}"

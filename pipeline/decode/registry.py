@@ -204,6 +204,7 @@ class FileDecoder:
     parts: dict[str, list[pa.Table]] = field(default_factory=dict)
     not_stored: Counter = field(default_factory=Counter)
     missing_decoders: set[str] = field(default_factory=set)
+    not_stored_by_channel: dict[int, Counter] = field(default_factory=dict)
     _unknown: dict[int, _UnknownChannel] = field(default_factory=dict)
     _json: list[ChannelBatch] = field(default_factory=list)
     _json_count: int = 0
@@ -291,10 +292,13 @@ class FileDecoder:
         """Rows per raw table not yet drained (every table of ``RAW_TABLES``, possibly
         empty), conformed."""
         self._flush_json()
-        for dec in self._channels.values():
+        for channel_id, dec in self._channels.items():
             for name, table in dec.finish().items():
                 self._add(name, table)
-            self.not_stored.update(getattr(dec, "not_stored", {}))
+            counts = getattr(dec, "not_stored", {})
+            self.not_stored.update(counts)
+            if counts:
+                self.not_stored_by_channel[channel_id] = Counter(counts)
             if getattr(dec, "missing_decoder", None):
                 self.missing_decoders.add(dec.missing_decoder)
         self._channels.clear()

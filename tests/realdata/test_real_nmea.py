@@ -70,6 +70,13 @@ def warehouse(tmp_path_factory) -> tuple[Path, dict[str, dict[str, int]], dict]:
         key = [pl.col("file"), pl.lit(name) if name != "rejects" else pl.col("reason_code")]
         for f, k, n in df.group_by(key).len().iter_rows():
             got.setdefault(f, Counter())[k if name == "rejects" else name] += n
+    index = pl.from_arrow(read_table(tmp / "wh", "mcap_index"))
+    per_file: dict[str, Counter] = {}
+    for f, j in index.select("source_file", "not_stored_json").iter_rows():
+        per_file.setdefault(Path(f).name.removesuffix(".mcap"), Counter()).update(
+            json.loads(j) if j else {}
+        )
+    got["__index__"] = per_file  # type: ignore[assignment]
     ledger = pl.from_arrow(read_table(tmp / "wh", "ingest_ledger"))
     got["__ledger__"] = {  # type: ignore[assignment]
         Path(f).name.removesuffix(".mcap"): json.loads(j)
@@ -264,6 +271,7 @@ def test_counts_per_file_match_a_plain_reading(warehouse, name):
     assert dict(got.get(name, Counter())) == dict(+want)
     if path.suffix != ".csv":  # valid but unused sentences: counted per type, not rejected
         assert got["__ledger__"][name] == dict(not_stored)
+        assert dict(got["__index__"][name]) == dict(not_stored)  # the channels' sum
 
 
 def test_sources_md_facts(warehouse):
