@@ -54,7 +54,7 @@ import pyarrow.compute as pc
 
 from jobs.common import UsageError, keep_freed_memory
 from pipeline.config import Config, ValidationConfig
-from pipeline.convert.config import parse_editions
+from pipeline.convert.config import import_options
 from pipeline.decode.registry import RAW_TABLES, FileDecoder, make_rejects
 from pipeline.executors import Executor, UnitResult, make_executor
 from pipeline.io.mcap_index import mcap_index_rows
@@ -430,7 +430,7 @@ def run_ingest(
     warehouse = Path(warehouse).resolve()
     staging = warehouse / "_staging" / f"ingest-{os.getpid()}-{time.time_ns()}"
     ex = _executor(executor, cfg, len(files))
-    editions = tuple(sorted(parse_editions(cfg.section("asterix")).items()))
+    editions = tuple(sorted(import_options(cfg).asterix_editions.items()))
     units = [
         IngestUnit(
             str(f), str(warehouse), str(staging), cfg.validation, start_ns, end_ns, force,

@@ -1,4 +1,6 @@
-"""The ``[import.csv]`` and ``[asterix]`` sections of the config, typed and validated.
+"""The ``[import.csv]`` and ``[asterix]`` sections of the config, declared with
+:mod:`pipeline.configspec` and read when the file loads (``IMPORT_SECTION``, registered
+in :mod:`pipeline.families`).
 
 ```toml
 [import.csv]
@@ -13,7 +15,7 @@ editions = { "010" = "0.24", "021" = "0.26" }   # optional: else detected per da
 (:func:`pipeline.convert.ais_csv.canonical_field`: ``time``, ``mmsi``, ``lat``, ``lon``,
 ``sog``, ``cog``, ``heading``, ... or the schema's own names, or ``ignore``).
 ``editions``: ASTERIX category (``"10"`` or ``"010"``) -> edition
-(:data:`pipeline.decode.asterix_editions.EDITIONS`). A bad value is a
+(:func:`pipeline.decode.asterix_editions.known_editions`). A bad value is a
 :class:`~pipeline.config.ConfigError` (exit 2) naming the key.
 """
 
@@ -23,8 +25,62 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from pipeline.config import Config, ConfigError
+from pipeline.config import Config
+from pipeline.configspec import Document, setting
 from pipeline.convert.ais_csv import COLUMN_NAMES, CsvOptions, canonical_field
+from pipeline.decode.asterix_editions import known_editions
+
+SECTION = "import"
+
+
+def _check_columns(columns: Mapping[str, str]) -> str | None:
+    for cell, target in columns.items():
+        if canonical_field(target) is None:
+            names = ", ".join(sorted(set(COLUMN_NAMES) - {"sog_mps"}))
+            return f"{cell!r} = {target!r} is not a field (one of: {names})"
+    return None
+
+
+def _editions(raw: Mapping[str, str]) -> dict[int, str]:
+    out = {}
+    for cat, ed in raw.items():
+        out[int(str(cat))] = str(ed)
+    return out
+
+
+def _check_editions(editions: Mapping[str, str]) -> str | None:
+    for cat, ed in editions.items():
+        try:
+            c = int(str(cat))
+        except ValueError:
+            return f"{cat!r} is not a category number"
+        known = known_editions(c)
+        if str(ed) not in known:
+            return (f"CAT{c:03d} edition {ed!r} is not one we decode "
+                    f"(known: {', '.join(known) or 'none'})")  # fmt: skip
+    return None
+
+
+@dataclass(frozen=True)
+class CsvImportConfig:
+    """``[import.csv]``."""
+
+    columns: Mapping[str, str] = setting({}, factory=dict, check=_check_columns)
+    time_format: str = setting("")  # "": detected per file
+
+
+@dataclass(frozen=True)
+class ImportConfig:
+    """``[import]``."""
+
+    csv: CsvImportConfig = setting({}, factory=CsvImportConfig)
+
+
+@dataclass(frozen=True)
+class AsterixConfig:
+    """``[asterix]``."""
+
+    editions: Mapping[str, str] = setting({}, factory=dict, check=_check_editions)
 
 
 @dataclass(frozen=True)
@@ -35,56 +91,47 @@ class ImportOptions:
     asterix_editions: Mapping[int, str] = field(default_factory=dict)
 
 
-def parse_import_options(raw: Mapping[str, Any]) -> ImportOptions:
-    """``ImportOptions`` from a whole parsed TOML mapping (module docstring)."""
-    csv_raw = dict(raw.get("import", {}).get("csv", {}) or {})
-    unknown = set(csv_raw) - {"columns", "time_format"}
-    if unknown:
-        raise ConfigError(f"[import.csv]: unknown keys {sorted(unknown)} (columns, time_format)")
-    columns = csv_raw.get("columns", {}) or {}
-    if not isinstance(columns, Mapping):
-        raise ConfigError("[import.csv] columns must be a table: header cell = field")
-    for cell, target in columns.items():
-        if not isinstance(target, str) or canonical_field(target) is None:
-            names = ", ".join(sorted(set(COLUMN_NAMES) - {"sog_mps"}))
-            raise ConfigError(
-                f"[import.csv] columns: {cell!r} = {target!r} is not a field (one of: {names})"
-            )
-    fmt = csv_raw.get("time_format")
-    if fmt is not None and not isinstance(fmt, str):
-        raise ConfigError("[import.csv] time_format must be a strftime format string")
+def parse_import_section(doc: Document, core: Any = None) -> ImportOptions | None:
+    """``[import]`` and ``[asterix]`` (defaults when absent); problems go to ``doc``."""
+    imp = doc.read(ImportConfig, SECTION)
+    ast = doc.read(AsterixConfig, "asterix")
+    if imp is None or ast is None:
+        return None
     return ImportOptions(
-        csv=CsvOptions(columns=dict(columns), time_format=fmt),
-        asterix_editions=parse_editions(raw.get("asterix", {}) or {}),
+        csv=CsvOptions(columns=dict(imp.csv.columns), time_format=imp.csv.time_format or None),
+        asterix_editions=_editions(ast.editions),
     )
 
 
-def parse_editions(section: Mapping[str, Any]) -> dict[int, str]:
-    """``[asterix] editions`` -> {category: edition}; validated against the editions the
-    decoder knows."""
-    from pipeline.decode.asterix_editions import known_editions
+@dataclass(frozen=True)
+class _Section:
+    name: str
+    sections: tuple[str, ...]
+    parse_config: Any
 
-    unknown = set(section) - {"editions"}
-    if unknown:
-        raise ConfigError(f"[asterix]: unknown keys {sorted(unknown)} (editions)")
-    out: dict[int, str] = {}
-    for cat, ed in (section.get("editions", {}) or {}).items():
-        try:
-            c = int(str(cat))
-        except ValueError:
-            raise ConfigError(f"[asterix] editions: {cat!r} is not a category number") from None
-        known = known_editions(c)
-        if str(ed) not in known:
-            raise ConfigError(
-                f"[asterix] editions: CAT{c:03d} edition {ed!r} is not one we decode "
-                f"(known: {', '.join(known) or 'none'})"
-            )
-        out[c] = str(ed)
+
+IMPORT_SECTION = _Section(SECTION, (SECTION, "asterix"), parse_import_section)
+"""Read at load like a family's sections (:data:`pipeline.families.SECTIONS`)."""
+
+
+def parse_import_options(raw: Mapping[str, Any]) -> ImportOptions:
+    """``ImportOptions`` from a parsed TOML mapping holding only these sections (tests,
+    tools); :class:`~pipeline.config.ConfigError` listing every problem."""
+    doc = Document(raw, "(in memory)")
+    out = parse_import_section(doc)
+    doc.finish()
+    assert out is not None
     return out
 
 
+def parse_editions(section: Mapping[str, Any]) -> dict[int, str]:
+    """``[asterix]`` alone -> {category: edition} (validated)."""
+    return dict(parse_import_options({"asterix": dict(section)}).asterix_editions)
+
+
 def import_options(cfg: Config | None) -> ImportOptions:
-    """The options of a loaded config (defaults without one)."""
-    if cfg is None:
-        return ImportOptions()
-    return parse_import_options(cfg.sections)
+    """The options of a loaded config (defaults without one, or when it was loaded
+    without the import section)."""
+    families = getattr(cfg, "families", {}) or {}
+    opts = families.get(SECTION)
+    return opts if isinstance(opts, ImportOptions) else ImportOptions()

@@ -18,17 +18,10 @@ from pipeline.config import ConfigError
 from pipeline.families import config_from_mapping
 from pipeline.frames import enu_to_geodetic, geodetic_to_enu
 from pipeline.gaps.config import gaps_config
-from pipeline.gaps.forecast import (
-    OUTSIDE_ZONES,
-    build_geometry,
-    detect_gaps,
-    forecast_gaps,
-    hpd_region,
-    lead_in,
-    mark_lost,
-    observations,
-    plan_forecasts,
-)
+from pipeline.gaps.forecast import OUTSIDE_ZONES, forecast_gaps
+from pipeline.gaps.geometry import build_geometry
+from pipeline.gaps.messages import detect_gaps, lead_in, mark_lost, observations, plan_forecasts
+from pipeline.gaps.propagate import hpd_region
 from pipeline.units import NS
 from tests.conftest import real_data_dir
 

@@ -126,8 +126,24 @@ def test_config_overrides_place_other_columns(tmp_path):
 def test_config_override_to_an_unknown_field_is_a_config_error():
     with pytest.raises(ConfigError, match="'Zeit' = 'when' is not a field"):
         parse_import_options({"import": {"csv": {"columns": {"Zeit": "when"}}}})
-    with pytest.raises(ConfigError, match="unknown keys"):
+    with pytest.raises(ConfigError, match="colums"):
         parse_import_options({"import": {"csv": {"colums": {}}}})
+
+
+def test_the_sections_load_with_the_config_file(tmp_path):
+    from pipeline.convert.config import import_options
+    from pipeline.families import load_config
+    from pipeline.resources import resource_path
+
+    text = (resource_path("config") / "surveil.toml").read_text()
+    path = tmp_path / "c.toml"
+    path.write_text(text + '\n[import.csv]\ncolumns = { "Zeit" = "time" }\n'
+                    '[asterix]\neditions = { "010" = "0.24" }\n')  # fmt: skip
+    opts = import_options(load_config(path))
+    assert opts.csv.columns == {"Zeit": "time"} and opts.asterix_editions == {10: "0.24"}
+    path.write_text(text + '\n[asterix]\neditions = { "010" = "9.9" }\n')
+    with pytest.raises(ConfigError, match="not one we decode"):
+        load_config(path)
 
 
 def test_known_dialects_keep_their_names_and_ignore_is_honoured(tmp_path):

@@ -16,7 +16,7 @@ from pipeline.config import Config
 from pipeline.decode.ais import decode_ais_sentences
 from pipeline.frames import geodetic_to_enu
 from pipeline.gaps.config import gaps_config
-from pipeline.gaps.forecast import build_geometry
+from pipeline.gaps.geometry import build_geometry
 from pipeline.simulate.gaps import (
     FIRST_SILENCE_S,
     SILENCE_DURATION_S,
