@@ -111,15 +111,16 @@ def payloads(variant: str, cols: dict) -> tuple[np.ndarray, np.ndarray, bytes]:
         import pyarrow as pa
 
         from pipeline.io.mcap_write import json_payloads as _json_payloads
+        from pipeline.messages import RADAR_REPORT, message_layout
 
+        layout = message_layout(RADAR_REPORT)
         df = pl.DataFrame(
             {k: list(v) if k in ("site_id", "status") else v for k, v in cols.items()}
         )
-        arr = _json_payloads(df, list(cols)).to_arrow().cast(pa.large_binary())
+        arr = _json_payloads(df, layout.names).to_arrow().cast(pa.large_binary())
         offsets = np.frombuffer(arr.buffers()[1], np.int64)[arr.offset : arr.offset + len(arr) + 1]
         data = np.frombuffer(arr.buffers()[2], np.uint8)[offsets[0] : offsets[-1]]
-        schema = (REPO / "schemas" / "radar_track_report.schema.json").read_bytes()
-        return data, offsets - offsets[0], schema
+        return data, offsets - offsets[0], layout.data
     from pipeline.decode import radar_binary as rb
 
     str_cols = {k: (list(v) if k in ("site_id", "status") else v) for k, v in cols.items()}

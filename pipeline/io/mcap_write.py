@@ -7,7 +7,6 @@ The scenario writers (``pipeline.simulate``) and the legacy converters
 
 from __future__ import annotations
 
-import json
 import os
 import tempfile
 from datetime import UTC, datetime
@@ -16,17 +15,11 @@ from pathlib import Path
 import polars as pl
 from mcap.writer import CompressionType, Writer
 
-from pipeline.resources import resource_path
 from pipeline.units import NS
 
 MCAP_PROFILE = ""
 MCAP_LIBRARY = "surveil-pipeline/mcap_write"
 """Fixed header strings (the mcap default embeds the library version)."""
-
-def schema_bytes(file_name: str) -> tuple[bytes, list[str]]:
-    data = (resource_path("schemas") / file_name).read_bytes()
-    return data, list(json.loads(data)["properties"])
-
 
 def json_payloads(df: pl.DataFrame, fields: list[str]) -> pl.Series:
     """Compact JSON object per row with exactly ``fields``, as bytes."""
