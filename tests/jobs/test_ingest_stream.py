@@ -23,10 +23,11 @@ from mcap_fixtures import (
     write_mcap,
 )
 
-from jobs.ingest import IngestUnit, ingest_file, run_ingest
+from jobs.ingest import run_ingest
 from pipeline.config import ValidationConfig
 from pipeline.decode import registry
 from pipeline.decode.registry import FileDecoder
+from pipeline.ingest import IngestUnit, ingest_file
 from pipeline.io.mcap_read import read_mcap_batches
 from pipeline.warehouse.delta import read_table, table_exists, table_path
 
@@ -241,12 +242,12 @@ def test_windowed_unit_outside_the_file_reads_only_its_summary(tmp_path, cfg):
 
 
 def test_failed_staged_commit_is_reported_and_ledger_not_written(tmp_path, cfg, monkeypatch):
-    import jobs.ingest as job
+    import pipeline.ingest.commit as commit
 
     def boom(*a, **k):
         raise RuntimeError("disk full")
 
-    monkeypatch.setattr(job, "commit_staged", boom)
+    monkeypatch.setattr(commit, "commit_staged", boom)
     p = write_mcap(tmp_path / "x.mcap", radar_messages(5))
     s = ingest([p], cfg, tmp_path / "wh")
     assert s.exit_code == 1 and "disk full" in s.failed[0][1]
