@@ -50,6 +50,7 @@ from __future__ import annotations
 
 from collections import Counter
 from collections.abc import Sequence
+from concurrent.futures import Executor
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -64,7 +65,7 @@ from pipeline.decode.json_bulk import decode_json_batches
 from pipeline.decode.radar import RADAR as RADAR_KIND
 from pipeline.decode.truth import TRUTH as TRUTH_KIND
 from pipeline.io.mcap_read import ChannelBatch
-from pipeline.tables import conform, empty
+from pipeline.tables import ConstantStrings, conform, empty
 
 RAW_TABLES = (
     "radar_tracks", "ais_reports", "ais_static", "truth", "rejects",
@@ -182,10 +183,16 @@ class FileDecoder:
     ``JSON_MAX_CHUNKS`` chunks: memory does not grow with the file), and per AIS topic at
     most a few trailing fragments of a multi-part message that continues in the next
     chunk. ``not_stored`` counts valid AIS messages of types we do not keep.
+
+    ``parse_pool``, ``strings``: what the bulk JSON decoding reuses across groups and
+    files (the ingest context's parser threads and provenance columns; ``None``: made
+    per group).
     """
 
     source_file: str
     validation: ValidationConfig
+    parse_pool: Executor | None = None
+    strings: ConstantStrings | None = None
     parts: dict[str, list[pa.Table]] = field(default_factory=dict)
     not_stored: Counter = field(default_factory=Counter)
     _unknown: dict[int, _UnknownChannel] = field(default_factory=dict)
@@ -244,7 +251,12 @@ class FileDecoder:
             kind = decoder_kind(b.message_encoding, b.schema_encoding, b.schema_name)
             kinds[b.channel_id] = RADAR_KIND if kind == "radar" else TRUTH_KIND
         tables = decode_json_batches(
-            batches, kinds, source_file=self.source_file, validation=self.validation
+            batches,
+            kinds,
+            source_file=self.source_file,
+            validation=self.validation,
+            parse_pool=self.parse_pool,
+            strings=self.strings,
         )
         for name, table in tables.items():
             self._add(name, table)

@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import hashlib
 from collections import Counter
-from concurrent.futures import Future
+from concurrent.futures import Future, wait
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -36,10 +36,10 @@ import pyarrow.compute as pc
 
 from pipeline.config import ValidationConfig
 from pipeline.decode.registry import RAW_TABLES, FileDecoder, make_rejects
+from pipeline.ingest.context import IngestContext
 from pipeline.io.mcap_index import mcap_index_rows
 from pipeline.io.mcap_read import ReadStatus, read_mcap_batches
 from pipeline.tables import conform, empty, spec
-from pipeline.threads import HASHER_NICE, helper_pool
 from pipeline.warehouse.ledger import file_fingerprint, lookup
 from pipeline.warehouse.staged import StagedFile, TableStager
 
@@ -89,12 +89,12 @@ class FileManifest:
     chunks_decompressed: int = 0
 
 
-def ingest_file(unit: IngestUnit) -> FileManifest:
-    """Decode one file and stage its rows (runs in a worker; commits nothing)."""
+def ingest_file(unit: IngestUnit, ctx: IngestContext) -> FileManifest:
+    """Decode one file and stage its rows (runs in a worker; commits nothing). ``ctx``:
+    the worker process's context (entered), whose buffers and threads it uses."""
     path = Path(unit.path)
     size = path.stat().st_size
     sha: str | Future[str] = ""
-    hasher = None
     if not unit.windowed:  # a windowed run never uses the hash: do not read the whole file
         prior = None if unit.force else lookup(unit.warehouse, unit.path)
         if (
@@ -106,21 +106,25 @@ def ingest_file(unit: IngestUnit) -> FileManifest:
             if sha == prior["sha256"]:
                 return FileManifest(unit.path, size, sha, skipped=True)
         else:  # hash while decoding (hashlib releases the GIL)
-            hasher = helper_pool(1, "sha256", HASHER_NICE)
-            sha = hasher.submit(lambda: file_fingerprint(path)[1])
+            sha = ctx.hasher.submit(lambda: file_fingerprint(path)[1])  # type: ignore[union-attr]
     try:
-        return _decode_and_stage(unit, path, size, sha)
+        return _decode_and_stage(unit, ctx, path, size, sha)
     finally:
-        if hasher is not None:
-            hasher.shutdown(wait=True)
+        if isinstance(sha, Future) and not sha.cancel():
+            wait([sha])  # the file is not read any more once the unit returns
 
 
 def _decode_and_stage(
-    unit: IngestUnit, path: Path, size: int, sha: str | Future[str]
+    unit: IngestUnit, ctx: IngestContext, path: Path, size: int, sha: str | Future[str]
 ) -> FileManifest:
     lo, hi = _read_window(unit)
-    scan = read_mcap_batches(path, start_ns=lo, end_ns=hi)
-    decoder = FileDecoder(source_file=unit.path, validation=unit.validation)
+    scan = read_mcap_batches(path, start_ns=lo, end_ns=hi, buffers=ctx.chunk_buffers)
+    decoder = FileDecoder(
+        source_file=unit.path,
+        validation=unit.validation,
+        parse_pool=ctx.parse_pool,
+        strings=ctx.strings,
+    )
     stager = TableStager(_stage_folder(unit))
     reasons: Counter = Counter()
 

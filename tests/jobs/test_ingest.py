@@ -326,6 +326,7 @@ def test_helper_threads_yield_the_cores_to_the_fetch_thread(tmp_path, cfg, monke
     src = write_mcap(tmp_path / "a.mcap", radar_messages(50))
     assert ingest([src], cfg, tmp_path / "wh").exit_code == 0
     assert seen == {"writer": min(19, base + WRITER_NICE), "hasher": min(19, base + HASHER_NICE)}
-    parser = json_columns._pool().submit(_niceness).result()
+    with json_columns.parser_pool() as pool:
+        parser = pool.submit(_niceness).result()
     assert parser == min(19, base + SECOND_PARSER_NICE)
     assert _niceness() == base
