@@ -57,13 +57,14 @@ import polars as pl
 from mcap.writer import CompressionType, Writer
 
 from pipeline.io.mcap_write import MCAP_LIBRARY, MCAP_PROFILE
-from pipeline.resources import resource_path
+from pipeline.messages import message_layout
 from pipeline.units import NS
 
 DAY_NS = 86_400 * NS
 SYNTHETIC_STEP_NS = 1_000_000
 NAV_TOPIC, AIS_TOPIC, CSV_TOPIC = "/nav/nmea", "/ais/nmea", "/ais/csv"
 AIS_SCHEMA_NAME = "surveil.AisReport"
+AIS_REPORT_SCHEMA = "ais_report.schema.json"  # the row's fields, in order (pipeline.messages)
 _SAMPLE = 65_536
 PCAP_MAGICS = (b"\xa1\xb2\xc3\xd4", b"\xd4\xc3\xb2\xa1", b"\xa1\xb2\x3c\x4d",
                b"\x4d\x3c\xb2\xa1", b"\x0a\x0d\x0d\x0a")  # fmt: skip
@@ -433,10 +434,7 @@ def read_ais_csv(path: Path) -> tuple[pl.DataFrame, str, str]:
 
 
 def _schema_fields() -> list[str]:
-    import json
-
-    doc = json.loads((resource_path("schemas") / "ais_report.schema.json").read_text())
-    return list(doc["properties"])
+    return message_layout(AIS_REPORT_SCHEMA).names
 
 
 def wrap_ais_csv(path: Path, out_dir: Path) -> ImportedFile:
@@ -461,7 +459,7 @@ def wrap_ais_csv(path: Path, out_dir: Path) -> ImportedFile:
         "log_time_source": source,
     }
     out = output_path(path, out_dir)
-    schema = (resource_path("schemas") / "ais_report.schema.json").read_bytes()
+    schema = message_layout(AIS_REPORT_SCHEMA).data
     _write_mcap(
         out,
         [(CSV_TOPIC, "json", AIS_SCHEMA_NAME, schema, meta)],
