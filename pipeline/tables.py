@@ -149,7 +149,6 @@ def _repeated(value: str, n: int) -> pa.Array:
     return pa.Array.from_buffers(pa.string(), n, buffers, null_count=0)
 
 
-
 def shape(name: str, data: pa.Table | pl.DataFrame) -> pa.Table:
     """Cast ``data`` to table ``name``'s schema: select and order columns, add ``date``.
     Missing nullable columns are filled with nulls; a missing non-nullable column
@@ -214,3 +213,71 @@ def column_comment(field: pa.Field) -> str:
     unit = column_unit(field.name)
     doc = column_doc(field)
     return f"[{unit}] {doc}" if unit else doc
+
+
+# -- valid ranges of raw rows (tables.toml [valid]) --------------------------------------
+
+
+@dataclass(frozen=True)
+class Validity:
+    """``ranges``: column name or unit suffix (``_ns``) -> closed ``(lo, hi)``;
+    ``string_max_bytes``: longest string kept, except in ``long_strings``."""
+
+    ranges: dict[str, tuple[float, float]]
+    string_max_bytes: int
+    long_strings: frozenset[str]
+
+    def range_of(self, column: str) -> tuple[float, float] | None:
+        if column in self.ranges:
+            return self.ranges[column]
+        suffix = "_" + column.rsplit("_", 1)[-1] if "_" in column else None
+        return self.ranges.get(suffix) if suffix else None
+
+
+@cache
+def validity() -> Validity:
+    v = tomllib.loads((resource_path("schemas") / "tables.toml").read_text()).get("valid", {})
+    return Validity(
+        ranges={k: (lo, hi) for k, (lo, hi) in v.get("ranges", {}).items()},
+        string_max_bytes=int(v.get("string_max_bytes", 4096)),
+        long_strings=frozenset(v.get("long_strings", ())),
+    )
+
+
+def invalid_rows(name: str, table: pa.Table) -> tuple[np.ndarray, list[str]] | None:
+    """Rows of ``table`` (a raw table) that break ``tables.toml [valid]``: ``None`` when
+    every row is valid, else ``(row indices, reason per row)`` naming the first column
+    broken. Vectorised per column; Python only for the reasons of the bad rows."""
+    v = validity()
+    why: dict[int, str] = {}
+    for f in table.schema:
+        col = table[f.name]
+        if pa.types.is_string(f.type) or pa.types.is_large_string(f.type):
+            if f.name in v.long_strings:
+                continue
+            too_long = pc.fill_null(pc.greater(pc.binary_length(col), v.string_max_bytes), False)
+            if not pc.any(too_long).as_py():
+                continue
+            bad = np.flatnonzero(too_long.to_numpy(zero_copy_only=False))
+            lengths = pc.binary_length(col).to_numpy(zero_copy_only=False)
+            for i in bad.tolist():
+                why.setdefault(i, f"{f.name} is {int(lengths[i])} bytes long "
+                                  f"(at most {v.string_max_bytes})")  # fmt: skip
+            continue
+        rng = v.range_of(f.name)
+        if rng is None or not (pa.types.is_integer(f.type) or pa.types.is_floating(f.type)):
+            continue
+        lo, hi = rng
+        lo_s = pa.scalar(lo, f.type) if pa.types.is_floating(f.type) else pa.scalar(int(lo))
+        hi_s = pa.scalar(hi, f.type) if pa.types.is_floating(f.type) else pa.scalar(int(hi))
+        out = pc.fill_null(pc.or_(pc.less(col, lo_s), pc.greater(col, hi_s)), False)
+        if not pc.any(out).as_py():
+            continue
+        bad = np.flatnonzero(out.to_numpy(zero_copy_only=False))
+        values = col.take(pa.array(bad)).to_pylist()
+        for i, val in zip(bad.tolist(), values, strict=True):
+            why.setdefault(i, f"{f.name} = {val!r} outside [{lo!r}, {hi!r}]")
+    if not why:
+        return None
+    idx = np.array(sorted(why), dtype=np.int64)
+    return idx, [why[i] for i in idx.tolist()]

@@ -178,7 +178,7 @@ def _json_problem(payload: bytes) -> str | None:
     """Why one payload is not a LocationFix JSON object, else ``None``."""
     try:
         obj = json.loads(payload)
-    except (ValueError, UnicodeDecodeError) as exc:
+    except (ValueError, UnicodeDecodeError, RecursionError) as exc:
         return f"invalid JSON: {exc}"
     if not isinstance(obj, dict):
         return f"JSON {type(obj).__name__} where a LocationFix object was expected"

@@ -243,7 +243,7 @@ def _classify(payload: bytes) -> tuple[str, str] | None:
         return "undecodable", "empty payload"
     try:
         obj = json.loads(payload)
-    except (ValueError, UnicodeDecodeError) as exc:
+    except (ValueError, UnicodeDecodeError, RecursionError) as exc:
         return "undecodable", f"invalid JSON: {exc}"
     if not isinstance(obj, dict):
         return "undecodable", f"JSON {type(obj).__name__} where an object was expected"

@@ -45,7 +45,18 @@ Any other channel is not decoded: it produces ONE rejects row per channel (reaso
 ``make_rejects`` builds rows of the ``rejects`` table for every decoder. Reason codes used
 at ingest: ``undecodable``, ``out_of_range``, ``bad_checksum``, ``truncated_multipart``,
 ``unsupported_type``, ``no_position``, ``unknown_schema``, ``not_mcap``, ``corrupt_chunk``,
-``truncated``.
+``truncated``, ``decode_error``, ``too_large``.
+
+**No message loses more than itself** (:class:`FileDecoder`): before decoding, a message
+whose log time does not fit int64 (MCAP's is uint64) or whose payload is longer than
+``MAX_MESSAGE_BYTES`` is a rejects row (``out_of_range`` / ``too_large``); any exception
+a decoder raises on a batch (``RecursionError`` from deep JSON, ``OverflowError``,
+``struct.error``, ...) makes the batch decode again message by message, and each message
+that still raises is a rejects row (``decode_error``: the exception, the channel's topic,
+the first ``REJECT_RAW_BYTES`` of the payload); a channel whose decoder cannot be built or
+finished loses that channel's pending messages only. Every decoded row of a raw table is
+checked against ``schemas/tables.toml [valid]`` (time and coordinate ranges, string
+lengths) before it is kept; a row that breaks it is an ``out_of_range`` rejects row.
 """
 
 from __future__ import annotations
@@ -67,7 +78,7 @@ from pipeline.decode.json_bulk import decode_json_batches
 from pipeline.decode.radar import RADAR as RADAR_KIND
 from pipeline.decode.truth import TRUTH as TRUTH_KIND
 from pipeline.io.mcap_read import ChannelBatch
-from pipeline.tables import ConstantStrings, conform, empty
+from pipeline.tables import ConstantStrings, conform, empty, invalid_rows
 
 RAW_TABLES = (
     "radar_tracks", "ais_reports", "ais_static", "truth", "rejects",
@@ -113,6 +124,8 @@ _KINDS[("json", "jsonschema", "surveil.GyroSignals")] = "gyro_signals"
 _KINDS[("json", "jsonschema", "surveil.OwnshipTruth")] = "ownship_truth"
 CHANNEL_DECODERS["import_reject"] = "pipeline.decode.import_reject:ImportRejectChannelDecoder"
 _KINDS[("json", "jsonschema", "surveil.ImportReject")] = "import_reject"
+MAX_MESSAGE_BYTES = 1 << 20  # a decoded message longer than this is a rejects row
+REJECT_RAW_BYTES = 1024  # payload bytes kept in a decode_error / too_large rejects row
 JSON_BATCH = 100_000  # JSON messages per bulk parse (~44 MB of radar payload)
 JSON_MAX_CHUNKS = 64  # chunks a pending JSON parse may hold (bounds memory: ~64 MiB)
 JSON_RAMP_STEPS = 3  # the first parses take 1/8, 1/4, 1/2 of these limits
@@ -219,8 +232,76 @@ class FileDecoder:
     _channels: dict[int, Any] = field(default_factory=dict)
 
     def _add(self, name: str, table: pa.Table) -> None:
-        if table.num_rows:
-            self.parts.setdefault(name, []).append(table)
+        if not table.num_rows:
+            return
+        if name != "rejects":
+            bad = invalid_rows(name, table)
+            if bad is not None:
+                idx, why = bad
+                keep = np.ones(table.num_rows, dtype=bool)
+                keep[idx] = False
+                take = pa.array(idx)
+                self._add("rejects", make_rejects(
+                    table["log_time_ns"].take(take).to_numpy(zero_copy_only=False),
+                    source_file=self.source_file,
+                    topic=table["topic"].take(take).to_pylist(),
+                    reason_code="out_of_range",
+                    reason=[f"{name}: {w}" for w in why],
+                ))  # fmt: skip
+                table = table.filter(pa.array(keep))
+                if not table.num_rows:
+                    return
+        self.parts.setdefault(name, []).append(table)
+
+    def _reject_messages(self, batch: ChannelBatch, code: str, reason: str) -> None:
+        """Every message of ``batch`` as a rejects row (payload kept up to a cap)."""
+        self._add("rejects", make_rejects(
+            batch.log_time_ns,
+            source_file=self.source_file,
+            topic=batch.topic,
+            reason_code=code,
+            reason=reason,
+            raw=[p[:REJECT_RAW_BYTES] for p in batch.payloads],
+        ))  # fmt: skip
+
+    def _screen(self, batch: ChannelBatch) -> ChannelBatch:
+        """``batch`` without the messages no decoder is given: log time beyond int64
+        (reads negative), payload over ``MAX_MESSAGE_BYTES`` (each a rejects row)."""
+        t_bad = batch.log_time_ns < 0
+        big = batch.payload_lengths() > MAX_MESSAGE_BYTES
+        if not (t_bad.any() or big.any()):
+            return batch
+        for mask, code, reason in (
+            (t_bad, "out_of_range", "MCAP log_time beyond 2^63-1 ns (year 2262)"),
+            (big & ~t_bad, "too_large", f"payload over {MAX_MESSAGE_BYTES} bytes"),
+        ):
+            if mask.any():
+                bad = batch.take(np.flatnonzero(mask))
+                self._add("rejects", make_rejects(
+                    np.zeros(len(bad), dtype=np.int64) if code == "out_of_range"
+                    else bad.log_time_ns,
+                    source_file=self.source_file, topic=batch.topic, reason_code=code,
+                    reason=reason, raw=[p[:REJECT_RAW_BYTES] for p in bad.payloads],
+                ))  # fmt: skip
+        return batch.take(np.flatnonzero(~(t_bad | big)))
+
+    def _isolated(self, batch: ChannelBatch, decode: Any) -> list[dict[str, pa.Table]]:
+        """``decode(batch)``; when it raises, ``decode`` of each message alone, and a
+        ``decode_error`` rejects row for each message that still raises."""
+        try:
+            return [decode(batch)]
+        except Exception as exc:  # any decoder failure: isolate the message(s) at fault
+            if len(batch) == 1:
+                self._reject_messages(batch, "decode_error", _why(exc))
+                return []
+        out = []
+        for i in range(len(batch)):
+            one = batch.take([i])
+            try:
+                out.append(decode(one))
+            except Exception as exc:  # this message alone fails: it is the bad one
+                self._reject_messages(one, "decode_error", _why(exc))
+        return out
 
     def feed(self, batch: ChannelBatch, chunks_left: int | None = None) -> None:
         """Take one batch. JSON channels are buffered per channel up to ``JSON_BATCH``
@@ -229,6 +310,10 @@ class FileDecoder:
         ``chunks_left``: chunks of the file still to come after this batch's, if known;
         the last parses then shrink (see below)."""
         kind = decoder_kind(batch.message_encoding, batch.schema_encoding, batch.schema_name)
+        if kind in ("radar", "truth") or kind in CHANNEL_DECODERS:
+            batch = self._screen(batch)
+            if not len(batch):
+                return
         if kind in ("radar", "truth"):
             self._json.append(batch)
             self._json_count += len(batch)
@@ -249,11 +334,17 @@ class FileDecoder:
         elif kind in CHANNEL_DECODERS:
             dec = self._channels.get(batch.channel_id)
             if dec is None:
-                dec = self._channels[batch.channel_id] = _open_channel_decoder(
-                    kind, batch, self.source_file, self.validation, self.asterix_editions
-                )
-            for name, table in dec.feed(batch).items():
-                self._add(name, table)
+                try:
+                    dec = _open_channel_decoder(
+                        kind, batch, self.source_file, self.validation, self.asterix_editions
+                    )
+                except Exception as exc:  # e.g. a schema that does not parse
+                    self._reject_messages(batch, "decode_error", "no decoder: " + _why(exc))
+                    return
+                self._channels[batch.channel_id] = dec
+            for tables in self._isolated(batch, dec.feed):
+                for name, table in tables.items():
+                    self._add(name, table)
         else:
             self._note_unknown(batch)
 
@@ -267,16 +358,26 @@ class FileDecoder:
         for b in batches:
             kind = decoder_kind(b.message_encoding, b.schema_encoding, b.schema_name)
             kinds[b.channel_id] = RADAR_KIND if kind == "radar" else TRUTH_KIND
-        tables = decode_json_batches(
-            batches,
-            kinds,
-            source_file=self.source_file,
-            validation=self.validation,
-            parse_pool=self.parse_pool,
-            strings=self.strings,
-        )
-        for name, table in tables.items():
-            self._add(name, table)
+
+        def decode(group: list[ChannelBatch]) -> dict[str, pa.Table]:
+            return decode_json_batches(
+                group,
+                kinds,
+                source_file=self.source_file,
+                validation=self.validation,
+                parse_pool=self.parse_pool,
+                strings=self.strings,
+            )
+
+        try:
+            results = [decode(batches)]
+        except Exception:  # one message at fault: find it batch by batch, then alone
+            results = []
+            for b in batches:
+                results += self._isolated(b, lambda one: decode([one]))
+        for tables in results:
+            for name, table in tables.items():
+                self._add(name, table)
 
     def _note_unknown(self, batch: ChannelBatch) -> None:
         u = self._unknown.get(batch.channel_id)
@@ -305,7 +406,14 @@ class FileDecoder:
         empty), conformed."""
         self._flush_json()
         for channel_id, dec in self._channels.items():
-            for name, table in dec.finish().items():
+            try:
+                finished = dec.finish()
+            except Exception as exc:  # what the decoder still held is lost, nothing more
+                finished = {"rejects": make_rejects(
+                    [0], source_file=self.source_file, topic=None, reason_code="decode_error",
+                    reason=f"channel {channel_id}: decoder failed at the end: {_why(exc)}",
+                )}  # fmt: skip
+            for name, table in finished.items():
                 self._add(name, table)
             counts = getattr(dec, "not_stored", {})
             self.not_stored.update(counts)
@@ -331,3 +439,9 @@ class FileDecoder:
             parts = self.parts.get(name, [])
             out[name] = conform(name, pa.concat_tables(parts)) if parts else empty(name)
         return out
+
+
+def _why(exc: BaseException) -> str:
+    """One line naming an exception (its message capped)."""
+    text = str(exc).splitlines()[0][:200] if str(exc) else ""
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__

@@ -18,6 +18,14 @@ import pyarrow as pa
 from pipeline.io.mcap_read import ChannelInfo, McapSummary, ReadStatus
 from pipeline.tables import conform, empty
 
+_I64_MAX = 2**63 - 1
+
+
+def _ns(t: int | None) -> int | None:
+    """A log time as the table keeps it: null when it does not fit int64 (MCAP log times
+    are uint64; a hostile or broken writer may put 2^64 - 1 in a summary)."""
+    return t if t is not None and t <= _I64_MAX else None
+
 
 def _channel_row(source_file: str, ch_id: int, info: ChannelInfo) -> dict:
     return {
@@ -48,12 +56,12 @@ def summary_rows(source_file: str, summary: McapSummary) -> list[dict]:
             {
                 **_channel_row(source_file, ch_id, info),
                 "message_count": None if st is None else st.channel_message_counts.get(ch_id, 0),
-                "start_time_ns": lo,
-                "end_time_ns": hi,
+                "start_time_ns": _ns(lo),
+                "end_time_ns": _ns(hi),
                 "chunk_count": n if any_index else None,
                 "file_message_count": None if st is None else st.message_count,
-                "file_start_time_ns": None if st is None else st.message_start_time,
-                "file_end_time_ns": None if st is None else st.message_end_time,
+                "file_start_time_ns": None if st is None else _ns(st.message_start_time),
+                "file_end_time_ns": None if st is None else _ns(st.message_end_time),
                 "file_chunk_count": len(summary.chunk_indexes),
                 "file_size_bytes": summary.size_bytes,
                 "source": "summary",
@@ -73,8 +81,8 @@ def scan_rows(
             {
                 **_channel_row(source_file, ch_id, info),
                 "message_count": status.channel_counts.get(ch_id, 0),
-                "start_time_ns": lo,
-                "end_time_ns": hi,
+                "start_time_ns": _ns(lo),
+                "end_time_ns": _ns(hi),
                 "chunk_count": None,
                 "file_message_count": status.messages_read,
                 "file_start_time_ns": status.start_time_ns,

@@ -188,6 +188,17 @@ class ChannelBatch:
             self.start, self.end = starts, starts + lengths
         return self.chunk, self.start, self.end
 
+    def take(self, idx: np.ndarray | list[int]) -> ChannelBatch:
+        """The messages ``idx`` of this batch (same channel; spans into the same chunk)."""
+        idx = np.asarray(idx, dtype=np.int64)
+        info = (self.channel_id, self.topic, self.message_encoding, self.schema_name,
+                self.schema_encoding, self.schema_data, self.log_time_ns[idx])  # fmt: skip
+        if self._payloads is not None and self.chunk is None:
+            return ChannelBatch(*info, [self._payloads[i] for i in idx.tolist()], self.metadata)
+        return ChannelBatch(
+            *info, None, self.metadata, chunk=self.chunk, start=self.start[idx], end=self.end[idx]
+        )
+
     def payload_lengths(self) -> np.ndarray:
         """Bytes per payload, int64."""
         if self.chunk is not None:
@@ -288,11 +299,14 @@ class ReadStatus:
         """Count a batch of ``times`` (int64 ns) read from ``channel_id``."""
         if not len(times):
             return
-        lo, hi = int(times.min()), int(times.max())
         self.messages_read += len(times)
+        self.channel_counts[channel_id] = self.channel_counts.get(channel_id, 0) + len(times)
+        times = times[times >= 0]  # a uint64 log time beyond int64 reads negative: no span
+        if not len(times):
+            return
+        lo, hi = int(times.min()), int(times.max())
         self.start_time_ns = lo if self.start_time_ns is None else min(self.start_time_ns, lo)
         self.end_time_ns = hi if self.end_time_ns is None else max(self.end_time_ns, hi)
-        self.channel_counts[channel_id] = self.channel_counts.get(channel_id, 0) + len(times)
         old = self.channel_spans.get(channel_id)
         self.channel_spans[channel_id] = (
             (lo, hi) if old is None else (min(old[0], lo), max(old[1], hi))
