@@ -8,8 +8,11 @@ Inputs: files are taken as given; directories are walked recursively and every f
 whose content is importable is taken (others are listed as skipped). Usage errors
 (exit 2): a path that does not exist, a directory with no importable file, an explicitly
 named file that is not importable, two inputs with the same file name (their outputs
-would collide). A file that fails while being wrapped (e.g. a damaged ASTERIX file) is
-listed as failed (exit 1); the others are still written.
+would collide). A file that fails while being wrapped is listed as failed (exit 1); the
+others are still written. A file written with some pieces rejected (a damaged stretch of
+an ASTERIX or pcap file skipped up to the next good block or packet, a sentence whose
+date cannot be represented: ``/import/rejects``, rejects rows at ingest) is ``partial``
+and also makes the exit code 1; the summary says how many pieces.
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ from jobs.common import UsageError
 from pipeline.config import Config
 from pipeline.convert.config import import_options
 from pipeline.convert.legacy import ImportedFile, detect_format, import_file, output_path
+from pipeline.convert.output import REJECTS_TOPIC
 from pipeline.units import describe_time, time_in_range
 
 
@@ -35,21 +39,34 @@ class ImportSummary:
     failed: list[tuple[str, str]] = field(default_factory=list)
 
     @property
+    def partial(self) -> list[ImportedFile]:
+        """Files written with some pieces rejected (``/import/rejects``)."""
+        return [f for f in self.imported if f.status == "partial"]
+
+    @property
     def exit_code(self) -> int:
-        return 1 if self.failed else 0
+        """0: every file wrapped whole; 1: a file failed or was partial (pieces rejected)."""
+        return 1 if self.failed or self.partial else 0
 
     def render(self) -> str:
+        rejected = sum(f.rejected for f in self.imported)
         lines = [
-            f"import: {len(self.imported)} files written to {self.out_dir}, "
+            f"import: {len(self.imported)} files written to {self.out_dir} "
+            f"({len(self.partial)} partial: {rejected} pieces rejected), "
             f"{len(self.skipped)} skipped (not importable), {len(self.failed)} failed"
         ]
         for f in self.imported:
             chans = ", ".join(
-                f"{t} {n} ({f.log_time_source.get(t, '?')})" for t, n in f.messages.items()
-            )
+                f"{t} {n} (rejected)" if t == REJECTS_TOPIC
+                else f"{t} {n} ({f.log_time_source.get(t, '?')})"
+                for t, n in f.messages.items()
+            )  # fmt: skip
+            not_messages = ", ".join(f"{n} {k} lines" for k, n in sorted(f.skipped.items()) if n)
             lines.append(
                 f"  {Path(f.source).name} [{f.format}] -> {Path(f.output).name}"
+                + (" PARTIAL" if f.status == "partial" else "")
                 + (f": {chans}" if chans else "")
+                + (f"; not messages: {not_messages}" if not_messages else "")
             )
         for path in self.skipped[:10]:
             lines.append(f"  skipped {path}")
@@ -120,9 +137,7 @@ def run_import(
         if output_path(f, out).resolve() == f:
             raise UsageError(f"output would overwrite the input: {f}")
         try:
-            summary.imported.append(
-                import_file(f, out, base_time_ns=base_time_ns, options=options)
-            )
+            summary.imported.append(import_file(f, out, base_time_ns=base_time_ns, options=options))
         except ValueError as exc:  # damaged or unrecognised content found while wrapping
             summary.failed.append((str(f), str(exc)))
     return summary

@@ -13,6 +13,7 @@ does, the ledger skip, the windows and the statuses: :mod:`pipeline.ingest`.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import os
 import shutil
 import time
@@ -24,6 +25,7 @@ from pipeline.convert.config import import_options
 from pipeline.executors import Executor, UnitResult, make_executor
 from pipeline.ingest import FileManifest, IngestContext, IngestSummary, commit_file, ingest_file
 from pipeline.ingest.plan import IngestUsageError, expand_paths, plan_units
+from pipeline.warehouse.ledger import same_content
 from pipeline.warehouse.views import rebuild_views_file
 
 __all__ = ["IngestSummary", "IngestUsageError", "expand_paths", "run_ingest"]
@@ -60,11 +62,12 @@ def run_ingest(
     if start_ns is not None:
         summary.window = (start_ns, end_ns)  # type: ignore[assignment]
     committed = False
+    seen: dict[str, str] = {}
     with IngestContext() as ctx:
         ctx.views.warm_up()  # the views file's DuckDB instance, built while files decode
         try:
             for res in ex.map_units(ingest_file, units, context=ctx.for_workers()):
-                committed |= _handle(warehouse, res, summary, start_ns, end_ns)
+                committed |= _handle(warehouse, res, summary, start_ns, end_ns, seen)
                 if on_result is not None:
                     on_result(res)
         finally:
@@ -87,14 +90,25 @@ def _executor(executor: Executor | str | None, cfg: Config, n_units: int) -> Exe
     return make_executor(kind, workers, threads)
 
 
+def _as_duplicate(m: FileManifest, twin: str) -> FileManifest:
+    """``m`` as a ``duplicate`` of ``twin``: no rows (its old rows, if any, are removed
+    by the commit), a ledger row that names the file holding the same content."""
+    return dataclasses.replace(
+        m, status="duplicate", error=f"same content (sha256) as {twin}", staged={},
+        rows=dict.fromkeys(m.rows, 0), rejects_by_reason={}, not_stored={},
+    )  # fmt: skip
+
+
 def _handle(
     warehouse: Path,
     res: UnitResult,
     summary: IngestSummary,
     start_ns: int | None,
     end_ns: int | None,
+    seen: dict[str, str],
 ) -> bool:
-    """Commit one finished unit; returns True when something was committed."""
+    """Commit one finished unit; returns True when something was committed. ``seen``:
+    SHA-256 -> path of the files this run ingested (a second copy is a duplicate)."""
     if not res.ok:
         summary.failed.append((res.unit.path, res.error or "unknown error"))
         return False
@@ -102,13 +116,20 @@ def _handle(
     if m.skipped:
         summary.add(m)
         return False
+    staged = m.staged
+    if start_ns is None and m.sha256 and m.status in ("ok", "partial"):
+        twin = seen.get(m.sha256) or same_content(warehouse, m.sha256, m.source_file)
+        if twin is not None and twin != m.source_file:  # ingested already, under its name
+            m = _as_duplicate(m, twin)
+        else:
+            seen[m.sha256] = m.source_file
     try:
         commit_file(warehouse, m, start_ns=start_ns, end_ns=end_ns)
     except Exception as exc:  # the file stays re-runnable: its ledger row was not written
         summary.failed.append((m.source_file, f"commit failed: {type(exc).__name__}: {exc}"))
         return True
     finally:
-        for sf in (sf for files in m.staged.values() for sf in files):
+        for sf in (sf for files in staged.values() for sf in files):
             with contextlib.suppress(OSError):
                 os.remove(sf.path)  # still there only when the commit did not take it
     summary.add(m)

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import pyarrow as pa
 import pyarrow.compute as pc
 
 from jobs.batch import BatchSummary, run_batch
@@ -47,7 +48,9 @@ def files_overlapping(warehouse: Path, start_ns: int, end_ns: int) -> list[str]:
     overlaps = pc.and_(
         pc.less(ledger["start_time_ns"], end_ns), pc.greater_equal(ledger["end_time_ns"], start_ns)
     )
-    mask = pc.and_(overlaps, pc.not_equal(ledger["status"], "quarantined"))
+    # quarantined: nothing readable; duplicate: its content is ingested under another name
+    ingested = pc.is_in(ledger["status"], value_set=pa.array(["ok", "partial"]))
+    mask = pc.and_(overlaps, ingested)
     return sorted(set(ledger.filter(mask)["source_file"].to_pylist()))
 
 

@@ -44,12 +44,16 @@ from datetime import UTC, date, datetime
 from pathlib import Path
 
 from pipeline.convert.asterix_framing import (
+    RESYNC_RECORDS,
+    Tail,
     blocks_fill,
     detect_framing,
     oradis_time,
     oradis_time_unit,
+    split_blocks_resync,
     walk,
     walk_hdlc,
+    walk_resync,
 )
 from pipeline.convert.output import Message, write_converted
 from pipeline.decode.asterix import (
@@ -72,6 +76,10 @@ PCAP_MAGICS = {
 }  # fmt: skip  # magic -> (byte order, ns per timestamp fraction unit)
 PCAPNG_SHB = b"\x0a\x0d\x0d\x0a"
 ETH_IPV4, ETH_IPV6, ETH_VLAN = 0x0800, 0x86DD, (0x8100, 0x88A8)
+TAIL_RAW_BYTES = 4096  # octets of a skipped stretch kept in its rejects row
+PCAP_MAX_RECORD = 262_144  # libpcap's largest snapshot length
+PCAP_RESYNC_WINDOW_S = 86_400  # a record after damage is within a day of the last good one
+CAPTURE_TOPIC = "/asterix/capture"  # topic named in the rejects rows of capture damage
 
 
 @dataclass(frozen=True)
@@ -90,6 +98,12 @@ class _Messages:
     topics: dict[str, dict[str, str]] = field(default_factory=dict)
     rows: list[Message] = field(default_factory=list)
     skipped: Counter = field(default_factory=Counter)
+
+    def reject_tail(self, topic: str, t: int, tail: Tail) -> None:
+        """A damaged stretch of the file: one rejects message (its first
+        ``TAIL_RAW_BYTES`` octets; the reason gives its offset and length)."""
+        self.rows.append(Message(topic, t, tail.data[:TAIL_RAW_BYTES],
+                                 ("undecodable", tail.reason)))  # fmt: skip
 
     def add(
         self, topic: str, meta: dict[str, str], t: int, payload: bytes,
@@ -249,13 +263,16 @@ def _from_raw(data: bytes, day: date, path: Path) -> _Messages:
     _need_decoder(path, "raw")
     meta = {"log_time_source": "asterix_time_of_day", "log_date": day.isoformat()}
     msgs = _Messages()
-    blocks, rest = split_blocks(data)
+    blocks, tails = split_blocks_resync(data)
     clock = _DayClock(day)
+    pending = sorted(tails, key=lambda t: t.offset, reverse=True)
     # per block: the time of day comes from the decoded records of each block
-    for block in blocks:
+    for offset, block in blocks:
+        while pending and pending[-1].offset < offset:  # damage before this block
+            msgs.reject_tail(RAW_TOPIC, clock.t, pending.pop())
         msgs.add(RAW_TOPIC, meta, clock.at(block_time_of_day(block)), block)
-    if rest:
-        msgs.add(RAW_TOPIC, meta, clock.t, rest)
+    for tail in reversed(pending):
+        msgs.reject_tail(RAW_TOPIC, clock.t, tail)
     return msgs
 
 
@@ -269,8 +286,7 @@ def _from_framed(data: bytes, framing: str, day: date, path: Path) -> _Messages:
         _need_decoder(path, "HDLC-framed")
         records, tails = walk_hdlc(data)
     else:
-        records, tail = walk(data, framing)
-        tails = [tail] if tail is not None else []
+        records, tails = walk_resync(data, framing)
     meta = {"log_date": day.isoformat()}
     tods: list[float | None] = [r.tod_s for r in records]
     abs_ns: list[int | None] = [None] * len(records)
@@ -298,7 +314,7 @@ def _from_framed(data: bytes, framing: str, day: date, path: Path) -> _Messages:
         t = t_abs if t_abs is not None else clock.at(tod)
         msgs.add(topic, meta, t, r.content)
     for tail in tails:
-        msgs.add(topic, meta, clock.t, tail.data, ("undecodable", tail.reason))
+        msgs.reject_tail(topic, clock.t, tail)
     return msgs
 
 
@@ -317,13 +333,18 @@ def _content_tod(content: bytes) -> float | None:
 
 def _from_capture(data: bytes, path: Path) -> _Messages:
     msgs = _Messages()
+    tails: list[Tail] = []
     packets = (
-        _pcapng_packets(data, msgs.skipped)
+        _pcapng_packets(data, msgs.skipped, tails)
         if data[:4] == PCAPNG_SHB
-        else (_pcap_packets(data, msgs.skipped))
+        else (_pcap_packets(data, msgs.skipped, tails))
     )
     # per packet: each frame has its own link/IP/UDP headers to strip
+    last_t = 0
     for pkt in packets:
+        while tails:  # damage found before this packet: rejected at the last good time
+            msgs.reject_tail(CAPTURE_TOPIC, last_t or pkt.time_ns, tails.pop(0))
+        last_t = pkt.time_ns
         udp = _udp_payload(pkt, msgs.skipped)
         if udp is None:
             continue
@@ -335,6 +356,8 @@ def _from_capture(data: bytes, path: Path) -> _Messages:
         }  # fmt: skip
         for content in _oradis_unwrapped(payload):
             msgs.add(topic, meta, pkt.time_ns, content)
+    for tail in tails:
+        msgs.reject_tail(CAPTURE_TOPIC, last_t, tail)
     return msgs
 
 
@@ -348,40 +371,91 @@ def _oradis_unwrapped(payload: bytes) -> list[bytes]:
     return [r.content for r in records] if records and tail is None else [payload]
 
 
-def _pcap_packets(data: bytes, skipped: Counter) -> Iterator[Packet]:
-    """Frames of a libpcap file (stops at a record cut off by the end of the file)."""
+def _pcap_packets(data: bytes, skipped: Counter, tails: list[Tail]) -> Iterator[Packet]:
+    """Frames of a libpcap file. A record header that is not plausible (length beyond the
+    snapshot length, fraction beyond a second, record past the end of the file) is
+    damage: the walk resumes at the next offset where :data:`RESYNC_RECORDS` record
+    headers in a row are plausible (or the records reach the end of the file exactly),
+    and the octets skipped are a :class:`Tail` in ``tails``."""
     order, frac_ns = PCAP_MAGICS[data[:4]]
     if len(data) < 24:
         skipped["truncated_header"] += 1
+        tails.append(Tail(0, data, f"pcap: {len(data)} octets, shorter than its header"))
         return
-    (link_type,) = struct.unpack_from(order + "I", data, 20)
+    (snaplen, link_type) = struct.unpack_from(order + "II", data, 16)
+    limit = min(snaplen, PCAP_MAX_RECORD) if snaplen else PCAP_MAX_RECORD
+    frac_max = NS // frac_ns
     rec = struct.Struct(order + "IIII")
+    n = len(data)
+
+    last_sec: list[int] = []  # seconds of the last good record (none yet: any)
+
+    def record_at(q: int) -> int:  # end of a plausible record at q, else 0
+        if q + 16 > n:
+            return 0
+        sec, frac, incl, orig = rec.unpack_from(data, q)
+        if frac >= frac_max or incl > limit or incl > orig or q + 16 + incl > n:
+            return 0
+        if last_sec and abs(sec - last_sec[0]) > PCAP_RESYNC_WINDOW_S:
+            return 0  # a misaligned header reads some other field as its time
+        return q + 16 + incl
+
+    def chain(q: int) -> bool:
+        for _ in range(RESYNC_RECORDS):
+            if q == n:
+                return True
+            q = record_at(q)
+            if not q:
+                return False
+        return True
+
     pos = 24
-    while pos + 16 <= len(data):
-        sec, frac, incl, _orig = rec.unpack_from(data, pos)
-        pos += 16
-        if pos + incl > len(data):
-            skipped["truncated_record"] += 1
-            return
-        yield Packet(sec * NS + frac * frac_ns, link_type & 0x0FFFFFFF, data[pos : pos + incl])
-        pos += incl
-    if pos != len(data):
-        skipped["truncated_record"] += 1
+    while pos < n:
+        end = record_at(pos)
+        if end:
+            sec, frac, _incl, _orig = rec.unpack_from(data, pos)
+            last_sec[:] = [sec]
+            yield Packet(sec * NS + frac * frac_ns, link_type & 0x0FFFFFFF, data[pos + 16 : end])
+            pos = end
+            continue
+        skipped["damaged_record"] += 1
+        nxt = next((q for q in range(pos + 1, n) if chain(q)), n)
+        where = f"resumed at octet {nxt}" if nxt < n else "to the end of the file (cut off?)"
+        tails.append(Tail(pos, data[pos:nxt], f"pcap: record header at octet {pos} is not "
+                          f"plausible; {nxt - pos} octets skipped, {where}"))  # fmt: skip
+        pos = nxt
 
 
-def _pcapng_packets(data: bytes, skipped: Counter) -> Iterator[Packet]:
-    """Frames of a pcapng file (EPB, SPB, obsolete PB); SHB/IDB set order and units."""
+def _pcapng_packets(data: bytes, skipped: Counter, tails: list[Tail]) -> Iterator[Packet]:
+    """Frames of a pcapng file (EPB, SPB, obsolete PB); SHB/IDB set order and units. A
+    block whose length does not check (the trailing copy of the length must match) is
+    damage: the walk resumes at the next block that checks, the octets skipped are a
+    :class:`Tail` in ``tails``."""
     order = "<"
     ifaces: list[tuple[int, tuple[int, int]]] = []  # (link type, if_tsresol (base, exp))
-    pos = 0
-    while pos + 12 <= len(data):
-        if data[pos : pos + 4] == PCAPNG_SHB:
+    pos, n = 0, len(data)
+
+    def block_ok(q: int) -> bool:
+        if q + 12 > n:
+            return False
+        blen = struct.unpack_from(order + "I", data, q + 4)[0]
+        if blen < 12 or blen % 4 or q + blen > n:
+            return False
+        return struct.unpack_from(order + "I", data, q + blen - 4)[0] == blen
+
+    while pos < n:
+        if data[pos : pos + 4] == PCAPNG_SHB and pos + 12 <= n:
             order = "<" if data[pos + 8 : pos + 12] == b"\x4d\x3c\x2b\x1a" else ">"
             ifaces = []
+        if not block_ok(pos):
+            skipped["damaged_block"] += 1
+            nxt = next((q for q in range(pos + 4, n, 4) if block_ok(q)), n)
+            where = f"resumed at octet {nxt}" if nxt < n else "to the end of the file"
+            tails.append(Tail(pos, data[pos:nxt], f"pcapng: block at octet {pos} does not "
+                              f"check; {nxt - pos} octets skipped, {where}"))  # fmt: skip
+            pos = nxt
+            continue
         btype, blen = struct.unpack_from(order + "II", data, pos)
-        if blen < 12 or blen % 4 or pos + blen > len(data):
-            skipped["truncated_block"] += 1
-            return
         body = data[pos + 8 : pos + blen - 4]
         if btype == 1 and len(body) >= 8:  # Interface Description Block
             link, _res, _snap = struct.unpack_from(order + "HHI", body, 0)

@@ -36,8 +36,13 @@ frame with a bad FCS is skipped, not the end of the file). Candidates are tried 
 IOSS-seq, HDLC, ORADIS, GPS; raw data blocks (no framing) are recognised by the caller.
 
 Walking (:func:`walk`): records in file order; a record that does not frame ends the walk
-and the rest of the file is returned as one damaged tail (the importer rejects it with the
-reason, it is not dropped). HDLC resynchronises at the next ``01 03`` whose frame checks.
+and the rest of the file is returned as one damaged tail. The importer walks with
+:func:`walk_resync` instead: after a record that does not frame it resynchronises at the
+next offset where :data:`RESYNC_RECORDS` records in a row frame (or the rest frames to
+the end of the file), and the octets skipped are one :class:`Tail` each (rejected with
+their offset, not dropped). Raw data blocks resynchronise the same way
+(:func:`split_blocks_resync`). HDLC resynchronises at the next ``01 03`` whose frame
+checks.
 
 ORADIS time: CroatiaControl's reader skips the 4 time octets and no public source states
 their unit, so it is calibrated per file (:func:`oradis_time_unit`): with the records' own
@@ -108,6 +113,73 @@ def blocks_fill(content: bytes) -> bool:
             return False
         pos += length
     return True
+
+
+RESYNC_RECORDS = 3
+"""Records (or raw data blocks) in a row that must frame at an offset for a walk to resume
+there after damage (fewer when the file ends first)."""
+
+
+def _block_at(data: bytes, pos: int, cats: frozenset[int] = ASTERIX_CATEGORIES) -> int:
+    """LEN of a plausible data block at ``pos`` (CAT in ``cats``, LEN >= 4, inside
+    ``data``), else 0."""
+    if len(data) - pos < 4 or data[pos] not in cats:
+        return 0
+    length = int.from_bytes(data[pos + 1 : pos + 3], "big")
+    return length if length >= 4 and pos + length <= len(data) else 0
+
+
+def _blocks_chain(data: bytes, pos: int, cats: frozenset[int], k: int = RESYNC_RECORDS) -> bool:
+    """``k`` plausible data blocks in a row from ``pos`` (or fewer reaching the end)."""
+    for _ in range(k):
+        if pos == len(data):
+            return True
+        n = _block_at(data, pos, cats)
+        if not n:
+            return False
+        pos += n
+    return True
+
+
+def _candidates(data: bytes, start: int, cats: frozenset[int]) -> Iterator[int]:
+    """Offsets from ``start`` on whose octet is in ``cats`` (numpy, not per octet)."""
+    import numpy as np
+
+    arr = np.frombuffer(data, dtype=np.uint8, offset=start)
+    table = np.zeros(256, dtype=bool)
+    table[list(cats)] = True
+    for i in np.flatnonzero(table[arr]).tolist():
+        yield start + i
+
+
+def split_blocks_resync(data: bytes) -> tuple[list[tuple[int, bytes]], list[Tail]]:
+    """Raw data blocks back to back: ``[(offset, block)]`` and the damaged stretches.
+    Where a block does not frame, the walk resumes at the next offset where
+    :data:`RESYNC_RECORDS` blocks frame in a row, of the categories met before the damage
+    (a misaligned octet often reads as some other known category); the octets in between
+    are a Tail."""
+    blocks: list[tuple[int, bytes]] = []
+    tails: list[Tail] = []
+    seen: set[int] = set()
+    pos, n = 0, len(data)
+    while pos < n:
+        length = _block_at(data, pos)
+        if length:
+            blocks.append((pos, data[pos : pos + length]))
+            seen.add(data[pos])
+            pos += length
+            continue
+        cats = frozenset(seen) or ASTERIX_CATEGORIES
+        nxt = next((q for q in _candidates(data, pos + 1, cats) if _blocks_chain(data, q, cats)), n)
+        cat = data[pos]
+        lv = int.from_bytes(data[pos + 1 : pos + 3], "big") if n - pos >= 3 else None
+        tails.append(Tail(pos, data[pos:nxt], f"raw: {nxt - pos} octets at octet {pos} do "
+                          f"not frame as data blocks (CAT {cat}, LEN {lv}); resumed at "
+                          f"octet {nxt}" if nxt < n else f"raw: {nxt - pos} octets at octet "
+                          f"{pos} to the end do not frame as data blocks (CAT {cat}, LEN "
+                          f"{lv})"))  # fmt: skip
+        pos = nxt
+    return blocks, tails
 
 
 # -- per-framing record readers: (record, next offset) or a reason ------------------------
@@ -252,6 +324,40 @@ def walk(data: bytes, framing: str) -> tuple[list[Record], Tail | None]:
     return out, None
 
 
+def walk_resync(data: bytes, framing: str) -> tuple[list[Record], list[Tail]]:
+    """Like :func:`walk`, but after a record that does not frame the walk resumes at the
+    next offset where :data:`RESYNC_RECORDS` records in a row frame (or the rest frames
+    to the end); each stretch skipped is a Tail with its offset and reason."""
+    if framing == "hdlc":
+        return walk_hdlc(data)
+    step, pos, out, tails = STEPS[framing], 0, [], []
+    n = len(data)
+
+    def chain(q: int) -> bool:
+        for _ in range(RESYNC_RECORDS):
+            if q == n:
+                return True
+            r = step(data, q)
+            if isinstance(r, str):
+                return False
+            q = r[1]
+        return True
+
+    while pos < n:
+        r = step(data, pos)
+        if not isinstance(r, str):
+            out.append(r[0])
+            pos = r[1]
+            continue
+        start = max(pos, GPS_HEADER) if framing == "gps" else pos
+        nxt = next((q for q in range(start + 1, n) if chain(q)), n)
+        where = f"resumed at octet {nxt}" if nxt < n else "to the end of the file"
+        tails.append(Tail(start, data[start:nxt], f"{framing} record at octet {start}: {r}; "
+                          f"{nxt - start} octets skipped, {where}"))  # fmt: skip
+        pos = nxt
+    return out, tails
+
+
 def walk_hdlc(data: bytes) -> tuple[list[Record], list[Tail]]:
     """HDLC frames; octets between frames that do not check are returned as tails."""
     records: list[Record] = []
@@ -289,9 +395,7 @@ ORADIS_UNITS: dict[str, tuple[float, bool]] = {  # name -> (seconds per count, t
 def oradis_time_unit(raw: list[int], record_tod: list[float | None]) -> str | None:
     """The unit of ORADIS header times (module docstring), ``None`` when none fits."""
     fits = {
-        name: all(
-            v * k < 86_400 if of_day else 631_152_000 <= v * k < 2**32 for v in raw
-        )
+        name: all(v * k < 86_400 if of_day else 631_152_000 <= v * k < 2**32 for v in raw)
         for name, (k, of_day) in ORADIS_UNITS.items()
     }
     pairs = [(v, t) for v, t in zip(raw, record_tod, strict=True) if t is not None]

@@ -61,7 +61,7 @@ import polars as pl
 from pipeline.convert.ais_csv import CsvOptions, looks_like_ais_csv, read_ais_csv
 from pipeline.convert.asterix_framing import ASTERIX_CATEGORIES, detect_framing
 from pipeline.convert.config import ImportOptions
-from pipeline.convert.output import Message, write_converted
+from pipeline.convert.output import REJECTS_TOPIC, Message, write_converted
 from pipeline.io.mcap_write import ChannelSpec
 from pipeline.resources import resource_path
 from pipeline.units import NS, TIME_MAX_NS, describe_time, time_in_range
@@ -98,6 +98,17 @@ class ImportedFile:
     messages: dict[str, int]
     log_time_source: dict[str, str]
     skipped: dict[str, int] = field(default_factory=dict)
+
+    @property
+    def rejected(self) -> int:
+        """Pieces of the input written to ``/import/rejects`` (damaged stretches, lines or
+        records whose time cannot be represented): rejects rows once ingested."""
+        return self.messages.get(REJECTS_TOPIC, 0)
+
+    @property
+    def status(self) -> str:
+        """``ok`` (everything wrapped) | ``partial`` (some pieces rejected)."""
+        return "partial" if self.rejected else "ok"
 
 
 # -- detection ---------------------------------------------------------------------------

@@ -17,6 +17,7 @@ class IngestSummary:
     files_partial: int = 0
     files_quarantined: int = 0
     files_skipped: int = 0
+    files_duplicate: int = 0
     messages_read: int = 0
     rows: dict[str, int] = field(default_factory=lambda: dict.fromkeys(RAW_TABLES, 0))
     rejects: dict[str, int] = field(default_factory=dict)
@@ -25,9 +26,15 @@ class IngestSummary:
     window: tuple[int, int] | None = None
 
     @property
+    def rejected(self) -> int:
+        """Rejects rows this run wrote (every one is data not used)."""
+        return sum(self.rejects.values())
+
+    @property
     def exit_code(self) -> int:
-        """0: all files ok or skipped; 1: some file partial/quarantined or a unit failed."""
-        bad = self.files_partial or self.files_quarantined or self.failed
+        """0: everything read was used (all files ok or skipped, no rejects row); 1: some
+        row was rejected, some file partial/quarantined, or a unit failed."""
+        bad = self.files_partial or self.files_quarantined or self.failed or self.rejected
         return 1 if bad else 0
 
     def add(self, m: FileManifest) -> None:
@@ -37,6 +44,7 @@ class IngestSummary:
         self.files_ok += m.status == "ok"
         self.files_partial += m.status == "partial"
         self.files_quarantined += m.status == "quarantined"
+        self.files_duplicate += m.status == "duplicate"
         self.messages_read += m.message_count
         for k, v in m.rows.items():
             self.rows[k] = self.rows.get(k, 0) + v
@@ -47,13 +55,17 @@ class IngestSummary:
         """One screen of text for the CLI."""
         lines = [
             f"ingest: {self.files_total} files: {self.files_ok} ok, {self.files_partial} "
-            f"partial, {self.files_quarantined} quarantined, {self.files_skipped} skipped "
+            f"partial, {self.files_quarantined} quarantined, {self.files_duplicate} duplicate "
+            f"(content ingested under another name), {self.files_skipped} skipped "
             f"(unchanged), {len(self.failed)} failed; {self.messages_read} messages read"
         ]
         if self.window:
             lines.append(f"window: [{self.window[0]}, {self.window[1]}) ns")
         lines.append("rows:    " + _fmt(self.rows))
-        lines.append("rejects: " + (_fmt(self.rejects) or "none"))
+        lines.append(
+            f"rejects: {self.rejected} rows ({_fmt(self.rejects)})" if self.rejected
+            else "rejects: none"
+        )  # fmt: skip
         if self.not_stored:
             lines.append("valid, not stored (by type): " + _fmt(self.not_stored))
         if self.rejects.get("decoder_missing"):

@@ -10,7 +10,7 @@ staged Parquet files, one per (table, date), as they come. Memory holds a few ch
 row groups, not the file. Meanwhile a thread computes the file's SHA-256 (whole-file runs
 only).
 
-Ledger: a file whose size and SHA-256 match its ledger row (status ok/partial) is skipped
+Ledger: a file whose size and SHA-256 match its ledger row (status ok/duplicate) is skipped
 (``FileManifest.skipped``), unless ``force``, or unless an optional decoder was missing
 when it was read (error "decoder not installed": it may be installed now); it is hashed
 first, before any decoding. Status: ``ok``; ``partial`` (chunks lost, file cut off,
@@ -44,7 +44,7 @@ from pipeline.ingest.context import IngestContext
 from pipeline.io.mcap_index import mcap_index_rows
 from pipeline.io.mcap_read import ReadStatus, read_mcap_batches
 from pipeline.tables import conform, empty, spec
-from pipeline.warehouse.ledger import file_fingerprint, lookup
+from pipeline.warehouse.ledger import SKIP_STATUSES, file_fingerprint, lookup
 from pipeline.warehouse.staged import StagedFile, TableStager
 
 WINDOW_READ_MARGIN_NS = 60 * 10**9
@@ -105,7 +105,7 @@ def ingest_file(unit: IngestUnit, ctx: IngestContext) -> FileManifest:
         prior = None if unit.force else lookup(unit.warehouse, unit.path)
         if (
             prior is not None
-            and prior["status"] in ("ok", "partial")
+            and prior["status"] in SKIP_STATUSES  # partial: read again, it may be whole now
             and prior["size_bytes"] == size
             and MISSING_DECODER not in (prior["error"] or "")  # a decoder may be there now
         ):

@@ -264,6 +264,7 @@ class ReadStatus:
     channel_counts: dict[int, int] = field(default_factory=dict)
     channel_spans: dict[int, tuple[int, int]] = field(default_factory=dict)
     finished: bool = False
+    parts: int = 1  # MCAP files found concatenated in this one (``cat a.mcap b.mcap``)
 
     @property
     def not_mcap(self) -> bool:
@@ -358,6 +359,7 @@ class McapBatches(Iterator[ChannelBatch]):
         self.status = ReadStatus(path=str(path))
         self.summary: McapSummary | None = None
         self._channels: dict[int, ChannelInfo] = {}
+        self._parts_done: dict[int, ChannelInfo] = {}  # channels of earlier parts
         self._schemas: dict[int, Schema] = {}
         self._lo = _T_MIN if start_ns is None else start_ns
         self._hi = _T_MAX if end_ns is None else end_ns
@@ -378,8 +380,10 @@ class McapBatches(Iterator[ChannelBatch]):
 
     @property
     def channels(self) -> dict[int, ChannelInfo]:
-        """Every channel met so far (summary and in-file records), by id."""
-        return dict(self._channels)
+        """Every channel met so far (summary and in-file records), by id (in a
+        concatenated file, part ``k``'s channel ``i`` is ``i + k << 16``)."""
+        base = self.status.parts - 1 << 16
+        return {**self._parts_done, **{base + k: v for k, v in self._channels.items()}}
 
     # -- top level ---------------------------------------------------------------------
 
@@ -579,6 +583,7 @@ class McapBatches(Iterator[ChannelBatch]):
     def _batch(self, ch_id: int, times: np.ndarray, **payloads: Any) -> ChannelBatch:
         """A batch of channel ``ch_id`` (payloads as spans or as a list), counted."""
         info = self._info(ch_id)
+        ch_id += self.status.parts - 1 << 16  # concatenated parts: ids of their own
         self.status.note(ch_id, times)
         return ChannelBatch(
             ch_id,
@@ -627,9 +632,29 @@ class McapBatches(Iterator[ChannelBatch]):
                 self._truncated(f, why, exc)
                 return
             if isinstance(record, Footer):
-                break
+                yield from self._emit_lists(pending)
+                if not self._next_part(f):
+                    break
+                reader = StreamReader(f, skip_magic=True, emit_chunks=True, record_size_limit=size)  # type: ignore[arg-type]
+                records = reader.records
+                continue
             yield from self._linear_record(f, record, pending)
         yield from self._emit_lists(pending)
+
+    def _next_part(self, f: _CountingFile) -> bool:
+        """At a footer: is another MCAP file appended (``cat a.mcap b.mcap``: this part's
+        closing magic, then the next part's opening magic)? Then move to its first record
+        and keep this part's channels under ids of their own (``id + part << 16``: the
+        parts number their channels independently)."""
+        at = f.tell()
+        if f.read(2 * len(MAGIC)) != MAGIC + MAGIC:
+            f.seek(at)
+            return False
+        self._parts_done.update({(self.status.parts - 1 << 16) + k: v
+                                 for k, v in self._channels.items()})  # fmt: skip
+        self._channels, self._schemas = {}, {}
+        self.status.parts += 1
+        return True
 
     def _linear_record(
         self,

@@ -1,8 +1,11 @@
 """Ingest ledger: one row per archived source file (path, size, hash, counts, status).
 
 Re-ingesting a file whose size and SHA-256 match a ledger row with status ``ok`` or
-``partial`` is a no-op: re-reading the same bytes cannot recover more. A ``quarantined``
-file is retried. Ledger rows are replaced with ``replace_source_file`` and written LAST
+``duplicate`` is a no-op. A ``partial`` file (something lost: a cut-off file, a decoder
+not installed) and a ``quarantined`` one are retried: the README promises that a re-run
+reads them again. ``duplicate``: the file's content (SHA-256) is already in the warehouse
+under another path (its ``error`` names it): recorded, its rows not ingested twice.
+Ledger rows are replaced with ``replace_source_file`` and written LAST
 for a file, after its data rows, so a crash in between makes the next run redo the file.
 """
 
@@ -20,8 +23,8 @@ from pipeline.tables import conform
 from pipeline.warehouse.delta import read_table, replace_source_file
 
 LEDGER = "ingest_ledger"
-STATUSES = ("ok", "partial", "quarantined")
-SKIP_STATUSES = ("ok", "partial")
+STATUSES = ("ok", "partial", "quarantined", "duplicate")
+SKIP_STATUSES = ("ok", "duplicate")
 
 
 def file_fingerprint(path: Path) -> tuple[int, str]:
@@ -85,9 +88,22 @@ def lookup(warehouse: Path, source_file: str) -> dict | None:
     return rows[-1] if rows else None
 
 
+def same_content(warehouse: Path, sha256: str, source_file: str) -> str | None:
+    """Another file the ledger holds with this SHA-256 and its rows ingested (status ok
+    or partial), or ``None``."""
+    rows = read_table(warehouse, LEDGER, predicate=pds.field("sha256") == sha256).to_pylist()
+    ingested = ("ok", "partial")
+    others = sorted(
+        r["source_file"]
+        for r in rows
+        if r["source_file"] != source_file and r["status"] in ingested
+    )
+    return others[0] if others else None
+
+
 def is_unchanged(warehouse: Path, path: str | Path, size: int, sha256: str) -> bool:
     """True when the ledger already holds ``path`` with this size and hash and status
-    ok/partial: ingesting it again would change nothing."""
+    ok/duplicate: ingesting it again would change nothing."""
     row = lookup(warehouse, str(path))
     return (
         row is not None

@@ -7,6 +7,8 @@ under test; round trips compare every column with the encoded value within its L
 
 from __future__ import annotations
 
+import base64
+import json
 import math
 import struct
 import sys
@@ -432,7 +434,7 @@ def test_wrap_capture_splits_blocks_and_keeps_capture_times(tmp_path, writer):
 def test_wrap_raw_derives_times_and_crosses_midnight(tmp_path):
     recs = [(86_399.0, 1), (86_399.875, 2), (0.5, 3), (10.0, 4)]
     data = b"".join(block(10, cat010_record(tod=t, xy=(1, 1), track=k)) for t, k in recs)
-    data += b"\x0a\x00\x50\x00"  # a cut-off tail: kept as one message, rejected at ingest
+    data += b"\x0a\x00\x50\x00"  # a cut-off tail: an /import/rejects message with its offset
     (tmp_path / "x.ast").write_bytes(data)
     out = wrap_asterix_file(tmp_path / "x.ast", tmp_path / "out", day=date(2026, 3, 1))
     assert out == tmp_path / "out" / "x.ast.mcap"
@@ -441,13 +443,16 @@ def test_wrap_raw_derives_times_and_crosses_midnight(tmp_path):
     expected = [day + round(86_399.0 * NS), day + round(86_399.875 * NS),
                 day + DAY_NS + round(0.5 * NS), day + DAY_NS + 10 * NS]  # fmt: skip
     assert [m[1] for m in msgs] == [*expected, expected[-1]]
-    assert msgs[-1][2] == b"\x0a\x00\x50\x00"
+    tail = json.loads(msgs[-1][2])
+    assert msgs[-1][0] == "/import/rejects" and tail["topic"] == "/asterix/raw"
+    assert base64.b64decode(tail["raw_base64"]) == b"\x0a\x00\x50\x00"
+    assert f"at octet {len(data) - 4}" in tail["reason"]
     assert msgs[0][3] == {"log_time_source": "asterix_time_of_day", "log_date": "2026-03-01"}
-    payloads = [m[2] for m in msgs]
-    res = decode_asterix(payloads, np.array([m[1] for m in msgs]), source_file="x",
+    payloads = [m[2] for m in msgs[:-1]]
+    res = decode_asterix(payloads, np.array([m[1] for m in msgs[:-1]]), source_file="x",
                          topic="/asterix/raw")  # fmt: skip
     assert res.obs["time_ns"].to_pylist() == expected
-    assert res.rejects["reason_code"].to_pylist() == ["undecodable"]
+    assert res.rejects.num_rows == 0
 
 
 @pytest.mark.parametrize(
