@@ -30,6 +30,7 @@ from pipeline.config import Config
 from pipeline.executors import make_executor
 from pipeline.families import FAMILIES, family
 from pipeline.family import Family, Window
+from pipeline.signals import deferred_interrupts
 from pipeline.units import NS
 from pipeline.warehouse.delta import read_table, replace_rows, replace_window
 from pipeline.warehouse.views import rebuild_views_file, warm_up
@@ -172,10 +173,33 @@ def run_batch(
     executor = make_executor(
         executor_kind or ex.executor, min(ex.max_workers, len(units)), ex.threads_per_worker
     )
-    manifests = []
     if progress is not None:
         progress.batch_units(len(units))
-    for result in executor.map_units(run_unit, units):
+    results = executor.map_units(run_unit, units)
+    try:
+        manifests = _collect(results, summary, progress)
+    except BaseException:  # interrupted: nothing was committed; no staging left behind
+        results.close()
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    if summary.failed_units:
+        return summary
+    t0 = time.perf_counter()
+    with deferred_interrupts():  # the window's commit is whole or not begun
+        _commit(warehouse, manifests, summary)
+    summary.commit_s = time.perf_counter() - t0
+    shutil.rmtree(staging, ignore_errors=True)
+    with contextlib.suppress(OSError):  # only when empty: another job may be staging
+        (warehouse / "_staging").rmdir()
+    with deferred_interrupts():
+        rebuild_views_file(warehouse)
+    return summary
+
+
+def _collect(results: Any, summary: BatchSummary, progress: Any) -> list[UnitManifest]:
+    """The manifests of the units that succeeded; failures are noted in ``summary``."""
+    manifests = []
+    for result in results:
         if progress is not None:
             progress.batch_result(result)
         if result.ok:
@@ -187,16 +211,7 @@ def run_batch(
             label = f"{u.family} [{_iso(u.start_ns)}, {_iso(u.end_ns)}): {result.error}"
             summary.failed_units.append(label)
             log.error("batch unit failed %s", label)
-    if summary.failed_units:
-        return summary
-    t0 = time.perf_counter()
-    _commit(warehouse, manifests, summary)
-    summary.commit_s = time.perf_counter() - t0
-    shutil.rmtree(staging, ignore_errors=True)
-    with contextlib.suppress(OSError):  # only when empty: another job may be staging
-        (warehouse / "_staging").rmdir()
-    rebuild_views_file(warehouse)
-    return summary
+    return manifests
 
 
 def _commit(warehouse: Path, manifests: list[UnitManifest], summary: BatchSummary) -> None:

@@ -8,8 +8,9 @@ family's sections included), so a bad config is exit 2 at start, never a failed 
 Shell completion (click): ``eval "$(_SURVEIL_COMPLETE=bash_source surveil)"`` (zsh:
 ``zsh_source``, fish: ``fish_source``); report names, sectors and table names complete.
 
-Exit codes: 0 ok, 1 some units/files failed (re-runnable), 2 usage or config error,
-130 interrupted.
+Exit codes: 0 ok (everything read was used), 1 some units/files failed, some file was
+partial or some row was rejected (re-runnable), 2 usage or config error, 130 interrupted
+(SIGINT), 143 terminated (SIGTERM).
 """
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ from jobs.common import (
 )
 from pipeline.config import Config, ConfigError
 from pipeline.families import load_config
+from pipeline.signals import EXIT_TERMINATED, Terminated, install_handlers
 
 LOG_LEVELS = ("DEBUG", "INFO", "WARNING", "ERROR", "CRITICAL")
 # the scenarios of pipeline.simulate.scenarios.SCENARIOS (a test checks), named here so
@@ -675,12 +677,18 @@ _global_options(config_check, validate=False)  # it validates FILE (or --config)
 
 
 def main() -> None:
-    """Console entry point: map errors to exit codes instead of tracebacks."""
+    """Console entry point: map errors to exit codes instead of tracebacks. SIGINT
+    (Ctrl-C) exits 130, SIGTERM 143: the job unwinds (pool workers stopped, staging
+    removed, nothing half committed: ``pipeline.signals``)."""
+    install_handlers()
     try:
         cli.main(standalone_mode=False)
     except (click.exceptions.Abort, KeyboardInterrupt):
-        click.echo("interrupted", err=True)
+        click.echo("interrupted (SIGINT): nothing incomplete was committed", err=True)
         sys.exit(EXIT_INTERRUPTED)
+    except Terminated:
+        click.echo("terminated (SIGTERM): nothing incomplete was committed", err=True)
+        sys.exit(EXIT_TERMINATED)
     except click.ClickException as exc:
         exc.show()
         sys.exit(EXIT_USAGE)

@@ -25,6 +25,7 @@ from pipeline.convert.config import import_options
 from pipeline.executors import Executor, UnitResult, make_executor
 from pipeline.ingest import FileManifest, IngestContext, IngestSummary, commit_file, ingest_file
 from pipeline.ingest.plan import IngestUsageError, expand_paths, plan_units
+from pipeline.signals import deferred_interrupts
 from pipeline.warehouse.ledger import same_content
 from pipeline.warehouse.views import rebuild_views_file
 
@@ -66,16 +67,20 @@ def run_ingest(
     with IngestContext() as ctx:
         ctx.views.warm_up()  # the views file's DuckDB instance, built while files decode
         try:
-            for res in ex.map_units(ingest_file, units, context=ctx.for_workers()):
-                committed |= _handle(warehouse, res, summary, start_ns, end_ns, seen)
-                if on_result is not None:
-                    on_result(res)
+            results = ex.map_units(ingest_file, units, context=ctx.for_workers())
+            with contextlib.closing(results):  # an interrupt stops the pool at once
+                for res in results:
+                    with deferred_interrupts():  # a file's commit is whole or not begun
+                        committed |= _handle(warehouse, res, summary, start_ns, end_ns, seen)
+                    if on_result is not None:
+                        on_result(res)
         finally:
             shutil.rmtree(staging, ignore_errors=True)
             with contextlib.suppress(OSError):
                 (warehouse / "_staging").rmdir()
         if committed:
-            rebuild_views_file(warehouse, ctx.views)
+            with deferred_interrupts():
+                rebuild_views_file(warehouse, ctx.views)
     return summary
 
 

@@ -44,6 +44,7 @@ from dataclasses import dataclass
 from typing import Any, Generic, Protocol, TypeVar
 
 from pipeline.config import ConfigError
+from pipeline.signals import ignore_in_worker
 
 U = TypeVar("U")
 V = TypeVar("V")
@@ -110,6 +111,7 @@ def _start_worker(threads_per_worker: int, context: bytes | None) -> None:
     factory's context (unpickled only now: it may import polars); it is left when the
     worker process exits."""
     global _worker_context
+    ignore_in_worker()
     limit_threads(threads_per_worker)
     if context is None:
         return
@@ -167,12 +169,13 @@ class ProcessExecutor:
             return
         ctx = multiprocessing.get_context("spawn")
         blob = None if context is None else pickle.dumps(context)
-        with ProcessPoolExecutor(
+        pool = ProcessPoolExecutor(
             max_workers=max(1, min(self.max_workers, len(units))),
             mp_context=ctx,
             initializer=_start_worker,
             initargs=(self.threads_per_worker, blob),
-        ) as pool:
+        )
+        try:
             futures: dict[Future, Any] = {
                 (pool.submit(fn, u) if blob is None else pool.submit(_call_in_worker, fn, u)): u
                 for u in units
@@ -182,6 +185,26 @@ class ProcessExecutor:
                 done, pending = wait(pending, return_when=FIRST_COMPLETED)
                 for fut in done:
                     yield _result(futures[fut], fut)
+        except BaseException:  # interrupt, or the caller stopped early: no worker left
+            _stop_pool(pool)
+            raise
+        pool.shutdown(wait=True)
+
+
+def _stop_pool(pool: ProcessPoolExecutor, grace_s: float = 5.0) -> None:
+    """Terminate the pool's workers now (their units are abandoned: nothing of theirs is
+    committed, the driver commits), then reap them; SIGKILL after ``grace_s``."""
+    procs = list((getattr(pool, "_processes", None) or {}).values())
+    for p in procs:
+        with contextlib.suppress(Exception):
+            p.terminate()
+    pool.shutdown(wait=False, cancel_futures=True)
+    for p in procs:
+        with contextlib.suppress(Exception):
+            p.join(grace_s)
+            if p.is_alive():
+                p.kill()
+                p.join(1.0)
 
 
 def _result(unit: Any, fut: Future) -> UnitResult:
