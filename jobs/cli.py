@@ -149,6 +149,17 @@ def _window(from_: str | None, to: str | None, required: bool) -> tuple[int | No
     return start, end
 
 
+def _bounded(st: _State, start: int | None, end: int | None) -> tuple[int, int]:
+    """A batch/reprocess window clipped to the data the ledger knows, or exit 2 when it
+    is too long or too big for the memory budget (:mod:`jobs.window`)."""
+    from jobs.window import bounded_window
+
+    w = bounded_window(st.cfg, st.warehouse, start, end)  # type: ignore[arg-type]
+    if w.note:
+        click.echo(w.note, err=True)
+    return w.start_ns, w.end_ns
+
+
 def _duration_s(text: str) -> float:
     try:
         return parse_duration(text)
@@ -266,7 +277,7 @@ def batch(st: _State, from_, to, executor) -> None:
     from jobs.batch import run_batch
     from jobs.progress import terminal_progress
 
-    start, end = _window(from_, to, required=True)
+    start, end = _bounded(st, *_window(from_, to, required=True))
     progress = terminal_progress()
     with progress or contextlib.nullcontext():
         summary = run_batch(st.cfg, st.warehouse, start_ns=start, end_ns=end,
@@ -285,7 +296,7 @@ def reprocess(st: _State, from_, to, executor) -> None:
     from jobs.progress import terminal_progress
     from jobs.reprocess import run_reprocess
 
-    start, end = _window(from_, to, required=True)
+    start, end = _bounded(st, *_window(from_, to, required=True))
     progress = terminal_progress()
     with progress or contextlib.nullcontext():
         summary = run_reprocess(st.cfg, st.warehouse, start_ns=start, end_ns=end,

@@ -22,7 +22,7 @@ def parse_time_ns(text: str) -> int:
     """ISO 8601 (``2026-01-15T01:00:00Z``, naive means UTC) or an integer ns timestamp."""
     t = text.strip()
     if t.lstrip("-").isdigit():
-        return int(t)
+        return _in_range(int(t), text)
     try:
         dt = datetime.fromisoformat(t.replace("Z", "+00:00"))
     except ValueError as exc:
@@ -30,7 +30,16 @@ def parse_time_ns(text: str) -> int:
     if dt.tzinfo is None:
         dt = dt.replace(tzinfo=UTC)
     delta = dt - datetime(1970, 1, 1, tzinfo=UTC)
-    return (delta.days * 86_400 + delta.seconds) * 1_000_000_000 + delta.microseconds * 1000
+    return _in_range((delta.days * 86_400 + delta.seconds) * 1_000_000_000
+                     + delta.microseconds * 1000, text)  # fmt: skip
+
+
+def _in_range(t_ns: int, text: str) -> int:
+    """``t_ns`` if it is a time the warehouse can hold (int64 ns since 1970), else a
+    :class:`UsageError` (``--to 9999-01-01``: exit 2, not a traceback)."""
+    if not 0 <= t_ns <= 2**63 - 1:
+        raise UsageError(f"time {text!r} is outside 1970-01-01 .. 2262-04-11 UTC (int64 ns)")
+    return t_ns
 
 
 _DURATION = re.compile(

@@ -94,6 +94,10 @@ class ExecutionConfig:
     executor: str = setting("process", choices=("serial", "process", "ray"))
     max_workers: int = count(2)
     threads_per_worker: int = count(1)
+    # the longest batch/reprocess window, after clipping it to the data the ledger knows
+    max_window_days: float = positive(31.0)
+    # memory a batch may plan for (MB; 0: 80% of the machine's memory): above, exit 2
+    memory_budget_mb: int = setting(0, ge=0)
 
 
 @dataclass(frozen=True)

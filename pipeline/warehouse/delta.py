@@ -150,7 +150,7 @@ def read_table(
     expr = window_filter(name, start_ns, end_ns)
     if predicate is not None:
         expr = predicate if expr is None else expr & predicate
-    dataset = DeltaTable(str(table_path(warehouse, name))).to_pyarrow_dataset()
+    dataset = _snapshot_dataset(table_path(warehouse, name), spec(name).schema)
     have = set(dataset.schema.names)
     table = dataset.to_table(columns=[c for c in target.names if c in have], filter=expr)
     for i, f in enumerate(target):  # a nullable column added to the schema after the table
@@ -161,6 +161,35 @@ def read_table(
     if table.num_rows and keys and all(k in target.names for k in keys):
         table = table.sort_by([(k, "ascending") for k in keys])  # files come in any order
     return table
+
+
+def _snapshot_dataset(path: Path, schema: pa.Schema) -> pds.Dataset:
+    """The current snapshot's Parquet files as a plain pyarrow dataset on the local
+    filesystem (hive ``date=`` partitions).
+
+    Not ``DeltaTable.to_pyarrow_dataset()``: that dataset reads through delta-rs's
+    Python filesystem handler (a ``PyFileSystem``), which Arrow's I/O threads call back
+    into; when such a thread outlives a short script, the interpreter aborts at exit
+    ("terminate called without an active exception", exit 134: about 1 run in 2 of a
+    script that reads the ledger and exits; apache/arrow#34314, delta-io/delta-rs#2184).
+    The file list comes from the Delta log (so replaced files are never read); the
+    reading is Arrow's own."""
+    snapshot = DeltaTable(str(path))
+    files = snapshot.file_uris()
+    parts = snapshot.metadata().partition_columns
+    fmt = pds.ParquetFileFormat()
+    if not files:
+        return pds.dataset([], schema=schema, format=fmt)
+    partitioning = (
+        pds.partitioning(pa.schema([schema.field(p) for p in parts]), flavor="hive")
+        if parts else None
+    )  # fmt: skip
+    found = pds.dataset(files, format=fmt, partitioning=partitioning,
+                        partition_base_dir=str(path))  # fmt: skip
+    have = set(found.schema.names)
+    keep = pa.schema([f for f in schema if f.name in have])  # canonical types
+    return pds.dataset(files, schema=keep, format=fmt, partitioning=partitioning,
+                       partition_base_dir=str(path))  # fmt: skip
 
 
 def _writer_properties() -> WriterProperties:

@@ -57,7 +57,7 @@ def test_is_unchanged_rules(tmp_path):
     assert is_unchanged(tmp_path, "/a.mcap", 10, "abc")
     assert not is_unchanged(tmp_path, "/a.mcap", 10, "abd")  # content changed
     assert not is_unchanged(tmp_path, "/a.mcap", 11, "abc")  # size changed
-    assert is_unchanged(tmp_path, "/b.mcap", 10, "bbb")  # partial: re-reading won't help
+    assert not is_unchanged(tmp_path, "/b.mcap", 10, "bbb")  # partial: retried (issue 18)
     assert not is_unchanged(tmp_path, "/c.mcap", 10, "ccc")  # quarantined files are retried
     v = table_version(tmp_path, "ingest_ledger")
     write_entry(tmp_path, entry("/a.mcap", "new"))  # replaces, never duplicates

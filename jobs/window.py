@@ -1,0 +1,94 @@
+"""Bound a batch / reprocess window before any work starts (issue 18, item 3).
+
+:func:`bounded_window` clips ``[start_ns, end_ns)`` to the hours the ingest ledger knows
+data in (files ok or partial), so that a window reaching far beyond the data (``--to
+2200-01-01`` over one hour of recordings) costs what the data costs: the hours outside
+have no raw rows, hence no derived rows to replace. It refuses (:class:`UsageError`,
+exit 2, before anything is staged) when the clipped window is longer than
+``[execution] max_window_days``, or when its estimated memory exceeds ``[execution]
+memory_budget_mb`` (0: 80% of the machine's memory). The estimate is coarse on purpose:
+the densest hour of raw rows (ledger rows over each file's span) times
+``BYTES_PER_ROW_IN_UNIT`` times the workers running at once. When the ledger knows no
+data in the window (a warehouse filled by windowed ingests only, which write no ledger
+rows), the window is kept as asked and only its length is bounded.
+
+Times beyond int64 ns (``--to 9999-01-01``) never get here: :func:`jobs.common.parse_time_ns`
+refuses them.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+from jobs.common import UsageError, iso
+from pipeline.config import Config
+from pipeline.warehouse.delta import read_table
+
+HOUR_NS = 3600 * 10**9
+DAY_NS = 24 * HOUR_NS
+BYTES_PER_ROW_IN_UNIT = 2048  # raw row + its staged and derived frames in a batch unit
+
+
+@dataclass(frozen=True)
+class Window:
+    """The window to run, and a note when it differs from the one asked for."""
+
+    start_ns: int
+    end_ns: int
+    note: str = ""
+
+
+def _memory_total_mb() -> int:
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") // 2**20
+    except (ValueError, OSError, AttributeError):
+        return 8192
+
+
+def bounded_window(cfg: Config, warehouse: Path, start_ns: int, end_ns: int) -> Window:
+    """``[start_ns, end_ns)`` clipped to the ledger's data hours, or refused (module
+    docstring)."""
+    cols = ["status", "start_time_ns", "end_time_ns", "rows_json"]
+    try:
+        ledger = read_table(Path(warehouse), "ingest_ledger", columns=cols).to_pylist()
+    except Exception:  # no warehouse / ledger yet: nothing known, nothing to clip to
+        ledger = []
+    files = [
+        r for r in ledger
+        if r["status"] in ("ok", "partial") and r["start_time_ns"] is not None
+        and r["end_time_ns"] is not None and r["start_time_ns"] < end_ns
+        and r["end_time_ns"] >= start_ns
+    ]  # fmt: skip
+    if files:
+        lo = min(r["start_time_ns"] for r in files) // HOUR_NS * HOUR_NS
+        hi = -(-(max(r["end_time_ns"] for r in files) + 1) // HOUR_NS) * HOUR_NS
+        s, e = max(start_ns, lo), min(end_ns, hi)
+    else:  # windowed ingests write no ledger rows: the window as asked, bounded below
+        s, e = start_ns, end_ns
+    ex = cfg.execution
+    if e - s > ex.max_window_days * DAY_NS:
+        raise UsageError(
+            f"the window holds {(e - s) / DAY_NS:.1f} days of data ({iso(s)} .. {iso(e)}); "
+            f"at most {ex.max_window_days:g} days per run ([execution] max_window_days): "
+            "split it into shorter windows"
+        )
+    peak = 0.0
+    for r in files:
+        rows = sum(json.loads(r["rows_json"] or "{}").values())
+        hours = max(1.0, (r["end_time_ns"] - r["start_time_ns"]) / HOUR_NS)
+        peak = max(peak, rows / hours)
+    need_mb = peak * BYTES_PER_ROW_IN_UNIT * ex.max_workers / 2**20
+    budget = ex.memory_budget_mb or int(0.8 * _memory_total_mb())
+    if need_mb > budget:
+        raise UsageError(
+            f"the densest hour of this window holds ~{peak:,.0f} raw rows: {ex.max_workers} "
+            f"workers would need ~{need_mb:,.0f} MB, over the budget of {budget:,} MB "
+            "([execution] memory_budget_mb); use fewer workers or a larger budget"
+        )
+    note = ""
+    if (s, e) != (start_ns, end_ns):
+        note = f"window clipped to the data the ledger knows: {iso(s)} .. {iso(e)}"
+    return Window(s, e, note)
