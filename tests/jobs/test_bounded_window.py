@@ -90,6 +90,9 @@ def test_read_table_never_aborts_at_exit(warehouse):
         "sys.exit(0)\n"
     )
     env = {**os.environ, "PYTHONPATH": str(REPO)}
-    codes = [subprocess.run([sys.executable, "-c", script], cwd=REPO, env=env,
-                            capture_output=True, check=False).returncode for _ in range(10)]  # fmt: skip
+    run = [sys.executable, "-c", script]
+    codes = [
+        subprocess.run(run, cwd=REPO, env=env, capture_output=True, check=False).returncode
+        for _ in range(10)
+    ]
     assert codes == [0] * 10
