@@ -28,6 +28,7 @@ from jobs.common import (
     EXIT_INTERRUPTED,
     EXIT_USAGE,
     UsageError,
+    checked_warehouse,
     parse_duration,
     parse_time_ns,
     setup_logging,
@@ -60,7 +61,7 @@ class _State:
 
     @property
     def warehouse(self) -> Path:
-        return Path(self.warehouse_option or self.cfg.warehouse_path).resolve()
+        return checked_warehouse(Path(self.warehouse_option or self.cfg.warehouse_path))
 
     def sector(self, name: str | None) -> str | None:
         """``--sector``, checked against the config's sectors (maritime and airfield)."""

@@ -7,6 +7,7 @@ import logging
 import re
 import sys
 from datetime import UTC, datetime
+from pathlib import Path
 
 from pipeline.errors import UsageError
 
@@ -16,6 +17,23 @@ EXIT_OK = 0
 EXIT_UNITS_FAILED = 1
 EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130
+
+
+# deltalake (1.6) panics on a table path with these ("Invalid object store url") or fails
+# on a control character: refused up front, exit 2, instead of a Rust panic mid-commit
+_DELTA_UNSAFE = frozenset("^[]|\\")
+
+
+def checked_warehouse(path: Path) -> Path:
+    """The warehouse path, absolute; :class:`UsageError` when Delta cannot use it."""
+    path = path.expanduser().resolve()
+    bad = sorted({c for c in str(path) if c in _DELTA_UNSAFE or ord(c) < 32})
+    if bad:
+        raise UsageError(
+            f"warehouse path {str(path)!r} holds {', '.join(repr(c) for c in bad)}, which the "
+            "Delta Lake library cannot use in a table path: choose another directory"
+        )
+    return path
 
 
 def parse_time_ns(text: str) -> int:

@@ -134,3 +134,50 @@ def write(path: Path, data: bytes | str) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_bytes(data.encode("ascii") if isinstance(data, str) else data)
     return path
+
+
+# -- MCAP with hostile messages ------------------------------------------------------------
+
+T0_NS = 1_767_225_600 * NS  # 2026-01-01T00:00:00Z
+
+
+def radar_report(i: int, *, site: str = "R1", t_ns: int | None = None, **over: object) -> bytes:
+    """A valid radar track report as the simulator writes it (JSON), number ``i``, one per
+    second from :data:`T0_NS`; ``over`` replaces fields."""
+    import json
+    import math
+
+    t = T0_NS + i * NS if t_ns is None else t_ns
+    az = (0.1 + 0.01 * i) % (2 * math.pi)
+    rng = 1000.0 + i
+    rep = {
+        "site_id": site, "track_id": 100 + i % 7, "time_ns": t, "range_m": rng,
+        "azimuth_rad": az, "x_m": rng * math.sin(az), "y_m": rng * math.cos(az),
+        "course_rad": 1.0, "speed_mps": 5.0, "sigma_range_m": 15.0,
+        "sigma_azimuth_rad": 0.0079, "sigma_course_rad": 0.035, "sigma_speed_mps": 0.25,
+        "scan_period_s": 3.0, "scan_end_azimuth_rad": 6.0, "status": "confirmed",
+    }  # fmt: skip
+    rep.update(over)
+    return json.dumps(rep, separators=(",", ":")).encode()
+
+
+def write_radar_mcap(path: Path, messages: list[tuple[int, bytes]], *,
+                     topic: str = "/radar/R1/tracks") -> Path:  # fmt: skip
+    """``(log_time_ns, payload)`` on one radar channel (json, surveil.RadarTrackReport),
+    zstd chunks, written with the ``mcap`` writer (log times up to 2^64 - 1 allowed, as
+    MCAP allows them)."""
+    from mcap.writer import CompressionType, Writer
+
+    from pipeline.resources import resource_path
+
+    schema = (resource_path("schemas") / "radar_track_report.schema.json").read_bytes()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "wb") as f:
+        w = Writer(f, compression=CompressionType.ZSTD, chunk_size=1 << 16)
+        w.start(profile="", library="surveil-hostile")
+        sid = w.register_schema("surveil.RadarTrackReport", "jsonschema", schema)
+        ch = w.register_channel(topic, "json", sid)
+        for seq, (t, payload) in enumerate(messages):
+            w.add_message(ch, log_time=t, data=payload, publish_time=t, sequence=seq)
+        w.finish()
+    return path
