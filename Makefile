@@ -33,7 +33,8 @@ bench-hostile: setup
 
 # Fuzzing (docs/hostile_input.md): atheris over the MCAP reader, the ingest decoders (the
 # compiled JSON parser among them), the NMEA/AIS and ASTERIX/pcap importers, FUZZ_SECONDS
-# per target, with the C extensions built with AddressSanitizer + UBSan (build/asan).
+# per target (coverage-guided), then every corpus replayed with the C extensions built
+# with AddressSanitizer + UBSan (build/asan): fuzz/run.py says why in two phases.
 FUZZ_SECONDS ?= 300
 ASAN_CFLAGS := -shared -fPIC -O1 -g -fno-omit-frame-pointer -fsanitize=address,undefined -fno-sanitize-recover=undefined
 EXT = $$($(BIN)/python -c 'import sysconfig; print(sysconfig.get_config_var("EXT_SUFFIX"))')
@@ -46,10 +47,11 @@ fuzz-asan: setup
 
 fuzz: fuzz-asan
 	$(BIN)/pip install --quiet 'atheris>=2.3'
+	$(BIN)/python fuzz/run.py all --seconds $(FUZZ_SECONDS)
 	LD_PRELOAD="$$(gcc -print-file-name=libasan.so) $$(gcc -print-file-name=libubsan.so)" \
 	ASAN_OPTIONS=detect_leaks=0:allocator_may_return_null=1:handle_segv=1 \
 	UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
-	$(BIN)/python fuzz/run.py all --seconds $(FUZZ_SECONDS) --asan
+	$(BIN)/python fuzz/run.py all --replay --asan
 
 clean:
 	rm -rf $(VENV) warehouse/tables warehouse/*.duckdb build/asan fuzz/corpus

@@ -1,18 +1,26 @@
 """Coverage-guided fuzzing of the untrusted-bytes parsers with atheris (libFuzzer).
 
-    .venv/bin/python fuzz/run.py TARGET [--seconds 60] [--asan] [-- libFuzzer flags]
+    .venv/bin/python fuzz/run.py TARGET [--seconds 60] [-- libFuzzer flags]
+    .venv/bin/python fuzz/run.py TARGET --replay [--asan]
 
 TARGET: ``mcap``, ``json``, ``nmea``, ``asterix`` (:mod:`fuzz.targets`), or ``all``
-(each in turn, ``--seconds`` each). ``make fuzz`` runs ``all`` with
-``FUZZ_SECONDS`` (default 300) per target.
+(each in turn, ``--seconds`` each). ``make fuzz`` runs ``all`` with ``FUZZ_SECONDS``
+(default 300) per target, then replays every corpus under the sanitizers.
 
-Coverage: atheris instruments the Python of ``pipeline`` (the reader, decoders,
-importers); the compiled extensions (``_json_columns``, ``_mcap_records``) are not
-coverage-instrumented (gcc, no libFuzzer counters), but with ``--asan`` they are the
-AddressSanitizer + UndefinedBehaviorSanitizer builds from ``make fuzz-asan`` (in
-``build/asan``, loaded in place of the installed ones), so a memory error in them
-aborts the run with a report. Seeds: ``fuzz/seeds/<target>/`` (written on first run
-from :mod:`pipeline.simulate.hostile` and the real samples when present); the corpus
+Two phases, because the two tools do not mix here: with gcc's AddressSanitizer
+runtime preloaded (Python itself is not built with it), atheris loses its coverage
+counters ("Coverage symbols are being provided by a library other than libFuzzer") and
+the search goes blind. So (1) the coverage-guided search runs with the installed
+extensions: atheris instruments the Python of ``pipeline`` (reader, decoders,
+importers); the compiled extensions (``_json_columns``, ``_mcap_records``) run but are
+not coverage-instrumented (no clang/libFuzzer build here); (2) ``--replay --asan`` runs
+every corpus input and seed once more through the same target with the
+AddressSanitizer + UndefinedBehaviorSanitizer builds of the extensions (``make
+fuzz-asan``, ``build/asan``, loaded in place of the installed ones), so a memory error
+or undefined behaviour in C aborts the replay with a report.
+
+Seeds: ``fuzz/seeds/<target>/`` (written on first run from
+:mod:`pipeline.simulate.hostile` and the real samples when present); the corpus
 grows in ``fuzz/corpus/<target>/`` (not committed); a crashing input is written to
 ``fuzz/crashes/<target>-crash-<sha1>``: copy it to ``tests/fuzz/regressions/<target>/``
 and fix the cause (``tests/fuzz/test_regressions.py`` replays every file there).
@@ -62,22 +70,51 @@ def _seeds(target: str) -> Path:
     return d
 
 
+def _use_asan_builds() -> None:
+    """Load the sanitizer builds of the extensions in place of the installed ones."""
+    import pipeline.decode
+    import pipeline.io
+
+    for pkg in (pipeline.decode, pipeline.io):
+        sub = REPO / "build" / "asan" / Path(*pkg.__name__.split("."))
+        if not any(sub.glob("*.so")):
+            raise SystemExit(f"no sanitizer build in {sub}: run `make fuzz-asan`")
+        pkg.__path__.insert(0, str(sub))
+
+
+def replay(target: str, asan: bool) -> int:
+    """Every seed and corpus input once through ``target``; the count, or an exception."""
+    if asan:
+        _use_asan_builds()
+    from fuzz import targets
+
+    fn = targets.TARGETS[target]
+    files = sorted(p for d in (_seeds(target), HERE / "corpus" / target) if d.is_dir()
+                   for p in d.iterdir() if p.is_file())  # fmt: skip
+    for p in files:
+        fn(p.read_bytes())
+    if asan:
+        from pipeline.decode import _json_columns
+        from pipeline.io import _mcap_records
+
+        assert "build/asan" in _json_columns.__file__ and "build/asan" in _mcap_records.__file__
+    print(f"replay {target}: {len(files)} inputs, no finding"
+          + (" (ASan+UBSan builds of the C extensions)" if asan else ""), flush=True)
+    return 0
+
+
 def fuzz_one(target: str, seconds: int, asan: bool, extra: list[str]) -> int:
     import atheris
 
-    if asan:  # the sanitizer builds of the extensions, in place of the installed ones
-        import pipeline.decode
-        import pipeline.io
-
-        for pkg in (pipeline.decode, pipeline.io):
-            sub = REPO / "build" / "asan" / Path(*pkg.__name__.split("."))
-            pkg.__path__.insert(0, str(sub))
+    if asan:
+        _use_asan_builds()
     with atheris.instrument_imports(include=["pipeline"]):
-        from fuzz import targets
+        import importlib
 
-        import pipeline.convert.legacy  # noqa: F401
-        import pipeline.decode.registry  # noqa: F401
-        import pipeline.io.mcap_read  # noqa: F401
+        for mod in ("pipeline.convert.legacy", "pipeline.decode.registry",
+                    "pipeline.io.mcap_read"):  # fmt: skip
+            importlib.import_module(mod)
+        from fuzz import targets
     fn = targets.TARGETS[target]
     corpus = HERE / "corpus" / target
     corpus.mkdir(parents=True, exist_ok=True)
@@ -96,15 +133,19 @@ def main() -> int:
     ap.add_argument("target", choices=["mcap", "json", "nmea", "asterix", "all"])
     ap.add_argument("--seconds", type=int, default=60)
     ap.add_argument("--asan", action="store_true")
+    ap.add_argument("--replay", action="store_true", help="run the corpus once, no search")
     ap.add_argument("extra", nargs="*")
     a = ap.parse_args()
     if a.target != "all":
+        if a.replay:
+            return replay(a.target, a.asan)
         return fuzz_one(a.target, a.seconds, a.asan, a.extra)
     worst = 0
     for t in ("mcap", "json", "nmea", "asterix"):  # one process each: libFuzzer exits
         cmd = [sys.executable, __file__, t, "--seconds", str(a.seconds)]
         cmd += ["--asan"] if a.asan else []
-        print(f"== fuzz {t}: {a.seconds} s", flush=True)
+        cmd += ["--replay"] if a.replay else []
+        print(f"== fuzz {t}: " + ("replay" if a.replay else f"{a.seconds} s"), flush=True)
         worst = max(worst, subprocess.run(cmd, env=os.environ, check=False).returncode)
     return worst
 

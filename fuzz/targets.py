@@ -28,12 +28,13 @@ def _decoder():
     return FileDecoder(source_file="/fuzz.mcap", validation=ValidationConfig())
 
 
-def _drive(batches) -> None:
+def _drive(batches):
     dec = _decoder()
     for b in batches:
         dec.feed(b)
         dec.drain()
     dec.finish()
+    return dec
 
 
 def _batch(payloads: list[bytes], encoding: str, schema: str, schema_enc: str, topic: str):
@@ -49,9 +50,14 @@ def mcap(data: bytes) -> None:
 
     path = _TMP / "in.mcap"
     path.write_bytes(data)
+    from pipeline.io.mcap_index import mcap_index_rows
+
     scan = read_mcap_batches(path, prefetch=False)
-    _drive(scan)
+    dec = _drive(scan)
     _ = scan.status.status, scan.status.error
+    # what the ingest worker then builds from the summary and status (ledger, mcap_index)
+    mcap_index_rows("/fuzz.mcap", len(data), scan.summary, scan.channels, scan.status,
+                    dec.not_stored_by_channel)  # fmt: skip
 
 
 def json_radar(data: bytes) -> None:

@@ -194,11 +194,11 @@ def test_truncated_recordings_keep_their_records_and_reject_the_tail(tmp_path, f
     records, tail = walk(data, framing)
     assert [r.content for r in records] == blks[:-1] and "past the end" in tail.reason
     summary = run_import([src], tmp_path / "out", base_time_ns=DAY_NS)
-    assert summary.exit_code == 0, summary.render()
+    assert summary.exit_code == 1, summary.render()  # partial: the tail is rejected
     (f,) = summary.imported
     assert f.messages == {f"/asterix/{framing}": 4, REJECTS_TOPIC: 1}
     ingest = run_ingest([f.output], load_config(), tmp_path / "wh", executor="serial")
-    assert ingest.exit_code == 0
+    assert ingest.exit_code == 1  # one rejects row
     (rej,) = read_table(tmp_path / "wh", "rejects").to_pylist()
     assert rej["reason_code"] == "undecodable" and rej["stage"] == "import"
     assert "past the end" in rej["reason"]

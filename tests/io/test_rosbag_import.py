@@ -105,7 +105,7 @@ def test_known_types_decode_and_unknown_ones_are_one_reject_per_channel(tmp_path
     summary = run_import([bag], tmp_path / "out")
     ingest = run_ingest([summary.imported[0].output], load_config(), tmp_path / "wh",
                         executor="serial")  # fmt: skip
-    assert ingest.exit_code == 0, ingest.render()
+    assert ingest.exit_code == 1, ingest.render()  # unknown channels: rejects rows
     gnss = read_table(tmp_path / "wh", "nav_gnss").to_pylist()
     assert len(gnss) == 5 and gnss[0]["lat_deg"] == pytest.approx(42.3758)
     assert gnss[0]["fix_quality"] == 2 and gnss[0]["time_ns"] == T0
