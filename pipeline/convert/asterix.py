@@ -412,7 +412,9 @@ def _pcap_packets(data: bytes, skipped: Counter, tails: list[Tail]) -> Iterator[
     pos = 24
     while pos < n:
         end = record_at(pos)
-        if end:
+        # taken: the next header checks too, or, where it does not, no run of good records
+        # starts inside this one (a broken length inside the file swallows what it spans)
+        if end and (end == n or record_at(end) or not any(map(chain, range(pos + 1, end)))):
             sec, frac, _incl, _orig = rec.unpack_from(data, pos)
             last_sec[:] = [sec]
             yield Packet(sec * NS + frac * frac_ns, link_type & 0x0FFFFFFF, data[pos + 16 : end])

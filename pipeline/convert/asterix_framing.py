@@ -141,11 +141,14 @@ def _blocks_chain(data: bytes, pos: int, cats: frozenset[int], k: int = RESYNC_R
     return True
 
 
-def _candidates(data: bytes, start: int, cats: frozenset[int]) -> Iterator[int]:
-    """Offsets from ``start`` on whose octet is in ``cats`` (numpy, not per octet)."""
+def _candidates(
+    data: bytes, start: int, cats: frozenset[int], end: int | None = None
+) -> Iterator[int]:
+    """Offsets in ``[start, end)`` whose octet is in ``cats`` (numpy, not per octet)."""
     import numpy as np
 
-    arr = np.frombuffer(data, dtype=np.uint8, offset=start)
+    stop = len(data) if end is None else end
+    arr = np.frombuffer(data, dtype=np.uint8, offset=start, count=max(0, stop - start))
     table = np.zeros(256, dtype=bool)
     table[list(cats)] = True
     for i in np.flatnonzero(table[arr]).tolist():
@@ -154,23 +157,37 @@ def _candidates(data: bytes, start: int, cats: frozenset[int]) -> Iterator[int]:
 
 def split_blocks_resync(data: bytes) -> tuple[list[tuple[int, bytes]], list[Tail]]:
     """Raw data blocks back to back: ``[(offset, block)]`` and the damaged stretches.
-    Where a block does not frame, the walk resumes at the next offset where
-    :data:`RESYNC_RECORDS` blocks frame in a row, of the categories met before the damage
-    (a misaligned octet often reads as some other known category); the octets in between
-    are a Tail."""
+    A block is taken when the blocks after it frame too (:data:`RESYNC_RECORDS` of the
+    categories met so far), or, where they do not, when no such run of blocks starts
+    inside it (a broken LEN that stays inside the file would otherwise swallow the good
+    blocks it runs over). Where a block is not taken, the walk resumes at the next offset
+    where :data:`RESYNC_RECORDS` blocks frame in a row, of the categories met before the
+    damage (a misaligned octet often reads as some other known category); the octets in
+    between are a Tail."""
     blocks: list[tuple[int, bytes]] = []
     tails: list[Tail] = []
     seen: set[int] = set()
     pos, n = 0, len(data)
+
+    def swallows(q: int, end: int, cats: frozenset[int]) -> bool:  # blocks start inside?
+        return any(_blocks_chain(data, c, cats) for c in _candidates(data, q + 1, cats, end))
+
     while pos < n:
         length = _block_at(data, pos)
-        if length:
-            blocks.append((pos, data[pos : pos + length]))
+        after = pos + length
+        cats = frozenset(seen | {data[pos]}) if seen else ASTERIX_CATEGORIES
+        # taken: the blocks after it frame (the usual case, checked first), or, where they
+        # do not, no run of good blocks starts inside it (the damage is further on; a
+        # broken LEN that stays inside the file would swallow the blocks it runs over)
+        if length and (_blocks_chain(data, after, cats) or not swallows(pos, after, cats)):
+            blocks.append((pos, data[pos:after]))
             seen.add(data[pos])
-            pos += length
+            pos = after
             continue
         cats = frozenset(seen) or ASTERIX_CATEGORIES
-        nxt = next((q for q in _candidates(data, pos + 1, cats) if _blocks_chain(data, q, cats)), n)
+        nxt = next(
+            (q for q in _candidates(data, pos + 1, cats) if _blocks_chain(data, q, cats)), n
+        )
         cat = data[pos]
         lv = int.from_bytes(data[pos + 1 : pos + 3], "big") if n - pos >= 3 else None
         tails.append(Tail(pos, data[pos:nxt], f"raw: {nxt - pos} octets at octet {pos} do "

@@ -8,8 +8,10 @@ rejects a row that lies outside the predicate instead of writing it (measured in
 ``research/architecture.md`` §2.3). An empty table with a predicate deletes the matching
 rows in one commit (checked on deltalake 1.6.6).
 
-Readers go through the Delta log (``DeltaTable.to_pyarrow_dataset()``): a glob over a
-table folder also sees the files that earlier commits replaced and double-counts.
+Readers go through the Delta log (the snapshot's file list, ``DeltaTable.file_uris()``,
+read with Arrow's own filesystem: :func:`_snapshot_dataset` says why not
+``to_pyarrow_dataset()``): a glob over a table folder also sees the files that earlier
+commits replaced and double-counts.
 
 Times are int64 ns since the Unix epoch, UTC; windows are half-open ``[start_ns, end_ns)``.
 """

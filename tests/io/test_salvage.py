@@ -105,3 +105,33 @@ def test_import_salvages_and_reports_partial(tmp_path, kind):
     [rej] = rejects
     assert f"at octet {off}" in rej["reason"]
     assert base64.b64decode(rej["raw_base64"])  # the skipped octets (capped)
+
+
+def test_raw_bad_len_inside_the_file_does_not_swallow_good_blocks():
+    """A broken LEN that still ends inside the file (60000 in a 300 KB file) is not
+    taken: the blocks after it would not frame. Only the broken block is lost."""
+    blocks = h.cat010_blocks(9832)
+    data = b"".join(blocks)
+    k = 61
+    off = sum(len(b) for b in blocks[:k])
+    assert len(data) - off > 60_000
+    good, tails = split_blocks_resync(h.damage_length(data, off + 1, 60_000))
+    assert [b for _, b in good] == blocks[:k] + blocks[k + 1 :]
+    assert [t.offset for t in tails] == [off]
+
+
+def test_pcap_bad_length_inside_the_file():
+    from pipeline.convert.asterix import _pcap_packets
+
+    blocks = _blocks()
+    frames = [(T0 + i * 10**8, h.udp_frame(b)) for i, b in enumerate(blocks)]
+    data, offs = h.pcap_bytes(frames)
+    k = 100
+    # included = original = 3000: plausible alone, inside the file; the next header is not
+    bad = data[: offs[k] + 8] + (3000).to_bytes(4, "little") * 2 + data[offs[k] + 16 :]
+    tails: list = []
+    from collections import Counter
+
+    packets = list(_pcap_packets(bad, Counter(), tails))
+    assert len(packets) == len(frames) - 1
+    assert [t.offset for t in tails] == [offs[k]]
