@@ -21,6 +21,7 @@ from __future__ import annotations
 import datetime as dt
 import math
 from pathlib import Path
+from urllib.parse import unquote
 
 import pyarrow as pa
 import pyarrow.compute as pc
@@ -177,7 +178,8 @@ def _snapshot_dataset(path: Path, schema: pa.Schema) -> pds.Dataset:
     The file list comes from the Delta log (so replaced files are never read); the
     reading is Arrow's own."""
     snapshot = DeltaTable(str(path))
-    files = snapshot.file_uris()
+    # local paths, percent-encoded as URIs (a space is %20, '#' is %23, '%' is %25)
+    files = [unquote(u) for u in snapshot.file_uris()]
     parts = snapshot.metadata().partition_columns
     fmt = pds.ParquetFileFormat()
     if not files:

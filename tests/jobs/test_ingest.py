@@ -153,8 +153,10 @@ def test_damaged_file_is_partial_with_rejects(tmp_path, cfg):
     assert "messages lost" in rej["reason"] and rej["log_time_ns"] == ci.message_start_time
     (led,) = read_table(wh, "ingest_ledger").to_pylist()
     assert led["status"] == "partial" and "corrupt_chunk" in led["error"]
-    # partial + unchanged -> skipped next time
-    assert ingest([p], cfg, wh).files_skipped == 1
+    # partial -> read again next time (issue 18: the README's promise), same result
+    again = ingest([p], cfg, wh)
+    assert again.files_skipped == 0 and again.files_partial == 1 and again.exit_code == 1
+    assert len(rows_of(wh, "rejects", p)) == 1
 
 
 def test_bad_paths_are_usage_errors(tmp_path, cfg):
