@@ -89,21 +89,28 @@ def cli(ctx: click.Context, config_path, warehouse, log_level, log_json) -> None
 
 
 @cli.command()
-@click.option("--scenario", type=click.Choice(["channel", "airfield", "gaps", "ownship"]),
+@click.option("--scenario",
+              type=click.Choice(["channel", "airfield", "gaps", "ownship", "region"]),
               default="channel", show_default=True)
-@click.option("--duration", default="1h", show_default=True, help="e.g. 1h, 30m, 90s")
+@click.option("--duration", default=None,
+              help="e.g. 1h, 30m, 90s (default 1h; region: 24h)")
 @click.option("--seed", type=int, default=7, show_default=True)
 @click.option("--start", default=None,
               help="log start time, ISO 8601 (default 2026-01-15T00:00:00Z)")
+@click.option("--ships", type=int, default=None,
+              help="region: mean number of ships in the scene (default 1000)")
+@click.option("--radars", type=int, default=None,
+              help="region: number of radar sites along the coast (default 6)")
 @click.option("--out", type=click.Path(file_okay=False), required=True)
 @click.pass_obj
-def simulate(st: _State, scenario, duration, seed, start, out) -> None:
-    """Write a simulated scenario as an MCAP archive (one file per hour)."""
+def simulate(st: _State, scenario, duration, seed, start, ships, radars, out) -> None:
+    """Write a simulated scenario as an MCAP archive (one file per hour). The region
+    scenario also writes its config, region.toml, beside the files."""
     from jobs.simulate import run_simulate
 
     start_ns = parse_time_ns(start) if start else None
-    for f in run_simulate(scenario, _duration_s(duration), seed, Path(out), st.cfg,
-                          start_ns=start_ns):
+    for f in run_simulate(scenario, _duration_s(duration) if duration else None, seed,
+                          Path(out), st.cfg, start_ns=start_ns, ships=ships, radars=radars):
         click.echo(str(f))
 
 
