@@ -5,7 +5,8 @@ BIN    := $(VENV)/bin
 
 .PHONY: demo test setup lint bench clean
 
-NATIVE := pipeline/decode/_json_columns.c pipeline/decode/_pow5_128.h pipeline/io/_mcap_records.c
+NATIVE := pipeline/decode/_json_columns.c pipeline/decode/_pow5_128.h pipeline/io/_mcap_records.c \
+          pipeline/maritime/_associate.c
 
 # pip builds the two C extensions (optional: skipped without a C compiler)
 $(BIN)/surveil: pyproject.toml $(NATIVE)

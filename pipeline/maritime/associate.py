@@ -46,6 +46,11 @@ from pipeline.maritime.config import AssociationConfig
 from pipeline.maritime.sync import extrapolate_position, extrapolation_covariance
 from pipeline.units import NS
 
+try:  # the epoch loop in C (optional: built when a C compiler is present)
+    from pipeline.maritime import _associate
+except ImportError:  # pragma: no cover - same ids, ~30-100x slower
+    _associate = None
+
 #: continuity bonus, in units of the gate: keeps gated persisting pairs whatever the sums
 _BONUS_GATES = 1000.0
 
@@ -126,6 +131,29 @@ def assign(cost: np.ndarray, miss_cost: np.ndarray | float) -> tuple[np.ndarray,
     return r[order], c[order]
 
 
+_STATE_FORM = 0
+"""How ``_associate.c`` turns the sums into a state: 0 = the per-axis means below."""
+
+
+def _channel_terms(rows: Kinematics, sv: np.ndarray, sc: np.ndarray) -> np.ndarray:
+    """Each channel's own eq. 14 terms, (n, 10): what a candidate's sums accumulate."""
+    wx, wy, wv, wc = 1.0 / rows.P_xx, 1.0 / rows.P_yy, sv**-2, sc**-2
+    return np.column_stack(
+        [
+            wx,
+            wx * rows.x_m,
+            wy,
+            wy * rows.y_m,
+            wx * wy * rows.P_xy,
+            wv,
+            wv * rows.speed_mps,
+            wc,
+            wc * np.sin(rows.course_rad),
+            wc * np.cos(rows.course_rad),
+        ]
+    )
+
+
 class _Candidates:
     """Candidate system tracks of one epoch, as eq. 14 running sums (arrays of size
     n_rows of the epoch): weights 1/P_xx, 1/P_yy, 1/sigma_v^2, 1/sigma_c^2."""
@@ -144,22 +172,7 @@ class _Candidates:
         prev: np.ndarray,
         site: int,
     ) -> None:
-        wx, wy, wv, wc = 1.0 / rows.P_xx, 1.0 / rows.P_yy, sv**-2, sc**-2
-        contrib = np.column_stack(
-            [
-                wx,
-                wx * rows.x_m,
-                wy,
-                wy * rows.y_m,
-                wx * wy * rows.P_xy,
-                wv,
-                wv * rows.speed_mps,
-                wc,
-                wc * np.sin(rows.course_rad),
-                wc * np.cos(rows.course_rad),
-            ]
-        )
-        np.add.at(self.sums, clusters, contrib)
+        np.add.at(self.sums, clusters, _channel_terms(rows, sv, sc))
         self.prev_ids[clusters, site] = prev
 
     def new(self, k: int) -> np.ndarray:
@@ -214,22 +227,82 @@ def associate_tracks(synced: pl.DataFrame, *, cfg: AssociationConfig, id_base: i
     the OTHER members of its system track at that epoch; null when alone), sorted by
     (time_ns, system_track_id, site_id).
     """
-    df = synced.sort("time_ns", "site_id", "local_track_id")
-    keys = df.select("site_id", "local_track_id").unique(maintain_order=True)
-    df = df.join(keys.with_row_index("_key"), on=["site_id", "local_track_id"], how="left")
-    sites = sorted(df["site_id"].unique().to_list())
-    site_idx = df["site_id"].replace_strict(sites, list(range(len(sites)))).to_numpy()
-    sys_idx = _assign_ids(df, site_idx, keys.height, len(sites), cfg)
+    df, site_idx, n_keys, n_sites = prepare_rows(synced)
+    sys_idx = _assign_ids(df, site_idx, n_keys, n_sites, cfg)
     out = df.drop("_key").with_columns(
         pl.Series("system_track_id", sys_idx + int(id_base), dtype=pl.Int64)
     )
     return _with_leave_one_out_d2(out).sort("time_ns", "system_track_id", "site_id")
 
 
+def prepare_rows(synced: pl.DataFrame) -> tuple[pl.DataFrame, np.ndarray, int, int]:
+    """The epoch loop's input: rows sorted by (time_ns, site_id, local_track_id) with a
+    ``_key`` column (index of the (site, local track) pair), each row's site index (sites
+    in sorted order), the number of keys and of sites."""
+    df = synced.sort("time_ns", "site_id", "local_track_id")
+    keys = df.select("site_id", "local_track_id").unique(maintain_order=True)
+    df = df.join(keys.with_row_index("_key"), on=["site_id", "local_track_id"], how="left")
+    sites = sorted(df["site_id"].unique().to_list())
+    site_idx = df["site_id"].replace_strict(sites, list(range(len(sites)))).to_numpy()
+    return df, site_idx, keys.height, len(sites)
+
+
 def _assign_ids(
     df: pl.DataFrame, site_idx: np.ndarray, n_keys: int, n_sites: int, cfg: AssociationConfig
 ) -> np.ndarray:
-    """The epoch loop. Everything inside an epoch is array work (broadcast gates, one
+    """System index of every row: the compiled epoch loop (``_associate.c``: the same
+    gates, costs and assignments as :func:`_assign_ids_reference`, with spatial gating
+    and without a numpy call per site step), or the reference without a C compiler."""
+    if _associate is None:
+        return _assign_ids_reference(df, site_idx, n_keys, n_sites, cfg)
+    return _assign_ids_native(df, site_idx, n_keys, n_sites, cfg)
+
+
+def _lsa_columns(cost: bytes, k: int, m: int) -> bytes:
+    """The kernel's callback: scipy's assignment of a (k, m) cost matrix (k <= m), as
+    int64 column per row."""
+    _, cols = linear_sum_assignment(np.frombuffer(cost, np.float64).reshape(k, m))
+    return np.ascontiguousarray(cols, np.int64).tobytes()
+
+
+def _assign_ids_native(
+    df: pl.DataFrame, site_idx: np.ndarray, n_keys: int, n_sites: int, cfg: AssociationConfig
+) -> np.ndarray:
+    cols = [
+        np.ascontiguousarray(df[c].to_numpy(), np.float64)
+        for c in ("x_enu_m", "y_enu_m", "P_xx", "P_yy", "P_xy", "speed_mps", "course_rad")
+    ]
+    kin = Kinematics(*cols)
+    sv = df["sigma_speed_mps"].to_numpy().astype(float)
+    sc = df["sigma_course_rad"].to_numpy().astype(float)
+    terms = np.ascontiguousarray(_channel_terms(kin, sv, sc))
+    out = np.empty(df.height, np.int64)
+    _associate.assign_ids(
+        np.ascontiguousarray(df["time_ns"].to_numpy(), np.int64),
+        np.ascontiguousarray(site_idx, np.int64),
+        np.ascontiguousarray(df["_key"].to_numpy(), np.int64),
+        *cols,
+        terms,
+        out,
+        int(n_keys),
+        int(n_sites),
+        gate_threshold(cfg.gate_probability),
+        float(cfg.max_course_difference_rad),
+        float(cfg.max_speed_difference_mps),
+        float(cfg.course_gate_min_speed_mps),
+        float(_BONUS_GATES),
+        round(cfg.track_timeout_s * NS),
+        _STATE_FORM,
+        _lsa_columns,
+    )
+    return out
+
+
+def _assign_ids_reference(
+    df: pl.DataFrame, site_idx: np.ndarray, n_keys: int, n_sites: int, cfg: AssociationConfig
+) -> np.ndarray:
+    """The epoch loop in numpy (the reference the compiled loop is tested against).
+    Everything inside an epoch is array work (broadcast gates, one
     linear_sum_assignment per site and one for the ids); epochs must be processed in
     order because each epoch's ids depend on the previous ones, hence the loop."""
     t = df["time_ns"].to_numpy()
