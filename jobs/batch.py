@@ -121,12 +121,13 @@ def run_unit(unit: BatchUnit) -> UnitManifest:
 
 
 def plan_units(
-    warehouse: Path, cfg: Config, start_ns: int, end_ns: int, staging_dir: Path
+    warehouse: Path, cfg: Config, start_ns: int, end_ns: int, staging_dir: Path,
+    families: tuple[Family, ...] = FAMILIES,
 ) -> list[BatchUnit]:
     """Cut [start_ns, end_ns) into each family's work units (at UTC multiples of its
     ``unit_s``, or one unit for the whole window)."""
     units = []
-    for fam in FAMILIES:
+    for fam in families:
         if fam.unit_s is None:
             cuts = [start_ns, end_ns]
         else:
@@ -147,14 +148,18 @@ def run_batch(
     start_ns: int,
     end_ns: int,
     executor_kind: str | None = None,
+    families: tuple[str, ...] | None = None,
 ) -> BatchSummary:
-    """Run the batch for [start_ns, end_ns) and commit it atomically per table."""
+    """Run the batch for [start_ns, end_ns) and commit it atomically per table.
+
+    ``families``: names of the families to run (default: every registered family)."""
     if end_ns <= start_ns:
         raise ValueError("--to must be after --from")
+    fams = FAMILIES if families is None else tuple(family(name) for name in families)
     warm_up()  # the views file's DuckDB instance, built while the batch runs
     staging = warehouse / "_staging" / f"batch-{start_ns}-{end_ns}"
     shutil.rmtree(staging, ignore_errors=True)
-    units = plan_units(warehouse, cfg, start_ns, end_ns, staging)
+    units = plan_units(warehouse, cfg, start_ns, end_ns, staging, fams)
     summary = BatchSummary(start_ns=start_ns, end_ns=end_ns, units_total=len(units))
     ex = cfg.execution
     executor = make_executor(
@@ -171,7 +176,7 @@ def run_batch(
             log.error("batch unit failed %s", label)
     if summary.failed_units:
         return summary
-    _commit(warehouse, manifests, summary)
+    _commit(warehouse, manifests, summary, fams)
     shutil.rmtree(staging, ignore_errors=True)
     with contextlib.suppress(OSError):  # only when empty: another job may be staging
         (warehouse / "_staging").rmdir()
@@ -179,10 +184,11 @@ def run_batch(
     return summary
 
 
-def _commit(warehouse: Path, manifests: list[UnitManifest], summary: BatchSummary) -> None:
+def _commit(warehouse: Path, manifests: list[UnitManifest], summary: BatchSummary,
+            families: tuple[Family, ...] = FAMILIES) -> None:
     """Stitch ids across unit seams, then one atomic overwrite per derived table whose
     predicate is the window. Only the driver commits."""
-    for fam in FAMILIES:
+    for fam in families:
         ours = sorted((m for m in manifests if m.family == fam.name), key=lambda m: m.start_ns)
         parts = {name: [pl.read_parquet(m.files[name]) for m in ours if name in m.files]
                  for name in fam.outputs}

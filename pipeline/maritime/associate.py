@@ -154,6 +154,69 @@ def _channel_terms(rows: Kinematics, sv: np.ndarray, sc: np.ndarray) -> np.ndarr
     )
 
 
+def assign_grouped(
+    rows: np.ndarray,
+    cols: np.ndarray,
+    cost: np.ndarray,
+    miss: np.ndarray,
+    group_of_row: np.ndarray,
+    n_cols: int,
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`assign` of many independent matrices at once, given as entries.
+
+    Rows and columns are global indices; each row belongs to one group
+    (``group_of_row``) and pairs only with columns of its group; entries not given are
+    +inf; ``miss``: each row's miss cost. The result is what :func:`assign` returns for
+    each group's matrix (rows and columns in ascending order), concatenated and sorted
+    by row: lone matches directly, then, per group that has any left, the same
+    ``linear_sum_assignment`` on the same augmented matrix. The loop runs over those
+    groups only (a handful where the gates overlap), never over rows.
+    """
+    rows = np.asarray(rows, np.int64)
+    cols = np.asarray(cols, np.int64)
+    cost = np.asarray(cost, float)
+    ok = np.isfinite(cost) & (cost < miss[rows])
+    rows, cols, cost = rows[ok], cols[ok], cost[ok]
+    if rows.size == 0:
+        return np.empty(0, np.int64), np.empty(0, np.int64)
+    order = np.lexsort((cols, rows))
+    rows, cols, cost = rows[order], cols[order], cost[order]
+    n_rows = group_of_row.size
+    row_n = np.bincount(rows, minlength=n_rows)
+    col_n = np.bincount(cols, minlength=n_cols)
+    first = np.flatnonzero(np.r_[True, rows[1:] != rows[:-1]])
+    col_of = np.full(n_rows, -1, np.int64)
+    col_of[rows[first]] = cols[first]
+    has = row_n > 0
+    lone = has & (row_n == 1) & (col_n[np.maximum(col_of, 0)] == 1)
+    r_out, c_out = [np.flatnonzero(lone)], [col_of[lone]]
+    rest = has & ~lone
+    sel = rest[rows]
+    e_rows, e_cols, e_cost = rows[sel], cols[sel], cost[sel]
+    if e_rows.size:
+        g = group_of_row[e_rows]
+        by_group = np.argsort(g, kind="stable")
+        g, e_rows, e_cols = g[by_group], e_rows[by_group], e_cols[by_group]
+        e_cost = e_cost[by_group]
+        bounds = np.flatnonzero(np.r_[True, g[1:] != g[:-1], True])
+        for a, b in pairwise(bounds):
+            rr, cc, vv = e_rows[a:b], e_cols[a:b], e_cost[a:b]
+            rest_r = np.unique(rr)
+            rest_c = np.unique(cc)
+            k, mc = rest_r.size, rest_c.size
+            aug = np.full((k, mc + k), np.inf)
+            aug[np.searchsorted(rest_r, rr), np.searchsorted(rest_c, cc)] = vv
+            aug[np.arange(k), mc + np.arange(k)] = miss[rest_r]
+            lr, lc = linear_sum_assignment(aug)
+            keep = lc < mc
+            r_out.append(rest_r[lr[keep]])
+            c_out.append(rest_c[lc[keep]])
+    r = np.concatenate(r_out)
+    c = np.concatenate(c_out)
+    order = np.argsort(r, kind="stable")
+    return r[order], c[order]
+
+
 class _Candidates:
     """Candidate system tracks of one epoch, as eq. 14 running sums (arrays of size
     n_rows of the epoch): weights 1/P_xx, 1/P_yy, 1/sigma_v^2, 1/sigma_c^2."""

@@ -29,8 +29,9 @@ import polars as pl
 from pipeline.config import AisConfig, RegionConfig
 from pipeline.frames import geodetic_to_enu
 from pipeline.geometry import position_covariance
-from pipeline.maritime.associate import assign, gate_threshold
+from pipeline.maritime.associate import assign, assign_grouped, gate_threshold
 from pipeline.maritime.sync import expand_ranges, extrapolate_position
+from pipeline.spatial import pairs_within
 from pipeline.units import NS
 
 IDENTIFICATION_COLUMNS = ("time_ns", "system_track_id", "mmsi", "ais_time_ns", "mahalanobis_d2")
@@ -125,8 +126,87 @@ def identify(
 
 
 def _match(tracks: pl.DataFrame, ais: pl.DataFrame, gate: float) -> pl.DataFrame:
-    """One-to-one gated matches per epoch. Loop over epochs only: each epoch's
-    (n_tracks, n_mmsi) d^2 matrix is one broadcast, then one assignment."""
+    """One-to-one gated matches per epoch, vectorised over all epochs: the AIS points
+    that can pass the gate are found by a grid join (``pipeline.spatial``; |D|^2 <=
+    d^2 lambda_max(P_t + P_a) bounds the distance of a gated pair), their d^2 computed
+    pair by pair, then :func:`~pipeline.maritime.associate.assign_grouped` makes the
+    assignment of every epoch (lone pairs at once, a linear_sum_assignment only where
+    gates overlap). Same matches as :func:`_match_reference` (dense matrix per epoch)."""
+    tt, at = tracks["time_ns"].to_numpy(), ais["time_ns"].to_numpy()
+    epochs = np.intersect1d(tt, at)
+    tP, aP = position_covariance(tracks), position_covariance(ais)
+    ti, ai = _in_epochs(tt, epochs), _in_epochs(at, epochs)
+    tx, ty = tracks["x_enu_m"].to_numpy(), tracks["y_enu_m"].to_numpy()
+    ax, ay = ais["x_enu_m"].to_numpy(), ais["y_enu_m"].to_numpy()
+    r_t, r_a = _gate_radius(tP, gate), _gate_radius(aP, gate)
+    r_a_max = float(r_a[ai].max()) if ai.size else 0.0
+    i, j, _ = pairs_within(
+        np.searchsorted(epochs, tt[ti]), tx[ti], ty[ti], r_t[ti] + r_a_max,
+        np.searchsorted(epochs, at[ai]), ax[ai], ay[ai], cell_m=1000.0,
+    )
+    i, j = ti[i], ai[j]
+    dx = tx[i] - ax[j]
+    dy = ty[i] - ay[j]
+    sxx, syy, sxy = (tP[k][i] + aP[k][j] for k in range(3))
+    d2 = (syy * dx * dx - 2.0 * sxy * dx * dy + sxx * dy * dy) / (sxx * syy - sxy * sxy)
+    keep = d2 < gate
+    i, j, d2 = i[keep], j[keep], d2[keep]
+    group = np.searchsorted(epochs, tt)
+    r, c = assign_grouped(i, j, d2, np.full(tt.size, gate), group, at.size)
+    pair_d2 = _pair_lookup(i, j, d2, r, c)
+    return _matches_frame(tracks, ais, r, c, pair_d2)
+
+
+def _in_epochs(t: np.ndarray, epochs: np.ndarray) -> np.ndarray:
+    """Indices of the rows whose time is one of ``epochs`` (sorted)."""
+    pos = np.searchsorted(epochs, t)
+    return np.flatnonzero((pos < epochs.size) & (epochs[np.minimum(pos, epochs.size - 1)] == t))
+
+
+def _gate_radius(P: tuple[np.ndarray, ...], gate: float) -> np.ndarray:
+    """sqrt(gate * lambda_max(P)) per row (slightly widened); inf where P is not positive
+    definite (such a row is compared with every point of its epoch)."""
+    a, c, b = (np.asarray(x, float) for x in P)
+    h = 0.5 * (a - c)
+    lam = 0.5 * (a + c) + np.sqrt(h * h + b * b)
+    ok = (a > 0) & (c > 0) & (a * c - b * b > 0) & np.isfinite(lam)
+    return np.where(ok, np.sqrt(gate * np.where(ok, lam, 0.0)) * (1 + 1e-9) + 1e-6, np.inf)
+
+
+def _pair_lookup(i: np.ndarray, j: np.ndarray, v: np.ndarray, r: np.ndarray, c: np.ndarray
+                 ) -> np.ndarray:
+    """v of the pairs (r, c), looked up among the pairs (i, j) (sorted by (i, j))."""
+    order = np.lexsort((j, i))
+    i, j, v = i[order], j[order], v[order]
+    key = i.astype(np.int64) * (int(j.max()) + 1 if j.size else 1) + j
+    q = r.astype(np.int64) * (int(j.max()) + 1 if j.size else 1) + c
+    return v[np.searchsorted(key, q)]
+
+
+def _matches_frame(tracks: pl.DataFrame, ais: pl.DataFrame, ti: np.ndarray, ai: np.ndarray,
+                   d2: np.ndarray) -> pl.DataFrame:
+    return pl.DataFrame(
+        {
+            "time_ns": tracks["time_ns"].to_numpy()[ti],
+            "system_track_id": tracks["system_track_id"].to_numpy()[ti],
+            "mmsi": ais["mmsi"].to_numpy()[ai],
+            "ais_time_ns": ais["ais_time_ns"].to_numpy()[ai],
+            "mahalanobis_d2": d2,
+        },
+        schema={
+            "time_ns": pl.Int64,
+            "system_track_id": pl.Int64,
+            "mmsi": pl.Int64,
+            "ais_time_ns": pl.Int64,
+            "mahalanobis_d2": pl.Float64,
+        },
+    )
+
+
+def _match_reference(tracks: pl.DataFrame, ais: pl.DataFrame, gate: float) -> pl.DataFrame:
+    """One-to-one gated matches per epoch, one dense (n_tracks, n_mmsi) d^2 matrix and one
+    :func:`~pipeline.maritime.associate.assign` per epoch (the reference of
+    :func:`_match`; quadratic in the number of ships)."""
     tt, at = tracks["time_ns"].to_numpy(), ais["time_ns"].to_numpy()
     tx, ty = tracks["x_enu_m"].to_numpy(), tracks["y_enu_m"].to_numpy()
     ax, ay = ais["x_enu_m"].to_numpy(), ais["y_enu_m"].to_numpy()
@@ -149,22 +229,8 @@ def _match(tracks: pl.DataFrame, ais: pl.DataFrame, gate: float) -> pl.DataFrame
         d2_all.append(d2[r, c])
     ti = np.concatenate(ti_all) if ti_all else np.empty(0, int)
     ai = np.concatenate(ai_all) if ai_all else np.empty(0, int)
-    return pl.DataFrame(
-        {
-            "time_ns": tt[ti],
-            "system_track_id": tracks["system_track_id"].to_numpy()[ti],
-            "mmsi": ais["mmsi"].to_numpy()[ai],
-            "ais_time_ns": ais["ais_time_ns"].to_numpy()[ai],
-            "mahalanobis_d2": np.concatenate(d2_all) if d2_all else np.empty(0),
-        },
-        schema={
-            "time_ns": pl.Int64,
-            "system_track_id": pl.Int64,
-            "mmsi": pl.Int64,
-            "ais_time_ns": pl.Int64,
-            "mahalanobis_d2": pl.Float64,
-        },
-    )
+    return _matches_frame(tracks, ais, ti, ai,
+                          np.concatenate(d2_all) if d2_all else np.empty(0))
 
 
 def vote_identity(

@@ -38,6 +38,10 @@ Radars: each site's tracker as in the ``channel`` scenario (antenna sweep times,
 detection probability 0.97, initiation after 3 detections, 2 coasted scans, a confirmed
 track lost with probability 0.002 per scan, reports published at the scan end), run
 with its state carried from slice to slice; local track ids count up per site from 1.
+Unlike the channel scenario's white errors, a track report's errors (range, azimuth,
+course, speed) are those of a tracker's filtered output: first-order Gauss-Markov over
+the track's scans with correlation time TRACKER_ERROR_TAU_S (15 s) and the site's
+sigmas as stationary standard deviations.
 Report values are rounded to a tracker's output resolution (range 1 cm, azimuth 1e-6 rad,
 ...). Truth: every ``truth_period_s`` (default 5 s) per vessel, lat/lon, true course,
 speed.
@@ -115,6 +119,10 @@ P_CRAFT_CLASS_B = 0.5
 PLAN_LEAD_H = 16
 """The traffic plan starts this many hours before the scenario (steady state at t = 0)."""
 RADAR_WARMUP_S = 60.0
+TRACKER_ERROR_TAU_S = 15.0
+"""Correlation time of a site tracker's output errors, s: a track report is a filtered
+estimate, its error changes little from one scan to the next (white report errors would
+let any downstream Kalman filter average them away, which real track data do not allow)."""
 TRUTH_PERIOD_S = 5.0
 STATIC_INTERVAL_S = 360.0
 ANCHOR_AIS_INTERVAL_S = 180.0
@@ -562,6 +570,7 @@ class _SiteState:
     misses: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     track: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     last: np.ndarray = field(default_factory=lambda: np.zeros((0, 5)))  # x, y, c, v, t
+    err: np.ndarray = field(default_factory=lambda: np.zeros((0, 5)))  # r, az, c, v, t
 
     def grow(self, n: int) -> None:
         if self.in_track.size >= n:
@@ -573,6 +582,7 @@ class _SiteState:
         self.misses = np.concatenate([self.misses, np.zeros(m - k, np.int64)])
         self.track = np.concatenate([self.track, np.full(m - k, -1, np.int64)])
         self.last = np.vstack([self.last, np.zeros((m - k, 5))])
+        self.err = np.vstack([self.err, np.zeros((m - k, 5))])
 
 
 @dataclass
@@ -725,12 +735,19 @@ class RegionSimulation:
                 continue
             kk = np.full(rows.size, k)
             meas = status < 3
-            rm = np.abs(r[rows, kk] + site.sigma_range_m * z[rows, kk, 0])
-            am = np.mod(azt[rows, kk] + sig_az * z[rows, kk, 1], TWO_PI)
-            cm = np.mod(crs[rows, kk] + sig_c * z[rows, kk, 2], TWO_PI)
-            vm = np.abs(spd[rows, kk] + site.sigma_speed_mps * z[rows, kk, 3])
-            xm, ym = polar_to_enu(rm, am)
             tsk = ts[rows, kk]
+            # the site tracker's output error: first-order Gauss-Markov from scan to scan
+            # (rho = exp(-dt / tau)), stationary from the track's first report
+            err = st.err[vid[rows]]
+            rho = np.where(status == 1, 0.0, np.exp(-(tsk - err[:, 4]) / TRACKER_ERROR_TAU_S))
+            sig = np.array([site.sigma_range_m, sig_az, sig_c, site.sigma_speed_mps])
+            e = rho[:, None] * err[:, :4] + np.sqrt(1.0 - rho**2)[:, None] * sig * z[rows, kk]
+            st.err[vid[rows[meas]]] = np.column_stack([e, tsk])[meas]
+            rm = np.abs(r[rows, kk] + e[:, 0])
+            am = np.mod(azt[rows, kk] + e[:, 1], TWO_PI)
+            cm = np.mod(crs[rows, kk] + e[:, 2], TWO_PI)
+            vm = np.abs(spd[rows, kk] + e[:, 3])
+            xm, ym = polar_to_enu(rm, am)
             # coasted scans: predicted from the previous report
             last = st.last[vid[rows]]
             dt = tsk - last[:, 4]

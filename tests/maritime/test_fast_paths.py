@@ -1,0 +1,107 @@
+"""Faster paths of the maritime stage against the references they replaced (STYLE.md:
+a faster path keeps its reference and is tested against it)."""
+
+from __future__ import annotations
+
+import numpy as np
+import polars as pl
+import pytest
+from polars.testing import assert_frame_equal
+
+from pipeline.families import load_config
+from pipeline.maritime import identity, score
+from pipeline.maritime.associate import assign, assign_grouped, gate_threshold
+
+T0_NS = 1_768_471_200 * 10**9
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_assign_grouped_equals_assign_per_group(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    rows, cols, costs, groups, miss_all = [], [], [], [], []
+    r0 = c0 = 0
+    expect_r, expect_c = [], []
+    for g in range(12):
+        n, m = rng.integers(0, 9), rng.integers(0, 9)
+        cost = np.where(rng.random((n, m)) < 0.35, rng.uniform(0, 10, (n, m)), np.inf)
+        if g % 3 == 0 and n and m:  # ties
+            cost[cost < 5] = 2.0
+        miss = rng.uniform(1, 12, n)
+        if n and m:
+            r, c = assign(cost, miss)
+            expect_r.append(r0 + r)
+            expect_c.append(c0 + c)
+        i, j = np.nonzero(np.isfinite(cost))
+        rows.append(r0 + i)
+        cols.append(c0 + j)
+        costs.append(cost[i, j])
+        groups.append(np.full(n, g))
+        miss_all.append(miss)
+        r0, c0 = r0 + n, c0 + m
+    perm = rng.permutation(sum(map(len, rows)))  # entries in any order
+    r, c = assign_grouped(np.concatenate(rows)[perm], np.concatenate(cols)[perm],
+                          np.concatenate(costs)[perm], np.concatenate(miss_all),
+                          np.concatenate(groups), c0)
+    np.testing.assert_array_equal(r, np.concatenate(expect_r) if expect_r else [])
+    np.testing.assert_array_equal(c, np.concatenate(expect_c) if expect_c else [])
+
+
+def _crowd(seed: int, n_epochs: int = 20, n: int = 120) -> tuple[pl.DataFrame, pl.DataFrame]:
+    """Tracks and AIS points crowded enough that gates overlap."""
+    rng = np.random.default_rng(seed)
+    t = np.repeat(T0_NS + 4 * 10**9 * np.arange(n_epochs), n)
+    base = rng.uniform(0, 6000, (n, 2))
+    xy = np.tile(base, (n_epochs, 1)) + rng.normal(0, 40, (n * n_epochs, 2))
+    sig = rng.choice([10.0, 60.0, 300.0], n * n_epochs)
+    tracks = pl.DataFrame({
+        "time_ns": t, "system_track_id": np.tile(np.arange(n), n_epochs),
+        "x_enu_m": xy[:, 0], "y_enu_m": xy[:, 1], "sigma_x_m": sig, "sigma_y_m": sig * 0.7,
+        "cov_xy_m2": sig * sig * 0.2,
+    })
+    keep = rng.random(n * n_epochs) < 0.8
+    ais = pl.DataFrame({
+        "time_ns": t[keep], "mmsi": 200_000_000 + np.tile(np.arange(n), n_epochs)[keep],
+        "ais_time_ns": t[keep], "x_enu_m": xy[keep, 0] + rng.normal(0, 15, keep.sum()),
+        "y_enu_m": xy[keep, 1] + rng.normal(0, 15, keep.sum()), "P_xx": 100.0,
+        "P_yy": 100.0, "P_xy": 0.0,
+    })
+    return tracks.sort("time_ns", "system_track_id"), ais.sort("time_ns", "mmsi")
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_ais_match_equals_dense_reference(seed: int) -> None:
+    tracks, ais = _crowd(seed)
+    gate = gate_threshold(0.999)
+    fast = identity._match(tracks, ais, gate)
+    ref = identity._match_reference(tracks, ais, gate)
+    assert ref.height > 1000
+    assert_frame_equal(fast, ref)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_nearest_truth_equals_polars_reference(seed: int) -> None:
+    cfg = load_config()
+    rng = np.random.default_rng(seed)
+    n_v, n_e = 80, 15
+    t = np.repeat(T0_NS + 5 * 10**9 * np.arange(n_e), n_v)
+    lat = 46.40 + np.tile(rng.uniform(-0.05, 0.05, n_v), n_e) + rng.normal(0, 1e-5, n_v * n_e)
+    lon = 30.90 + np.tile(rng.uniform(-0.05, 0.05, n_v), n_e)
+    truth = pl.DataFrame({"time_ns": t, "vessel_id": np.tile(np.arange(n_v), n_e),
+                          "mmsi": np.tile(np.arange(n_v), n_e) + 1000, "lat_deg": lat,
+                          "lon_deg": lon, "course_rad": 0.0, "speed_mps": 0.0})
+    epochs = T0_NS + 4 * 10**9 * np.arange(15)
+    at = score.truth_at_epochs(truth, epochs, cfg.region)
+    pts = at.sample(400, with_replacement=True, seed=seed).select(
+        "time_ns", (pl.col("ref_x_m") + rng.normal(0, 600, 400)).alias("x_enu_m"),
+        (pl.col("ref_y_m") + rng.normal(0, 600, 400)).alias("y_enu_m"),
+    ).with_row_index("system_track_id").with_columns(pl.col("system_track_id").cast(pl.Int64))
+    pts = pts.sort("time_ns", "system_track_id")
+    ref = score._truth_reference_reference(pts, truth, cfg.region, 1000.0, 0.0).sort(
+        "time_ns", "system_track_id")
+    row = score.nearest_truth(pts["time_ns"].to_numpy(), pts["x_enu_m"].to_numpy(),
+                              pts["y_enu_m"].to_numpy(), at, 1000.0)
+    got = pts.filter(pl.Series(row >= 0)).select(
+        "time_ns", "system_track_id",
+        pl.Series("reference_id", at["vessel_id"].to_numpy()[row[row >= 0]]))
+    assert ref.height > 100
+    assert_frame_equal(got, ref.select("time_ns", "system_track_id", "reference_id"))
