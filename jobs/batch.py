@@ -4,10 +4,15 @@ A *batch family* (maritime radar + AIS here; own-ship navigation and airfield su
 surveillance plug in the same way) reads its inputs from the warehouse for a sub-window
 and returns its derived tables. The window is cut into work units (family, sub-window:
 one per UTC hour, or the whole window for families whose filters need continuity); each
-unit writes its outputs as staged Parquet files under a deterministic name. Only when
-every unit of the window has succeeded does the driver commit, one atomic Delta
-overwrite per derived table whose predicate is the window; a failure or a crash before
-that leaves the previous data of the window untouched.
+unit writes its outputs once, as the tables' final Parquet data files (sorted row groups,
+Delta statistics) in a staging folder, and returns a small manifest (the files and the
+family's unit seam). Only when every unit of the window has succeeded does the driver
+join the units (a family's ``join_units`` over the seams; units whose ids must be
+relabelled are rewritten by the workers) and commit: one Delta transaction per derived
+table that removes the window's old files and adds the staged ones (a file that also
+holds rows outside the window is rewritten without them), so no row passes through the
+driver and its memory does not grow with the window. A failure or a crash before the
+commit leaves the previous data of the window untouched.
 """
 
 from __future__ import annotations
@@ -15,21 +20,23 @@ from __future__ import annotations
 import contextlib
 import itertools
 import logging
+import os
 import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import polars as pl
-import pyarrow.parquet as pq
 
 from pipeline import tables
 from pipeline.config import Config
 from pipeline.executors import make_executor
 from pipeline.families import FAMILIES, family
-from pipeline.family import Family, Window
+from pipeline.family import Family, Relabel, Window, relabel
 from pipeline.units import NS
-from pipeline.warehouse.delta import read_table, replace_rows, replace_window
+from pipeline.warehouse.delta import read_table, replace_rows
+from pipeline.warehouse.staged import StagedFile, TableStager, commit_window, read_staged
 from pipeline.warehouse.views import rebuild_views_file, warm_up
 
 log = logging.getLogger(__name__)
@@ -91,33 +98,65 @@ def read_inputs(fam: Family, warehouse: Path, cfg: Config, window: Window
 
 @dataclass(frozen=True)
 class UnitManifest:
-    """What a worker staged: {table: parquet path} for one family's sub-window."""
+    """What a worker staged: {table: data files ready to commit} for one family's
+    sub-window, and the family's ``unit_seam`` of it (small)."""
 
     family: str
     start_ns: int
-    files: dict[str, str]
+    files: dict[str, list[StagedFile]]
+    seam: Any = None
+    staging_dir: str = ""
 
 
 def run_unit(unit: BatchUnit) -> UnitManifest:
-    """Worker: read, compute, stage."""
+    """Worker: read, compute, write the outputs once as the tables' final Parquet data
+    files (``TableStager``: sorted row groups, Delta statistics), return the manifest.
+    The stage returns its frames sorted by the tables' sort keys (its contract)."""
     fam = family(unit.family)
     window = Window(unit.start_ns, unit.end_ns)
     out = fam.stage(read_inputs(fam, Path(unit.warehouse), unit.cfg, window), window, unit.cfg)
     unknown = set(out) - set(fam.outputs) - {"rejects"}
     if unknown:
         raise ValueError(f"family {fam.name} returned tables it does not own: {unknown}")
-    manifest = {}
+    seam = fam.unit_seam(out) if fam.unit_seam is not None else None
+    folder = Path(unit.staging_dir) / f"{unit.family}-{unit.start_ns}"
+    shutil.rmtree(folder, ignore_errors=True)
+    stager = TableStager(folder, threaded=False, presorted=True)
     for name, frame in out.items():
-        if name == "rejects" and frame.height == 0:
-            continue
-        table = tables.conform(name, frame)
-        path = Path(unit.staging_dir) / name / f"{unit.family}-{unit.start_ns}.parquet"
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_suffix(".tmp")
-        pq.write_table(table, tmp)
-        tmp.replace(path)
-        manifest[name] = str(path)
-    return UnitManifest(unit.family, unit.start_ns, manifest)
+        if frame.height:
+            ordered = fam.sorted_outputs and name != "rejects"
+            stager.add(name, tables.shape(name, frame) if ordered else tables.conform(name, frame))
+    del out
+    files: dict[str, list[StagedFile]] = {}
+    for f in stager.close():
+        files.setdefault(f.table, []).append(f)
+    return UnitManifest(unit.family, unit.start_ns, files, seam, str(folder))
+
+
+@dataclass(frozen=True)
+class RelabelTask:
+    """Rewrite a unit's staged files with a :data:`~pipeline.family.Relabel` applied."""
+
+    manifest: UnitManifest
+    mapping: Relabel
+
+
+def relabel_unit(task: RelabelTask) -> UnitManifest:
+    """Worker: the unit's staged files read back, relabelled, staged again (the old ones
+    deleted): ids stitched across seams without bringing the rows to the driver."""
+    m = task.manifest
+    folder = Path(m.staging_dir + "-relabelled")
+    shutil.rmtree(folder, ignore_errors=True)
+    stager = TableStager(folder, threaded=False, presorted=True)
+    for name, staged in m.files.items():
+        for sf in staged:
+            frame = pl.from_arrow(read_staged(name, [sf]))
+            stager.add(name, tables.shape(name, relabel(frame, task.mapping)))
+            os.remove(sf.path)
+    files: dict[str, list[StagedFile]] = {}
+    for f in stager.close():
+        files.setdefault(f.table, []).append(f)
+    return UnitManifest(m.family, m.start_ns, files, m.seam, str(folder))
 
 
 def plan_units(
@@ -174,7 +213,10 @@ def run_batch(
             label = f"{u.family} [{_iso(u.start_ns)}, {_iso(u.end_ns)}): {result.error}"
             summary.failed_units.append(label)
             log.error("batch unit failed %s", label)
+    if not summary.failed_units:
+        manifests = _join_units(executor, manifests, fams, summary)
     if summary.failed_units:
+        shutil.rmtree(staging, ignore_errors=True)
         return summary
     _commit(warehouse, manifests, summary, fams)
     shutil.rmtree(staging, ignore_errors=True)
@@ -184,25 +226,45 @@ def run_batch(
     return summary
 
 
-def _commit(warehouse: Path, manifests: list[UnitManifest], summary: BatchSummary,
-            families: tuple[Family, ...] = FAMILIES) -> None:
-    """Stitch ids across unit seams, then one atomic overwrite per derived table whose
-    predicate is the window. Only the driver commits."""
+def _join_units(executor, manifests: list[UnitManifest], families: tuple[Family, ...],
+                summary: BatchSummary) -> list[UnitManifest]:
+    """Each family's ``join_units`` over its units' seams; units that need a relabelling
+    are rewritten by the executor's workers (in parallel)."""
+    out: list[UnitManifest] = []
+    tasks: list[RelabelTask] = []
     for fam in families:
         ours = sorted((m for m in manifests if m.family == fam.name), key=lambda m: m.start_ns)
-        parts = {name: [pl.read_parquet(m.files[name]) for m in ours if name in m.files]
-                 for name in fam.outputs}
-        if fam.join_units is not None:
-            parts = fam.join_units(parts)
+        if fam.join_units is None or len(ours) < 2:
+            out += ours
+            continue
+        for m, mapping in zip(ours, fam.join_units([m.seam for m in ours]), strict=True):
+            if mapping:
+                tasks.append(RelabelTask(m, mapping))
+            else:
+                out.append(m)
+    for result in executor.map_units(relabel_unit, tasks):
+        if result.ok:
+            out.append(result.value)
+        else:
+            m = result.unit.manifest
+            summary.failed_units.append(f"{m.family} {_iso(m.start_ns)} relabel: {result.error}")
+    return out
+
+
+def _commit(warehouse: Path, manifests: list[UnitManifest], summary: BatchSummary,
+            families: tuple[Family, ...] = FAMILIES) -> None:
+    """One Delta commit per derived table replacing the window's rows by the units'
+    staged files (``commit_window``: no row passes through the driver). Only the driver
+    commits."""
+    for fam in families:
+        ours = [m for m in manifests if m.family == fam.name]
         for name in fam.outputs:
-            frames = parts[name]
-            table = tables.conform(name, pl.concat(frames) if frames else tables.empty(name))
-            replace_window(
-                warehouse, name, table, start_ns=summary.start_ns, end_ns=summary.end_ns
-            )
-            summary.rows[name] = table.num_rows
-    frames = [pl.read_parquet(m.files["rejects"]) for m in manifests if "rejects" in m.files]
-    rejects = tables.conform("rejects", pl.concat(frames) if frames else tables.empty("rejects"))
+            staged = [f for m in ours for f in m.files.get(name, [])]
+            commit_window(warehouse, name, staged, start_ns=summary.start_ns,
+                          end_ns=summary.end_ns)
+            summary.rows[name] = sum(f.rows for f in staged)
+    staged = [f for m in manifests for f in m.files.get("rejects", [])]
+    rejects = read_staged("rejects", staged) if staged else tables.empty("rejects")
     replace_rows(
         warehouse,
         "rejects",

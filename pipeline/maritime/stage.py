@@ -22,7 +22,7 @@ from pipeline.maritime.fuse import fuse
 from pipeline.maritime.identity import identify
 from pipeline.maritime.score import score_tracks
 from pipeline.maritime.siap import siap_by_sector
-from pipeline.maritime.stitch import join_units
+from pipeline.maritime.stitch import join_units, unit_seam
 from pipeline.maritime.sync import epoch_grid, synchronise
 from pipeline.units import NS
 
@@ -118,5 +118,7 @@ FAMILY = Family(
     outputs=OUTPUTS,
     stage=stage,
     unit_s=3600,
+    sorted_outputs=True,
+    unit_seam=unit_seam,
     join_units=join_units,
 )

@@ -105,3 +105,19 @@ def test_nearest_truth_equals_polars_reference(seed: int) -> None:
         pl.Series("reference_id", at["vessel_id"].to_numpy()[row[row >= 0]]))
     assert ref.height > 100
     assert_frame_equal(got, ref.select("time_ns", "system_track_id", "reference_id"))
+
+
+def test_stage_outputs_come_sorted_by_the_tables_sort_keys() -> None:
+    """The family declares sorted_outputs: the batch writes the frames as they are."""
+    from maritime_helpers import batch_tables
+
+    from pipeline import tables
+    from pipeline.maritime.stage import FAMILY
+
+    assert FAMILY.sorted_outputs
+    out = batch_tables(load_config(), duration_s=600.0, seed=3)
+    for name, frame in out.items():
+        if name == "rejects" or frame.height == 0:
+            continue
+        shaped = pl.from_arrow(tables.shape(name, frame))
+        assert_frame_equal(shaped, pl.from_arrow(tables.conform(name, frame)), check_exact=True)
