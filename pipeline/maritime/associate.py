@@ -43,6 +43,7 @@ from scipy.stats import chi2
 
 from pipeline.frames import wrap_angle
 from pipeline.maritime.config import AssociationConfig
+from pipeline.maritime.fuse import group_sums
 from pipeline.maritime.sync import extrapolate_position, extrapolation_covariance
 from pipeline.units import NS
 
@@ -292,6 +293,22 @@ def associate_tracks(synced: pl.DataFrame, *, cfg: AssociationConfig, id_base: i
     """
     df, site_idx, n_keys, n_sites = prepare_rows(synced)
     sys_idx = _assign_ids(df, site_idx, n_keys, n_sites, cfg)
+    ids = sys_idx + int(id_base)
+    order = np.lexsort((site_idx, ids, df["time_ns"].to_numpy()))
+    out = df.drop("_key")[order].with_columns(pl.Series("system_track_id", ids[order],
+                                                        dtype=pl.Int64))
+    d2, alone = leave_one_out_d2(out)
+    return out.with_columns(
+        pl.when(pl.Series(alone)).then(None).otherwise(pl.Series(d2)).alias("mahalanobis_d2")
+    )
+
+
+def associate_tracks_reference(synced: pl.DataFrame, *, cfg: AssociationConfig, id_base: int
+                               ) -> pl.DataFrame:
+    """:func:`associate_tracks` with the numpy epoch loop and the polars leave-one-out
+    distance (the reference the fast path is tested against)."""
+    df, site_idx, n_keys, n_sites = prepare_rows(synced)
+    sys_idx = _assign_ids_reference(df, site_idx, n_keys, n_sites, cfg)
     out = df.drop("_key").with_columns(
         pl.Series("system_track_id", sys_idx + int(id_base), dtype=pl.Int64)
     )
@@ -301,13 +318,70 @@ def associate_tracks(synced: pl.DataFrame, *, cfg: AssociationConfig, id_base: i
 def prepare_rows(synced: pl.DataFrame) -> tuple[pl.DataFrame, np.ndarray, int, int]:
     """The epoch loop's input: rows sorted by (time_ns, site_id, local_track_id) with a
     ``_key`` column (index of the (site, local track) pair), each row's site index (sites
-    in sorted order), the number of keys and of sites."""
-    df = synced.sort("time_ns", "site_id", "local_track_id")
-    keys = df.select("site_id", "local_track_id").unique(maintain_order=True)
-    df = df.join(keys.with_row_index("_key"), on=["site_id", "local_track_id"], how="left")
-    sites = sorted(df["site_id"].unique().to_list())
-    site_idx = df["site_id"].replace_strict(sites, list(range(len(sites)))).to_numpy()
-    return df, site_idx, keys.height, len(sites)
+    in sorted order), the number of keys and of sites. Rows that come sorted (as
+    ``synchronise`` returns them) are not sorted again."""
+    sites = sorted(synced["site_id"].unique().to_list())
+    code = synced["site_id"].replace_strict(sites, list(range(len(sites))),
+                                            return_dtype=pl.Int64).to_numpy()
+    t = synced["time_ns"].to_numpy()
+    track = synced["local_track_id"].to_numpy()
+    if not _lex_sorted(t, code, track):
+        order = np.lexsort((track, code, t))
+        synced, t, code, track = synced[order], t[order], code[order], track[order]
+    if track.size:
+        lo, span = int(track.min()), int(track.max()) - int(track.min()) + 1
+        if span * max(len(sites), 1) < 2**62:
+            _, key = np.unique(code * span + (track - lo), return_inverse=True)
+        else:  # pragma: no cover - absurd track ids
+            _, key = np.unique(np.column_stack([code, track]), axis=0, return_inverse=True)
+        n_keys = int(key.max()) + 1
+    else:
+        key, n_keys = np.zeros(0, np.int64), 0
+    df = synced.with_columns(pl.Series("_key", key.astype(np.int64).ravel(), dtype=pl.UInt32))
+    return df, code, n_keys, len(sites)
+
+
+def _lex_sorted(*keys: np.ndarray) -> bool:
+    """True when the rows are sorted by the keys (first key first)."""
+    n = keys[0].size
+    if n < 2:
+        return True
+    tied = np.ones(n - 1, bool)  # pairs not yet decided by an earlier key
+    for k in keys:
+        a, b = k[:-1], k[1:]
+        if np.any(tied & (b < a)):
+            return False
+        tied &= b == a
+    return True
+
+
+def leave_one_out_d2(df: pl.DataFrame) -> tuple[np.ndarray, np.ndarray]:
+    """(d2, alone): mahalanobis_d2 of each row to the eq. 14 fusion of the OTHER members
+    of its (time_ns, system_track_id) group (the group's sums minus the row's own terms,
+    the candidate state of :class:`_Candidates`), and whether the row is alone in its
+    group (no distance). Rows sorted by (time_ns, system_track_id, site_id); numpy
+    ``reduceat`` over the groups (the same sums as :func:`_with_leave_one_out_d2`'s
+    window expressions)."""
+    n = df.height
+    if n == 0:
+        return np.empty(0), np.empty(0, bool)
+    kin = Kinematics(*(df[c].to_numpy().astype(float) for c in
+                       ("x_enu_m", "y_enu_m", "P_xx", "P_yy", "P_xy", "speed_mps", "course_rad")))
+    t, sid = df["time_ns"].to_numpy(), df["system_track_id"].to_numpy()
+    new = np.r_[True, (t[1:] != t[:-1]) | (sid[1:] != sid[:-1])]
+    starts = np.flatnonzero(new)
+    group = np.cumsum(new) - 1
+    wx, wy = 1.0 / kin.P_xx, 1.0 / kin.P_yy
+    own = np.column_stack([wx, wx * kin.x_m, wy, wy * kin.y_m, wx * wy * kin.P_xy])
+    o = group_sums(own, starts)[group] - own
+    with np.errstate(divide="ignore", invalid="ignore"):  # rows alone: no others
+        xo, yo = o[:, 1] / o[:, 0], o[:, 3] / o[:, 2]
+        pxx, pyy, pxy = 1.0 / o[:, 0], 1.0 / o[:, 2], o[:, 4] / (o[:, 0] * o[:, 2])
+        dx, dy = kin.x_m - xo, kin.y_m - yo
+        sxx, syy, sxy = kin.P_xx + pxx, kin.P_yy + pyy, kin.P_xy + pxy
+        d2 = (syy * dx * dx - 2.0 * sxy * dx * dy + sxx * dy * dy) / (sxx * syy - sxy * sxy)
+    alone = np.diff(np.r_[starts, n])[group] == 1
+    return d2, alone
 
 
 def _assign_ids(

@@ -62,6 +62,95 @@ def fuse(associated: pl.DataFrame) -> pl.DataFrame:
     """Fuse the radars' synchronised tracks of each (epoch, system track), eq. 14
     (position in matrix form, see the module docstring).
 
+    Consumes the rows of ``associate_tracks``, sorted by (time_ns, system_track_id,
+    site_id): each group's sums are one ``numpy.add.reduceat`` over its consecutive rows
+    (the same terms, added in the same order, as :func:`fuse_reference`'s polars
+    aggregation); produces the same rows as it.
+    """
+    n = associated.height
+    if n == 0:
+        return fuse_reference(associated)
+    t = associated["time_ns"].to_numpy()
+    sid = associated["system_track_id"].to_numpy()
+    if not ((t[1:] > t[:-1]) | ((t[1:] == t[:-1]) & (sid[1:] >= sid[:-1]))).all():
+        return fuse_reference(associated)
+    c = {k: associated[k].to_numpy().astype(float) for k in (
+        "P_xx", "P_yy", "P_xy", "x_enu_m", "y_enu_m", "sigma_speed_mps", "sigma_course_rad",
+        "speed_mps", "course_rad")}
+    det = c["P_xx"] * c["P_yy"] - c["P_xy"] ** 2
+    ixx, iyy, ixy = c["P_yy"] / det, c["P_xx"] / det, -c["P_xy"] / det
+    x, y = c["x_enu_m"], c["y_enu_m"]
+    wv, wc = c["sigma_speed_mps"] ** -2, c["sigma_course_rad"] ** -2
+    terms = np.column_stack([
+        ixx, iyy, ixy, ixx * x + ixy * y, ixy * x + iyy * y, wv, wc, wv * c["speed_mps"],
+        wc * np.sin(c["course_rad"]), wc * np.cos(c["course_rad"]),
+    ])
+    new = np.r_[True, (t[1:] != t[:-1]) | (sid[1:] != sid[:-1])]
+    starts = np.flatnonzero(new)
+    sixx, siyy, sixy, six, siy, swv, swc, sv, ss, sc = group_sums(terms, starts).T
+    d = sixx * siyy - sixy**2
+    pxx, pyy, pxy = siyy / d, sixx / d, -sixy / d
+    # polars' arctan2 and pow, as the reference (numpy's differ in the last bit at times)
+    polar = pl.DataFrame({"s": ss, "c": sc, "wc": swc, "wv": swv}).select(
+        (pl.arctan2(pl.col("s"), pl.col("c")) % TWO_PI).alias("course"),
+        pl.col("wc").pow(-0.5).alias("sc"),
+        pl.col("wv").pow(-0.5).alias("sv"),
+    )
+    return pl.DataFrame({
+        "time_ns": t[starts],
+        "system_track_id": sid[starts],
+        "x_enu_m": pxx * six + pxy * siy,
+        "y_enu_m": pxy * six + pyy * siy,
+        "sigma_x_m": np.sqrt(pxx),
+        "sigma_y_m": np.sqrt(pyy),
+        "cov_xy_m2": pxy,
+        "course_rad": polar["course"],
+        "speed_mps": sv / swv,
+        "sigma_course_rad": polar["sc"],
+        "sigma_speed_mps": polar["sv"],
+        "n_sources": np.diff(np.r_[starts, n]).astype(np.int16),
+        "sources": _sources(associated["site_id"], new, starts),
+    }, schema_overrides={"time_ns": pl.Int64, "system_track_id": pl.Int64})
+
+
+def group_sums(values: np.ndarray, starts: np.ndarray) -> np.ndarray:
+    """Sums of consecutive row groups (starting at ``starts``) of ``values`` (n, k), with
+    compensated (Kahan) summation in row order: the sums polars' group and window
+    aggregations compute, bit for bit. Vectorised over the groups; the loop runs over the
+    position in the group (a handful: one row per radar site)."""
+    n = values.shape[0]
+    size = np.diff(np.r_[starts, n])
+    s = np.zeros((starts.size, values.shape[1]))
+    c = np.zeros_like(s)
+    for k in range(int(size.max()) if size.size else 0):
+        g = np.flatnonzero(size > k)
+        y = values[starts[g] + k] - c[g]
+        t = s[g] + y
+        c[g] = (t - s[g]) - y
+        s[g] = t
+    return s
+
+
+def _sources(site: pl.Series, new: np.ndarray, starts: np.ndarray) -> pl.Series:
+    """Comma-joined sorted distinct site ids of each group: a bit mask of the group's
+    sites, each distinct mask written once."""
+    names = sorted(site.unique().to_list())
+    if len(names) > 62:  # pragma: no cover - more sites than bits: the slow way
+        groups = np.cumsum(new) - 1
+        return (pl.DataFrame({"g": groups, "s": site})
+                .group_by("g", maintain_order=True)
+                .agg(pl.col("s").unique().sort().str.join(","))["s"])
+    code = site.replace_strict(names, list(range(len(names))), return_dtype=pl.Int64).to_numpy()
+    mask = np.bitwise_or.reduceat(np.left_shift(np.int64(1), code), starts)
+    masks, inverse = np.unique(mask, return_inverse=True)
+    text = [",".join(n for b, n in enumerate(names) if m >> b & 1) for m in masks.tolist()]
+    return pl.Series("sources", text, dtype=pl.String).gather(inverse.ravel())
+
+
+def fuse_reference(associated: pl.DataFrame) -> pl.DataFrame:
+    """:func:`fuse` as one polars ``group_by`` (the reference the numpy path is tested
+    against; also used for unsorted input).
+
     Consumes (from ``associate_tracks``): time_ns, system_track_id, site_id, x_enu_m,
     y_enu_m, P_xx, P_yy, P_xy (m^2), course_rad, speed_mps, sigma_course_rad,
     sigma_speed_mps.

@@ -121,3 +121,60 @@ def test_stage_outputs_come_sorted_by_the_tables_sort_keys() -> None:
             continue
         shaped = pl.from_arrow(tables.shape(name, frame))
         assert_frame_equal(shaped, pl.from_arrow(tables.conform(name, frame)), check_exact=True)
+
+
+@pytest.fixture(scope="module")
+def region_synced():
+    """Ten busy minutes of a small region, aligned (and synchronised) with its config."""
+    from pathlib import Path
+    from tempfile import mkdtemp
+
+    from pipeline.maritime.align import align_reports
+    from pipeline.maritime.config import maritime_config
+    from pipeline.maritime.sync import epoch_grid
+    from pipeline.simulate.region import RegionSimulation
+    from pipeline.simulate.region_layout import region_config, region_layout, toml_text
+
+    path = Path(mkdtemp()) / "region.toml"
+    path.write_text(toml_text(region_config(region_layout(5))))
+    cfg = load_config(path)
+    sim = RegionSimulation(region_layout(5), n_ships=200, seed=9, start_ns=T0_NS,
+                           duration_s=600.0)
+    radar = pl.concat([s.radar_reports for s in sim.slices()]).rename(
+        {"track_id": "local_track_id", "x_m": "x_site_m", "y_m": "y_site_m"})
+    aligned, _ = align_reports(radar, cfg)
+    mc = maritime_config(cfg)
+    epochs = epoch_grid(T0_NS + 10 * 10**9, T0_NS + 600 * 10**9, mc.sync.epoch_period_s)
+    return cfg, aligned, epochs
+
+
+def test_synchronise_equals_polars_reference(region_synced) -> None:
+    from pipeline.maritime.config import maritime_config
+    from pipeline.maritime.sync import synchronise, synchronise_reference
+
+    cfg, aligned, epochs = region_synced
+    sync = maritime_config(cfg).sync
+    fast = synchronise(aligned, epochs_ns=epochs, sync=sync)
+    assert fast.height > 50_000
+    assert_frame_equal(fast, synchronise_reference(aligned, epochs_ns=epochs, sync=sync),
+                       check_exact=True)
+    shuffled = aligned.sample(fraction=1.0, shuffle=True, seed=1)  # any input order
+    assert_frame_equal(synchronise(shuffled, epochs_ns=epochs, sync=sync), fast,
+                       check_exact=True)
+
+
+def test_associate_and_fuse_equal_references(region_synced) -> None:
+    """Native epoch loop + numpy leave-one-out and fusion (Kahan group sums, polars'
+    trigonometry) give bit for bit the frames of the numpy/polars references."""
+    from pipeline.maritime.associate import associate_tracks, associate_tracks_reference
+    from pipeline.maritime.config import maritime_config
+    from pipeline.maritime.fuse import fuse, fuse_reference
+    from pipeline.maritime.sync import synchronise
+
+    cfg, aligned, epochs = region_synced
+    mc = maritime_config(cfg)
+    synced = synchronise(aligned, epochs_ns=epochs, sync=mc.sync)
+    fast = associate_tracks(synced, cfg=mc.association, id_base=7_000)
+    ref = associate_tracks_reference(synced, cfg=mc.association, id_base=7_000)
+    assert_frame_equal(fast, ref, check_exact=True)
+    assert_frame_equal(fuse(fast), fuse_reference(ref), check_exact=True)
