@@ -260,9 +260,17 @@ static int cmp_entry(const void *a, const void *b)
 
 /* Entries (row, col, cost) of a (nr, nc) matrix whose other entries are +inf; every
  * given entry is admissible (finite and below its row's miss cost). Writes match[row] =
- * col or -1. Same result as associate.assign(cost, miss). */
+ * col or -1. Same result as associate.assign(cost, miss).
+ *
+ * ``forced`` (the clustering step, where a persisting pair costs d^2 - 1000 gate < 0 and
+ * every other entry lies in [0, gate)): a persisting pair whose row and column have no
+ * other persisting entry belongs to EVERY optimal assignment (leaving it out costs more
+ * than 998 gates, more than all the other entries of its row and column can give back),
+ * so it is matched first and its row and column leave the problem; the rest is solved
+ * as associate.assign would. The optimum is the same; only when the rest has several
+ * optima (exactly equal sums) could the tie be broken differently. */
 static int assign_sparse(entry_t *e, int64_t ne, int64_t nr, int64_t nc, const double *miss,
-                         const params_t *p, int64_t *match)
+                         const params_t *p, int64_t *match, int forced)
 {
     int64_t *row_n = calloc((size_t)nr + 1, sizeof(int64_t));
     int64_t *col_n = calloc((size_t)nc + 1, sizeof(int64_t));
@@ -275,6 +283,23 @@ static int assign_sparse(entry_t *e, int64_t ne, int64_t nr, int64_t nc, const d
     if (!row_n || !col_n || !col_of || !row_start) goto done;
     qsort(e, (size_t)ne, sizeof(entry_t), cmp_entry);
     for (i = 0; i < nr; i++) { match[i] = -1; col_of[i] = -1; row_start[i] = -1; }
+    if (forced) {
+        /* persisting entries per row and column; forced pairs drop out of the problem */
+        int64_t w = 0;
+        for (i = 0; i < ne; i++)
+            if (e[i].cost < 0) { row_n[e[i].row]++; col_n[e[i].col]++; }
+        for (i = 0; i < ne; i++)
+            if (e[i].cost < 0 && row_n[e[i].row] == 1 && col_n[e[i].col] == 1)
+                match[e[i].row] = e[i].col;
+        memset(col_n, 0, sizeof(int64_t) * (size_t)(nc + 1));
+        for (i = 0; i < ne; i++)
+            if (match[e[i].row] >= 0 && match[e[i].row] == e[i].col) col_n[e[i].col] = 1;
+        for (i = 0; i < ne; i++) /* keep entries of free rows to free columns */
+            if (match[e[i].row] < 0 && !col_n[e[i].col]) e[w++] = e[i];
+        ne = w;
+        memset(row_n, 0, sizeof(int64_t) * (size_t)(nr + 1));
+        memset(col_n, 0, sizeof(int64_t) * (size_t)(nc + 1));
+    }
     for (i = 0; i < ne; i++) {
         if (row_n[e[i].row] == 0) { col_of[e[i].row] = e[i].col; row_start[e[i].row] = i; }
         row_n[e[i].row]++;
@@ -286,7 +311,7 @@ static int assign_sparse(entry_t *e, int64_t ne, int64_t nr, int64_t nc, const d
     if (!rest_r || !rest_c_pos || !rest_c) goto done;
     for (i = 0; i < nc; i++) rest_c_pos[i] = -1;
     for (i = 0; i < nr; i++) {
-        if (row_n[i] == 0) continue;
+        if (row_n[i] == 0 || match[i] >= 0) continue;
         if (row_n[i] == 1 && col_n[col_of[i]] == 1) {
             match[i] = col_of[i];
             continue;
@@ -427,6 +452,7 @@ static int run(int64_t n, const int64_t *t, const int64_t *site, const int64_t *
     double *sums = NULL, *sv = NULL, *sc = NULL, *rad = NULL, *miss = NULL, *live_rad = NULL;
     int64_t *prev_ids = NULL, *member = NULL, *prev = NULL, *found = NULL, *ids = NULL;
     int64_t *match = NULL, *live = NULL, *live_pos = NULL, *vote_l = NULL;
+    char *dirty = NULL;
     kin_t *ck = NULL, *rk = NULL, *lk = NULL;
     elist_t el = {0};
     int rc = -1;
@@ -454,7 +480,8 @@ static int run(int64_t n, const int64_t *t, const int64_t *site, const int64_t *
     ck = malloc(sizeof(kin_t) * (size_t)(maxm + 1));
     rk = malloc(sizeof(kin_t) * (size_t)(maxm + 1));
     vote_l = malloc(sizeof(int64_t) * (size_t)(n_sites + 1));
-    if (!sums || !prev_ids || !member || !prev || !found || !ids || !match || !sv || !sc ||
+    dirty = malloc((size_t)(maxm + 1));
+    if (!dirty || !sums || !prev_ids || !member || !prev || !found || !ids || !match || !sv || !sc ||
         !rad || !miss || !ck || !rk || !vote_l)
         goto done;
     for (a = 0; a < n; a = b) {
@@ -480,8 +507,10 @@ static int run(int64_t n, const int64_t *t, const int64_t *site, const int64_t *
             if (nc > 0) {
                 grid_t g;
                 for (i = 0; i < nc; i++) {
+                    if (!dirty[i]) continue; /* state unchanged since the last site */
                     cand_state(sums + NT * i, p->form, &ck[i], &sv[i], &sc[i]);
                     rad[i] = gate_radius(&ck[i], p->gate);
+                    dirty[i] = 0;
                 }
                 if (grid_build(&g, ck, rad, nc) < 0) { grid_free(&g); goto done; }
                 el.n = 0;
@@ -505,7 +534,7 @@ static int run(int64_t n, const int64_t *t, const int64_t *site, const int64_t *
                 }
                 grid_free(&g);
                 for (i = 0; i < s1 - s0; i++) miss[i] = p->gate;
-                if (assign_sparse(el.e, el.n, s1 - s0, nc, miss, p, match) < 0) goto done;
+                if (assign_sparse(el.e, el.n, s1 - s0, nc, miss, p, match, 1) < 0) goto done;
                 for (i = s0; i < s1; i++) member[i] = match[i - s0];
             }
             for (i = s0; i < s1; i++) /* fresh candidates, in row order */
@@ -521,6 +550,7 @@ static int run(int64_t n, const int64_t *t, const int64_t *site, const int64_t *
                 const double *tr = terms + NT * (a + i);
                 for (h = 0; h < NT; h++) sums[NT * c + h] += tr[h];
                 prev_ids[c * n_sites + s] = prev[i];
+                dirty[c] = 1;
             }
         }
         /* system ids of the candidates (associate._resolve_ids) */
@@ -544,7 +574,11 @@ static int run(int64_t n, const int64_t *t, const int64_t *site, const int64_t *
                     n_live++;
                 }
             }
-            for (i = 0; i < nc; i++) cand_state(sums + NT * i, p->form, &ck[i], &sv[i], &sc[i]);
+            for (i = 0; i < nc; i++)
+                if (dirty[i]) {
+                    cand_state(sums + NT * i, p->form, &ck[i], &sv[i], &sc[i]);
+                    dirty[i] = 0;
+                }
             if (grid_build(&g, lk, live_rad, n_live) < 0) { grid_free(&g); goto done; }
             el.n = 0;
             for (i = 0; i < nc; i++) {
@@ -588,7 +622,7 @@ static int run(int64_t n, const int64_t *t, const int64_t *site, const int64_t *
             }
             grid_free(&g);
             for (i = 0; i < nc; i++) miss[i] = 0.0;
-            if (assign_sparse(el.e, el.n, nc, n_live, miss, p, match) < 0) goto done;
+            if (assign_sparse(el.e, el.n, nc, n_live, miss, p, match, 0) < 0) goto done;
             {
                 int64_t fresh = 0, first;
                 for (i = 0; i < nc; i++) {
@@ -645,6 +679,7 @@ done:
     free(live);
     free(live_pos);
     free(vote_l);
+    free(dirty);
     free(el.e);
     if (rc < 0 && !PyErr_Occurred()) PyErr_NoMemory();
     return rc;
