@@ -178,3 +178,31 @@ def test_associate_and_fuse_equal_references(region_synced) -> None:
     ref = associate_tracks_reference(synced, cfg=mc.association, id_base=7_000)
     assert_frame_equal(fast, ref, check_exact=True)
     assert_frame_equal(fuse(fast), fuse_reference(ref), check_exact=True)
+
+
+def test_stage_siap_pairs_and_cross_track_equal_references() -> None:
+    """The channel scenario through the stage, then the polars references of SIAP's
+    candidate pairs and of the cross-track table on the same frames."""
+    from maritime_helpers import scenario_tables
+
+    from pipeline.family import Window
+    from pipeline.maritime import cross_track, siap
+    from pipeline.maritime.config import maritime_config
+    from pipeline.maritime.stage import stage
+
+    cfg = load_config()
+    radar, ais, truth = scenario_tables(cfg, duration_s=900.0, seed=5)
+    w = Window(1_768_435_200 * 10**9 + 60 * 10**9, 1_768_435_200 * 10**9 + 840 * 10**9)
+    out = stage({"radar_tracks": radar, "ais_reports": ais, "truth": truth}, w, cfg)
+    ref = cross_track.cross_track_by_leg_reference(
+        out["system_tracks"], out["associations"], out["track_errors"], legs=cfg.fairway_legs,
+        region=cfg.region, sites=cfg.radar_sites)
+    assert ref.height > 1000
+    assert_frame_equal(out["cross_track_by_leg"], ref, check_exact=True)
+    tracks = siap._tracks(out["system_tracks"])
+    truths = siap.truth_states(truth, out["system_tracks"]["time_ns"].unique().to_numpy(),
+                               cfg.region)
+    got = siap.candidate_pairs(tracks, truths, maritime_config(cfg).siap)
+    want = siap.candidate_pairs_reference(tracks, truths, maritime_config(cfg).siap)
+    assert want.height > 1000
+    assert_frame_equal(got.drop("_i", "_j"), want, check_exact=True, check_dtypes=False)
