@@ -88,10 +88,11 @@ def read_inputs(fam: Family, warehouse: Path, cfg: Config, window: Window
     for spec in fam.inputs(cfg):
         columns = list(spec.columns) if spec.columns else None
         if spec.whole_table:
-            table = read_table(warehouse, spec.table, columns=columns)
+            table = read_table(warehouse, spec.table, columns=columns, sort=spec.sorted)
         else:
             lo, hi = spec.span_ns(window)
-            table = read_table(warehouse, spec.table, start_ns=lo, end_ns=hi, columns=columns)
+            table = read_table(warehouse, spec.table, start_ns=lo, end_ns=hi, columns=columns,
+                               sort=spec.sorted)
         out[spec.table] = pl.from_arrow(table)
     return out
 

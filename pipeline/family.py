@@ -62,6 +62,9 @@ class TableInput:
     after_s: float = 0.0
     columns: tuple[str, ...] | None = None
     whole_table: bool = False
+    sorted: bool = True
+    """False: the stage does not need the rows in the table's sort order (saves a sort
+    of every row read)."""
 
     def span_ns(self, window: Window) -> tuple[int, int]:
         return (window.start_ns - round(self.before_s * NS),

@@ -77,18 +77,20 @@ def pairs_within(
         cx = np.floor((x_a[near] - x0) / cell_m).astype(np.int64)
         cy = np.floor((y_a[near] - y0) / cell_m).astype(np.int64)
         kmax = int(kn.max())
+        hi_cell = (1 << _BITS) - 1
         for dx in range(-kmax, kmax + 1):
-            for dy in range(-kmax, kmax + 1):
-                sel = kn >= max(abs(dx), abs(dy))
-                qx, qy = cx[sel] + dx, cy[sel] + dy
-                inside = (qx >= 0) & (qy >= 0) & (qx < 1 << _BITS) & (qy < 1 << _BITS)
-                rows = near[sel][inside]
-                q = _key(ga[rows], qx[inside], qy[inside])
-                lo = np.searchsorted(key_b, q, "left")
-                hi = np.searchsorted(key_b, q, "right")
-                r, idx = expand_ranges(lo, hi)
-                parts_i.append(rows[r])
-                parts_j.append(jb[idx])
+            # the cells (cx + dx, cy - k .. cy + k) are one run of keys: one range each
+            sel = kn >= abs(dx)
+            qx = cx[sel] + dx
+            y0c, y1c = cy[sel] - kn[sel], cy[sel] + kn[sel]
+            inside = (qx >= 0) & (qx <= hi_cell) & (y1c >= 0) & (y0c <= hi_cell)
+            rows = near[sel][inside]
+            qx, y0c, y1c = qx[inside], np.maximum(y0c[inside], 0), np.minimum(y1c[inside], hi_cell)
+            lo = np.searchsorted(key_b, _key(ga[rows], qx, y0c), "left")
+            hi = np.searchsorted(key_b, _key(ga[rows], qx, y1c), "right")
+            r, idx = expand_ranges(lo, hi)
+            parts_i.append(rows[r])
+            parts_j.append(jb[idx])
     if far.size:
         g_order = np.argsort(gb[jb], kind="stable")
         gs = gb[jb][g_order]

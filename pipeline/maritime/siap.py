@@ -167,8 +167,9 @@ def candidate_pairs(tracks: pl.DataFrame, truths: pl.DataFrame, cfg: SiapConfig)
     jr = np.flatnonzero(ok)
     tx, ty = tracks["x_enu_m"].to_numpy(), tracks["y_enu_m"].to_numpy()
     rx, ry = truths["ref_x_m"].to_numpy(), truths["ref_y_m"].to_numpy()
-    i, j, _ = pairs_within(np.searchsorted(epochs, tt), tx, ty, cell * (1 + 1e-9) + 1e-6,
-                           np.searchsorted(epochs, rt[jr]), rx[jr], ry[jr], cell_m=cell)
+    reach = cell * (1 + 1e-9) + 1e-6
+    i, j, _ = pairs_within(np.searchsorted(epochs, tt), tx, ty, reach,
+                           np.searchsorted(epochs, rt[jr]), rx[jr], ry[jr], cell_m=reach)
     j = jr[j]
     pxx, pyy, pxy = (tracks[c].to_numpy()[i] for c in ("P_xx", "P_yy", "P_xy"))
     dx, dy = tx[i] - rx[j], ty[i] - ry[j]

@@ -134,9 +134,10 @@ def read_table(
     end_ns: int | None = None,
     columns: list[str] | None = None,
     predicate: pc.Expression | None = None,
+    sort: bool = True,
 ) -> pa.Table:
     """Rows of the current snapshot of ``name`` with the time column in ``[start_ns, end_ns)``,
-    sorted by the table's sort key (when the selected columns include it).
+    sorted by the table's sort key (when the selected columns include it and ``sort``).
 
     The window also filters the ``date`` partition, so files of other days are pruned.
     ``predicate`` is an extra Arrow filter. Returns an empty table with the canonical
@@ -153,7 +154,7 @@ def read_table(
     dataset = DeltaTable(str(table_path(warehouse, name))).to_pyarrow_dataset()
     table = dataset.to_table(columns=list(target.names), filter=expr).cast(target)
     keys = spec(name).sort_by
-    if table.num_rows and keys and all(k in target.names for k in keys):
+    if sort and table.num_rows and keys and all(k in target.names for k in keys):
         table = table.sort_by([(k, "ascending") for k in keys])  # files come in any order
     return table
 
