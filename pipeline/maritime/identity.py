@@ -113,15 +113,14 @@ def identify(
     ais = ais_at_epochs(ais_reports, epochs, cfg=cfg, region=region)
     tracks = system_tracks.sort("time_ns", "system_track_id")
     matches = _match(tracks, ais, gate_threshold(cfg.gate_probability))
-    voted = vote_identity(
-        tracks.select("time_ns", "system_track_id"),
+    mmsi = vote_identity_rows(
+        tracks["time_ns"].to_numpy(),
+        tracks["system_track_id"].to_numpy(),
         matches,
         cfg.identity_window_s,
         cfg.min_identity_matches,
     )
-    out = tracks.drop("mmsi", strict=False).join(
-        voted, on=["time_ns", "system_track_id"], how="left"
-    )
+    out = tracks.drop("mmsi", strict=False).with_columns(mmsi)
     return matches, out
 
 
@@ -231,6 +230,91 @@ def _match_reference(tracks: pl.DataFrame, ais: pl.DataFrame, gate: float) -> pl
     ai = np.concatenate(ai_all) if ai_all else np.empty(0, int)
     return _matches_frame(tracks, ais, ti, ai,
                           np.concatenate(d2_all) if d2_all else np.empty(0))
+
+
+def vote_identity_rows(
+    t: np.ndarray, sid: np.ndarray, matches: pl.DataFrame, window_s: float,
+    min_matches: int = 3,
+) -> pl.Series:
+    """:func:`vote_identity` for points (t, sid) sorted by (t, sid), as an ``mmsi``
+    Series aligned with the points (null: no identity); the same votes, on arrays.
+
+    Counts and d^2 sums of each (track, MMSI) run of matches are read at t + W and just
+    before t - W by ``searchsorted`` on one integer key (run rank, time offset) instead of
+    two ``join_asof``; each run's d^2 is summed in order, as polars' ``cum_sum``."""
+    n = t.size
+    out = pl.Series("mmsi", np.zeros(n, np.int64)).set(pl.Series(np.ones(n, bool)), None)
+    if n == 0 or matches.height == 0:
+        return out
+    w = round(window_s * NS)
+    mt = matches["time_ns"].to_numpy()
+    ms = matches["system_track_id"].to_numpy()
+    mm = matches["mmsi"].to_numpy()
+    md2 = matches["mahalanobis_d2"].to_numpy()
+    base = int(min(mt.min(), t.min())) - w - 2
+    span = int(max(mt.max(), t.max())) + w + 2 - base
+    bits = span.bit_length()
+    # runs of (track, MMSI) in time order; per run: counts and d^2 sums in order
+    o = np.lexsort((mt, mm, ms))
+    rs, rm, rt, rd2 = ms[o], mm[o], mt[o], md2[o]
+    new = np.r_[True, (rs[1:] != rs[:-1]) | (rm[1:] != rm[:-1])]
+    starts = np.flatnonzero(new)
+    if starts.size >= 1 << (62 - bits):  # pragma: no cover - keys would overflow
+        return _vote_via_frames(t, sid, matches, window_s, min_matches)
+    run = np.cumsum(new) - 1
+    size = np.diff(np.r_[starts, rs.size])
+    cum = np.empty(rs.size)
+    cum[starts] = rd2[starts]
+    for k in range(1, int(size.max())):
+        idx = starts[size > k] + k
+        cum[idx] = cum[idx - 1] + rd2[idx]
+    run_key = (run << bits) + (rt - base)
+    # queries: each point x each MMSI matched on its track
+    run_sid = rs[starts]
+    lo = np.searchsorted(run_sid, sid, "left")
+    hi = np.searchsorted(run_sid, sid, "right")
+    p, r = expand_ranges(lo, hi)
+    if p.size == 0:
+        return out
+    tp = t[p]
+
+    def upto(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(matches of run r with time <= q, their d^2 sum)."""
+        k = np.searchsorted(run_key, (r << bits) + (q - base), "right")
+        cnt = k - starts[r]
+        d2 = np.where(cnt > 0, cum[np.maximum(k - 1, 0)], 0.0)
+        return cnt, d2
+
+    n_hi, d_hi = upto(tp + w)
+    n_lo, d_lo = upto(tp - w - 1)
+    count = n_hi - n_lo
+    d2sum = d_hi - d_lo
+    # each MMSI's matches on any track within the window
+    om = np.lexsort((mt, mm))
+    mm_sorted, mt_sorted = mm[om], mt[om]
+    m_new = np.r_[True, mm_sorted[1:] != mm_sorted[:-1]]
+    m_rank = np.cumsum(m_new) - 1
+    m_key = (m_rank << bits) + (mt_sorted - base)
+    mmsi_of_run = rm[starts][r]
+    qr = np.searchsorted(mm_sorted[m_new], mmsi_of_run)
+    total = (np.searchsorted(m_key, (qr << bits) + (tp + w - base), "right")
+             - np.searchsorted(m_key, (qr << bits) + (tp - w - 1 - base), "right"))
+    ok = (count >= min_matches) & (2 * count > total) & (count > 0)
+    p, count, d2sum, mmsi_c = p[ok], count[ok], d2sum[ok], mmsi_of_run[ok]
+    best = np.lexsort((mmsi_c, d2sum, -count, p))
+    first = best[np.r_[True, p[best][1:] != p[best][:-1]]] if best.size else best
+    values = np.zeros(n, np.int64)
+    has = np.zeros(n, bool)
+    values[p[first]] = mmsi_c[first]
+    has[p[first]] = True
+    return pl.Series("mmsi", values).set(pl.Series(~has), None)
+
+
+def _vote_via_frames(t: np.ndarray, sid: np.ndarray, matches: pl.DataFrame, window_s: float,
+                     min_matches: int) -> pl.Series:
+    points = pl.DataFrame({"time_ns": t, "system_track_id": sid})
+    voted = vote_identity(points, matches, window_s, min_matches)
+    return points.join(voted, on=["time_ns", "system_track_id"], how="left")["mmsi"]
 
 
 def vote_identity(
