@@ -35,7 +35,7 @@ from pipeline.executors import make_executor
 from pipeline.families import FAMILIES, family
 from pipeline.family import Family, Relabel, Window, relabel
 from pipeline.units import NS
-from pipeline.warehouse.delta import read_table, replace_rows
+from pipeline.warehouse.delta import read_table, replace_rows, volume_cuts, volume_profile
 from pipeline.warehouse.staged import StagedFile, TableStager, commit_window, read_staged
 from pipeline.warehouse.views import rebuild_views_file, warm_up
 
@@ -164,8 +164,9 @@ def plan_units(
     warehouse: Path, cfg: Config, start_ns: int, end_ns: int, staging_dir: Path,
     families: tuple[Family, ...] = FAMILIES,
 ) -> list[BatchUnit]:
-    """Cut [start_ns, end_ns) into each family's work units (at UTC multiples of its
-    ``unit_s``, or one unit for the whole window)."""
+    """Cut [start_ns, end_ns) into each family's work units: at UTC multiples of its
+    ``unit_s`` (or one unit for the whole window), and, for a family with
+    ``unit_rows``, wherever the volume of its ``unit_table`` calls for more cuts."""
     units = []
     for fam in families:
         if fam.unit_s is None:
@@ -173,6 +174,10 @@ def plan_units(
         else:
             step = fam.unit_s * NS
             cuts = [start_ns, *range((start_ns // step + 1) * step, end_ns, step), end_ns]
+        if fam.unit_rows is not None and fam.unit_table:
+            first, last, rows = volume_profile(warehouse, fam.unit_table, start_ns, end_ns)
+            extra = volume_cuts(first, last, rows, start_ns, end_ns, fam.unit_rows)
+            cuts = sorted(set(cuts) | set(extra))
         units += [
             BatchUnit(str(warehouse), str(staging_dir), a, b, cfg, fam.name)
             for a, b in itertools.pairwise(cuts)

@@ -10,7 +10,9 @@
   (``POLARS_MAX_THREADS``, ``OMP_NUM_THREADS``, BLAS, Arrow's CPU pool), so
   processes × threads do not oversubscribe the cores;
 - ``ray``: Ray tasks, only when the optional extra is installed (``surveil[ray]``); Ray
-  is imported here and nowhere in stage code.
+  is imported here and nowhere in stage code. A Ray session already started by the
+  caller is used as it is; else ``RAY_ADDRESS`` names an existing cluster to join; else
+  a local one with ``max_workers`` CPUs is started (docs/scale.md).
 
 A unit that raises is reported as ``UnitResult(ok=False, error=...)``; nothing raises past
 ``map_units``, so the caller can list failed units and re-run only those. Results arrive
@@ -148,7 +150,10 @@ class RayExecutor:
         import ray
 
         if not ray.is_initialized():
-            ray.init(num_cpus=self.max_workers, include_dashboard=False)
+            if os.environ.get("RAY_ADDRESS"):  # an existing cluster: it has its own CPUs
+                ray.init(address=os.environ["RAY_ADDRESS"])
+            else:
+                ray.init(num_cpus=self.max_workers, include_dashboard=False)
         remote = ray.remote(
             num_cpus=1,
             max_retries=self.max_retries,

@@ -12,6 +12,9 @@ A family (``pipeline.maritime``, ``pipeline.airfield``, ``pipeline.nav``,
 - ``stage(inputs, window, cfg)``: a pure function of those tables, the window and the
   config, returning ``{table: frame}`` for the tables in ``outputs`` (plus ``rejects``);
 - ``outputs``: the derived tables it owns (no other family writes them);
+- ``unit_rows`` and ``unit_table``: units are also cut so that none reads more than about
+  ``unit_rows`` rows of ``unit_table`` (located from the Parquet footers, without
+  reading rows): memory per worker bounded by data volume, not by a fixed hour;
 - ``sorted_outputs``: the stage returns every frame sorted by its table's sort key (the
   batch then writes it as it is instead of sorting it);
 - ``unit_s``: the work unit length (the window is cut at UTC multiples of it), or
@@ -97,6 +100,8 @@ class Family:
     outputs: tuple[str, ...]
     stage: Stage
     unit_s: int | None = 3600
+    unit_rows: int | None = None
+    unit_table: str = ""
     sorted_outputs: bool = False
     unit_seam: Callable[[Outputs], Any] | None = None
     join_units: Callable[[list[Any]], list[Relabel | None]] | None = None

@@ -26,6 +26,10 @@ from pipeline.maritime.stitch import join_units, unit_seam
 from pipeline.maritime.sync import epoch_grid, synchronise
 from pipeline.units import NS
 
+UNIT_REPORTS = 300_000
+"""Radar reports per work unit at most (about): ~2.5 KB of worker memory per report
+read (docs/scale.md), so a unit stays well under 2 GB at any traffic density."""
+
 DERIVED_TABLES = ("associations", "system_tracks", "identifications", "track_errors")
 # maritime audit tables (docs/maritime.md): SIAP against truth, cross-track error per leg
 AUDIT_TABLES = ("siap_by_sector", "cross_track_by_leg")
@@ -119,6 +123,8 @@ FAMILY = Family(
     outputs=OUTPUTS,
     stage=stage,
     unit_s=3600,
+    unit_rows=UNIT_REPORTS,
+    unit_table="radar_tracks",
     sorted_outputs=True,
     unit_seam=unit_seam,
     join_units=join_units,
