@@ -20,7 +20,6 @@ from __future__ import annotations
 import contextlib
 import itertools
 import logging
-import os
 import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -28,6 +27,7 @@ from typing import Any
 
 import numpy as np
 import polars as pl
+import pyarrow as pa
 
 from pipeline import tables
 from pipeline.config import Config
@@ -104,15 +104,15 @@ class UnitManifest:
 
     family: str
     start_ns: int
-    files: dict[str, list[StagedFile]]
+    files: dict[str, list]  # IPC paths after the unit, StagedFile after finalize_unit
     seam: Any = None
     staging_dir: str = ""
 
 
 def run_unit(unit: BatchUnit) -> UnitManifest:
-    """Worker: read, compute, write the outputs once as the tables' final Parquet data
-    files (``TableStager``: sorted row groups, Delta statistics), return the manifest.
-    The stage returns its frames sorted by the tables' sort keys (its contract)."""
+    """Worker: read, compute, keep the outputs as Arrow IPC files (lz4: cheap to write and
+    to read back) until the window's units are joined; return the manifest. The stage
+    returns its frames sorted by the tables' sort keys (its contract)."""
     fam = family(unit.family)
     window = Window(unit.start_ns, unit.end_ns)
     out = fam.stage(read_inputs(fam, Path(unit.warehouse), unit.cfg, window), window, unit.cfg)
@@ -122,41 +122,51 @@ def run_unit(unit: BatchUnit) -> UnitManifest:
     seam = fam.unit_seam(out) if fam.unit_seam is not None else None
     folder = Path(unit.staging_dir) / f"{unit.family}-{unit.start_ns}"
     shutil.rmtree(folder, ignore_errors=True)
-    stager = TableStager(folder, threaded=False, presorted=True)
+    folder.mkdir(parents=True)
+    files: dict[str, list[str]] = {}
     for name, frame in out.items():
         if frame.height:
             ordered = fam.sorted_outputs and name != "rejects"
-            stager.add(name, tables.shape(name, frame) if ordered else tables.conform(name, frame))
-    del out
-    files: dict[str, list[StagedFile]] = {}
-    for f in stager.close():
-        files.setdefault(f.table, []).append(f)
+            table = tables.shape(name, frame) if ordered else tables.conform(name, frame)
+            path = folder / f"{name}.arrow"
+            options = pa.ipc.IpcWriteOptions(compression="lz4")
+            with pa.OSFile(str(path), "wb") as sink, pa.ipc.new_file(
+                sink, table.schema, options=options
+            ) as w:
+                w.write_table(table)
+            files[name] = [str(path)]
     return UnitManifest(unit.family, unit.start_ns, files, seam, str(folder))
 
 
 @dataclass(frozen=True)
-class RelabelTask:
-    """Rewrite a unit's staged files with a :data:`~pipeline.family.Relabel` applied."""
+class FinalizeTask:
+    """Write a unit's outputs as the tables' Parquet data files, a
+    :data:`~pipeline.family.Relabel` applied first (``None``: as they are)."""
 
     manifest: UnitManifest
-    mapping: Relabel
+    mapping: Relabel | None
 
 
-def relabel_unit(task: RelabelTask) -> UnitManifest:
-    """Worker: the unit's staged files read back, relabelled, staged again (the old ones
-    deleted): ids stitched across seams without bringing the rows to the driver."""
+def finalize_unit(task: FinalizeTask) -> UnitManifest:
+    """Worker: a unit's outputs (Arrow IPC) relabelled if its family's join asks for it
+    and written once as final Parquet data files (``TableStager``: sorted row groups,
+    Delta statistics); the manifest then lists those files."""
     m = task.manifest
-    folder = Path(m.staging_dir + "-relabelled")
+    folder = Path(m.staging_dir + "-parquet")
     shutil.rmtree(folder, ignore_errors=True)
     stager = TableStager(folder, threaded=False, presorted=True)
-    for name, staged in m.files.items():
-        for sf in staged:
-            frame = pl.from_arrow(read_staged(name, [sf]))
-            stager.add(name, tables.shape(name, relabel(frame, task.mapping)))
-            os.remove(sf.path)
+    for name, paths in m.files.items():
+        for path in paths:
+            with pa.memory_map(path) as source:
+                table = pa.ipc.open_file(source).read_all()
+            if task.mapping:
+                table = tables.shape(name, relabel(pl.from_arrow(table), task.mapping))
+            stager.add(name, table)
+            del table
     files: dict[str, list[StagedFile]] = {}
     for f in stager.close():
         files.setdefault(f.table, []).append(f)
+    shutil.rmtree(m.staging_dir, ignore_errors=True)
     return UnitManifest(m.family, m.start_ns, files, m.seam, str(folder))
 
 
@@ -210,17 +220,8 @@ def run_batch(
     executor = make_executor(
         executor_kind or ex.executor, min(ex.max_workers, len(units)), ex.threads_per_worker
     )
-    manifests = []
-    for result in executor.map_units(run_unit, units):
-        if result.ok:
-            manifests.append(result.value)
-        else:
-            u = result.unit
-            label = f"{u.family} [{_iso(u.start_ns)}, {_iso(u.end_ns)}): {result.error}"
-            summary.failed_units.append(label)
-            log.error("batch unit failed %s", label)
-    if not summary.failed_units:
-        manifests = _join_units(executor, manifests, fams, summary)
+    with executor:  # one pool for the units and their finalisation
+        manifests = _run_units(executor, units, fams, summary)
     if summary.failed_units:
         shutil.rmtree(staging, ignore_errors=True)
         return summary
@@ -232,28 +233,39 @@ def run_batch(
     return summary
 
 
-def _join_units(executor, manifests: list[UnitManifest], families: tuple[Family, ...],
-                summary: BatchSummary) -> list[UnitManifest]:
-    """Each family's ``join_units`` over its units' seams; units that need a relabelling
-    are rewritten by the executor's workers (in parallel)."""
-    out: list[UnitManifest] = []
-    tasks: list[RelabelTask] = []
+def _run_units(executor, units: list[BatchUnit], fams: tuple[Family, ...],
+               summary: BatchSummary) -> list[UnitManifest]:
+    manifests = []
+    for result in executor.map_units(run_unit, units):
+        if result.ok:
+            manifests.append(result.value)
+        else:
+            u = result.unit
+            label = f"{u.family} [{_iso(u.start_ns)}, {_iso(u.end_ns)}): {result.error}"
+            summary.failed_units.append(label)
+            log.error("batch unit failed %s", label)
+    if summary.failed_units:
+        return manifests
+    return _finalize_units(executor, manifests, fams, summary)
+
+
+def _finalize_units(executor, manifests: list[UnitManifest], families: tuple[Family, ...],
+                    summary: BatchSummary) -> list[UnitManifest]:
+    """Each family's ``join_units`` over its units' seams, then every unit written as
+    Parquet data files by the executor's workers (relabelled where the join asks)."""
+    tasks: list[FinalizeTask] = []
     for fam in families:
         ours = sorted((m for m in manifests if m.family == fam.name), key=lambda m: m.start_ns)
-        if fam.join_units is None or len(ours) < 2:
-            out += ours
-            continue
-        for m, mapping in zip(ours, fam.join_units([m.seam for m in ours]), strict=True):
-            if mapping:
-                tasks.append(RelabelTask(m, mapping))
-            else:
-                out.append(m)
-    for result in executor.map_units(relabel_unit, tasks):
+        maps = (fam.join_units([m.seam for m in ours])
+                if fam.join_units is not None and len(ours) > 1 else [None] * len(ours))
+        tasks += [FinalizeTask(m, mapping) for m, mapping in zip(ours, maps, strict=True)]
+    out: list[UnitManifest] = []
+    for result in executor.map_units(finalize_unit, tasks):
         if result.ok:
             out.append(result.value)
         else:
             m = result.unit.manifest
-            summary.failed_units.append(f"{m.family} {_iso(m.start_ns)} relabel: {result.error}")
+            summary.failed_units.append(f"{m.family} {_iso(m.start_ns)} write: {result.error}")
     return out
 
 

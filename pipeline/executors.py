@@ -95,6 +95,12 @@ def _describe(exc: BaseException) -> str:
 class SerialExecutor:
     """Runs units one after the other in this process."""
 
+    def __enter__(self) -> SerialExecutor:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        return None
+
     def map_units(self, fn: Callable[[U], V], units: Iterable[U]) -> Iterator[UnitResult]:
         for unit in units:
             try:
@@ -105,30 +111,54 @@ class SerialExecutor:
                 yield UnitResult(unit, True, value=value)
 
 
-@dataclass(frozen=True)
+@dataclass
 class ProcessExecutor:
-    """A local process pool (``spawn``), library threads capped per worker."""
+    """A local process pool (``spawn``), library threads capped per worker.
+
+    Used as a context manager (``with executor: ...``), one pool serves every
+    ``map_units`` call inside the block (workers are started, and import their libraries,
+    once); otherwise each call starts and stops its own pool."""
 
     max_workers: int
     threads_per_worker: int = 1
+    _pool: ProcessPoolExecutor | None = None
+
+    def _new_pool(self, n: int) -> ProcessPoolExecutor:
+        return ProcessPoolExecutor(
+            max_workers=max(1, min(self.max_workers, n)),
+            mp_context=multiprocessing.get_context("spawn"),
+            initializer=limit_threads,
+            initargs=(self.threads_per_worker,),
+        )
+
+    def __enter__(self) -> ProcessExecutor:
+        self._pool = self._new_pool(self.max_workers)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=True)
+            self._pool = None
 
     def map_units(self, fn: Callable[[U], V], units: Iterable[U]) -> Iterator[UnitResult]:
         units = list(units)
         if not units:
             return
-        ctx = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(
-            max_workers=max(1, min(self.max_workers, len(units))),
-            mp_context=ctx,
-            initializer=limit_threads,
-            initargs=(self.threads_per_worker,),
-        ) as pool:
-            futures: dict[Future, Any] = {pool.submit(fn, u): u for u in units}
-            pending = set(futures)
-            while pending:
-                done, pending = wait(pending, return_when=FIRST_COMPLETED)
-                for fut in done:
-                    yield _result(futures[fut], fut)
+        if self._pool is not None:
+            yield from self._map(self._pool, fn, units)
+            return
+        with self._new_pool(len(units)) as pool:
+            yield from self._map(pool, fn, units)
+
+    @staticmethod
+    def _map(pool: ProcessPoolExecutor, fn: Callable[[U], V], units: list[U]
+             ) -> Iterator[UnitResult]:
+        futures: dict[Future, Any] = {pool.submit(fn, u): u for u in units}
+        pending = set(futures)
+        while pending:
+            done, pending = wait(pending, return_when=FIRST_COMPLETED)
+            for fut in done:
+                yield _result(futures[fut], fut)
 
 
 def _result(unit: Any, fut: Future) -> UnitResult:
@@ -145,6 +175,12 @@ class RayExecutor:
     max_workers: int
     threads_per_worker: int = 1
     max_retries: int = 0
+
+    def __enter__(self) -> RayExecutor:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        return None
 
     def map_units(self, fn: Callable[[U], V], units: Iterable[U]) -> Iterator[UnitResult]:
         import ray
