@@ -120,14 +120,21 @@ def group_sums(values: np.ndarray, starts: np.ndarray) -> np.ndarray:
     position in the group (a handful: one row per radar site)."""
     n = values.shape[0]
     size = np.diff(np.r_[starts, n])
-    s = np.zeros((starts.size, values.shape[1]))
-    c = np.zeros_like(s)
-    for k in range(int(size.max()) if size.size else 0):
-        g = np.flatnonzero(size > k)
-        y = values[starts[g] + k] - c[g]
-        t = s[g] + y
-        c[g] = (t - s[g]) - y
-        s[g] = t
+    # one or two terms: the compensated sum is the plain one (the first step adds to 0)
+    s = np.add.reduceat(values, starts, axis=0) if n else np.zeros((0, values.shape[1]))
+    big = np.flatnonzero(size > 2)
+    if big.size == 0:
+        return s
+    st, sz = starts[big], size[big]
+    acc = np.zeros((big.size, values.shape[1]))
+    c = np.zeros_like(acc)
+    for k in range(int(sz.max())):
+        g = np.flatnonzero(sz > k)
+        y = values[st[g] + k] - c[g]
+        t = acc[g] + y
+        c[g] = (t - acc[g]) - y
+        acc[g] = t
+    s[big] = acc
     return s
 
 
