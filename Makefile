@@ -28,6 +28,8 @@ test: setup
 bench: setup
 	$(BIN)/python bench/pipeline.py
 	$(BIN)/python bench/ingest.py
+	$(BIN)/python bench/batch.py --json bench-batch.json
+	$(BIN)/python bench/region_day.py --json bench-region-day.json
 
 clean:
 	rm -rf $(VENV) warehouse/tables warehouse/*.duckdb

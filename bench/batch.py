@@ -111,6 +111,21 @@ CHILD = textwrap.dedent(
                                          end_ns=w.end_ns))
         out["estimates"] = {"time_ns": fused["time_ns"].to_list(),
                             "x": fused["x_enu_m"].to_list(), "y": fused["y_enu_m"].to_list()}
+    elif what == "ray":
+        import ray
+        from jobs.batch import run_batch
+        ray.init(num_cpus=a["cpus"], include_dashboard=False, _node_ip_address="127.0.0.1",
+                 object_store_memory=256 * 1024 * 1024, log_to_driver=False)
+        walls = []
+        for _ in range(a["repeat"]):
+            t0, c0 = clock()
+            s = run_batch(cfg, wh, start_ns=a["start_ns"], end_ns=a["end_ns"],
+                          executor_kind="ray", families=("maritime",))
+            t1, c1 = clock()
+            assert s.committed and not s.failed_units, s.render()
+            walls.append(t1 - t0)
+        ray.shutdown()
+        out.update(wall_s=walls, units=s.units_total)
     elif what == "stonesoup":
         from bench_stonesoup import detections, run_tracker
         sets, n = detections(wh, cfg, a["read_from_ns"], a["end_ns"])
@@ -206,6 +221,9 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=7)
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--no-stonesoup", action="store_true")
+    ap.add_argument("--ray", action="store_true",
+                    help="also: the maritime batch of the 1,000-ship slice as Ray tasks on a "
+                         "local cluster of 1, then 2 CPUs (needs surveil-pipeline[ray])")
     a = ap.parse_args()
     from jobs.common import parse_duration
 
@@ -284,6 +302,18 @@ def main() -> None:
         result["linear"] = rows
         result["linear_spread"] = max(per) / min(per)
         print(f"spread of the per-report CPU time: x{max(per) / min(per):.2f} (goal <= 1.5)")
+    if a.ray:
+        d = prepare(work, 1000, a.radars, a.seed, dens_s)
+        cfg = str(d / "archive" / "region.toml")
+        w = {"start_ns": START_NS, "end_ns": START_NS + int(dens_s * NS)}
+        one = child("ray", config=cfg, warehouse=str(d / "wh"), cpus=1, repeat=a.repeat, **w)
+        two = child("ray", config=cfg, warehouse=str(d / "wh"), cpus=2, repeat=a.repeat, **w)
+        w1, w2 = statistics.median(one["wall_s"]), statistics.median(two["wall_s"])
+        result["ray_scaling"] = {"units": two["units"], "one_worker_wall_s": w1,
+                                 "two_workers_wall_s": w2, "speedup": w1 / w2}
+        print(f"\nRay, local cluster, 1,000 ships x {a.density_slice} ({two['units']} units): "
+              f"1 worker {w1:.1f} s, 2 workers {w2:.1f} s wall (median of {a.repeat}); "
+              f"speed-up x{w1 / w2:.2f}")
     print(f"work dir: {work}")
     if a.json:
         Path(a.json).write_text(json.dumps(result, indent=2))
