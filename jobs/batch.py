@@ -21,6 +21,7 @@ import contextlib
 import itertools
 import logging
 import shutil
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -63,6 +64,8 @@ class BatchSummary:
     rows: dict[str, int] = field(default_factory=dict)
     rejects: int = 0
     committed: bool = False
+    family_s: dict[str, float] = field(default_factory=dict)  # summed unit wall time
+    commit_s: float = 0.0
 
     @property
     def exit_code(self) -> int:
@@ -75,6 +78,10 @@ class BatchSummary:
             f"{'committed' if self.committed else 'NOT committed (previous data kept)'}"
         ]
         lines += [f"  {name:<16} {n:>9} rows" for name, n in self.rows.items()]
+        if self.family_s:
+            lines.append("  time: " + ", ".join(f"{fam} {s:.1f} s" for fam, s in
+                                                 self.family_s.items())
+                         + f" (summed over units); commit {self.commit_s:.1f} s")
         if self.rejects:
             lines.append(f"  rejects (batch)  {self.rejects:>9} rows")
         lines += [f"  failed: {u}" for u in self.failed_units]
@@ -107,12 +114,14 @@ class UnitManifest:
     files: dict[str, list]  # IPC paths after the unit, StagedFile after finalize_unit
     seam: Any = None
     staging_dir: str = ""
+    elapsed_s: float = 0.0  # the unit's wall time (read, compute, IPC)
 
 
 def run_unit(unit: BatchUnit) -> UnitManifest:
     """Worker: read, compute, keep the outputs as Arrow IPC files (lz4: cheap to write and
     to read back) until the window's units are joined; return the manifest. The stage
     returns its frames sorted by the tables' sort keys (its contract)."""
+    t0 = time.perf_counter()
     fam = family(unit.family)
     window = Window(unit.start_ns, unit.end_ns)
     out = fam.stage(read_inputs(fam, Path(unit.warehouse), unit.cfg, window), window, unit.cfg)
@@ -135,7 +144,8 @@ def run_unit(unit: BatchUnit) -> UnitManifest:
             ) as w:
                 w.write_table(table)
             files[name] = [str(path)]
-    return UnitManifest(unit.family, unit.start_ns, files, seam, str(folder))
+    return UnitManifest(unit.family, unit.start_ns, files, seam, str(folder),
+                        time.perf_counter() - t0)
 
 
 @dataclass(frozen=True)
@@ -167,7 +177,7 @@ def finalize_unit(task: FinalizeTask) -> UnitManifest:
     for f in stager.close():
         files.setdefault(f.table, []).append(f)
     shutil.rmtree(m.staging_dir, ignore_errors=True)
-    return UnitManifest(m.family, m.start_ns, files, m.seam, str(folder))
+    return UnitManifest(m.family, m.start_ns, files, m.seam, str(folder), m.elapsed_s)
 
 
 def plan_units(
@@ -204,14 +214,16 @@ def run_batch(
     end_ns: int,
     executor_kind: str | None = None,
     families: tuple[str, ...] | None = None,
+    progress: Any = None,
 ) -> BatchSummary:
     """Run the batch for [start_ns, end_ns) and commit it atomically per table.
 
-    ``families``: names of the families to run (default: every registered family)."""
+    ``families``: names of the families to run (default: every registered family);
+    ``progress``: the CLI's :class:`~jobs.progress.TerminalProgress` (or None)."""
     if end_ns <= start_ns:
         raise ValueError("--to must be after --from")
     fams = FAMILIES if families is None else tuple(family(name) for name in families)
-    warm_up()  # the views file's DuckDB instance, built while the batch runs
+    warm_up(warehouse)  # the views file's DuckDB instance, built while the batch runs
     staging = warehouse / "_staging" / f"batch-{start_ns}-{end_ns}"
     shutil.rmtree(staging, ignore_errors=True)
     units = plan_units(warehouse, cfg, start_ns, end_ns, staging, fams)
@@ -221,11 +233,13 @@ def run_batch(
         executor_kind or ex.executor, min(ex.max_workers, len(units)), ex.threads_per_worker
     )
     with executor:  # one pool for the units and their finalisation
-        manifests = _run_units(executor, units, fams, summary)
+        manifests = _run_units(executor, units, fams, summary, progress)
     if summary.failed_units:
         shutil.rmtree(staging, ignore_errors=True)
         return summary
+    t0 = time.perf_counter()
     _commit(warehouse, manifests, summary, fams)
+    summary.commit_s = time.perf_counter() - t0
     shutil.rmtree(staging, ignore_errors=True)
     with contextlib.suppress(OSError):  # only when empty: another job may be staging
         (warehouse / "_staging").rmdir()
@@ -234,11 +248,17 @@ def run_batch(
 
 
 def _run_units(executor, units: list[BatchUnit], fams: tuple[Family, ...],
-               summary: BatchSummary) -> list[UnitManifest]:
+               summary: BatchSummary, progress: Any = None) -> list[UnitManifest]:
     manifests = []
+    if progress is not None:
+        progress.batch_units(len(units))
     for result in executor.map_units(run_unit, units):
+        if progress is not None:
+            progress.batch_result(result)
         if result.ok:
             manifests.append(result.value)
+            m = result.value
+            summary.family_s[m.family] = summary.family_s.get(m.family, 0.0) + m.elapsed_s
         else:
             u = result.unit
             label = f"{u.family} [{_iso(u.start_ns)}, {_iso(u.end_ns)}): {result.error}"

@@ -12,14 +12,12 @@ warehouse without airfield data) yields empty tables.
 from __future__ import annotations
 
 import logging
-from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
 
 import polars as pl
 
 from pipeline.airfield.calibrate import calibrate, stored_models
-from pipeline.airfield.config import AirfieldConfig, parse_airfield_section
+from pipeline.airfield.config import AirfieldConfig, parse_airfield
 from pipeline.airfield.frames import config_sensor_id, sensor_rows, to_common_frame
 from pipeline.airfield.fusion import fuse_airfield
 from pipeline.airfield.score import score
@@ -107,14 +105,10 @@ def stage(tables: Inputs, window: Window, cfg: Config) -> Outputs:
     return {k: v for k, v in result.items() if v.height}
 
 
-def _parse(raw: Mapping[str, Any], core: Config) -> AirfieldConfig | None:
-    return parse_airfield_section(raw.get("airfield", {}), core)
-
-
 FAMILY = Family(
     name="airfield",
     sections=("airfield",),
-    parse_config=_parse,
+    parse_config=parse_airfield,
     inputs=inputs,
     outputs=OUTPUTS,
     stage=stage,

@@ -1,10 +1,11 @@
 """Write zstd-chunked MCAP files: one file atomically (temporary name, fsync, rename),
-from a frame of (log time, channel, payload) rows, deterministically (no wall clock).
+from (log time, channel, payload) rows, deterministically (no wall clock).
 
-The scenario writers (``pipeline.simulate``) and the legacy converters
-(``pipeline.convert``) build those frames; this module only writes them.
+The scenario writers (``pipeline.simulate``) build frames for :func:`write_mcap_file`
+(or stream them through :class:`McapFileWriter`); the legacy converters
+(``pipeline.convert``) call :func:`write_messages`. This module only writes them.
 
-Two writers give the same bytes:
+Two writers give the same bytes for a frame:
 
 - :func:`write_mcap_file_reference`: the ``mcap`` package's ``Writer``, one
   ``add_message`` call per message (~5-20 µs each: a ``Message`` object, a record built
@@ -17,6 +18,14 @@ Two writers give the same bytes:
   batches, so a writer can stream a file of any size slice by slice (the ``region``
   scenario writes hour-long files of ~4 million messages this way).
   ``tests/io/test_mcap_write.py`` checks that both give byte-identical files.
+
+Log times: an MCAP log time is a uint64 and the warehouse keeps int64 ns, so a log time
+is representable when it lies in ``[TIME_MIN_NS, TIME_MAX_NS]`` (1970-01-01 to
+2262-04-11, :mod:`pipeline.units`). Every writer checks the log times BEFORE it writes
+them and raises :class:`LogTimeError` (a ``ValueError`` naming the first bad message)
+instead of the ``struct.error`` the mcap writer would raise half-way through (no file is
+left behind); the converters divert such messages to rejects beforehand
+(:mod:`pipeline.convert.output`).
 """
 
 from __future__ import annotations
@@ -26,6 +35,8 @@ import os
 import struct
 import tempfile
 import zlib
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import BinaryIO
@@ -51,11 +62,114 @@ from mcap.records import (
 from mcap.writer import MCAP0_MAGIC, CompressionType, Writer
 
 from pipeline.resources import resource_path
-from pipeline.units import NS
+from pipeline.units import NS, TIME_MAX_NS, TIME_MIN_NS, describe_time
 
 MCAP_PROFILE = ""
 MCAP_LIBRARY = "surveil-pipeline/mcap_write"
 """Fixed header strings (the mcap default embeds the library version)."""
+
+
+class LogTimeError(ValueError):
+    """A log time outside the representable range (see the module docstring)."""
+
+
+def first_bad_log_time(log_times: Sequence[int]) -> tuple[int, int] | None:
+    """``(index, value)`` of the first log time outside ``[TIME_MIN_NS, TIME_MAX_NS]``,
+    else ``None``. ``log_times``: Python ints (exact) or an int64 array."""
+    for i, t in enumerate(log_times):
+        if not TIME_MIN_NS <= t <= TIME_MAX_NS:
+            return i, int(t)
+    return None
+
+
+def checked_log_times(log_times) -> np.ndarray:
+    """``log_times`` (array, series or sequence of ints) as int64, checked without a
+    Python loop unless one is out of range (then :func:`check_log_times` names it)."""
+    if isinstance(log_times, pl.Series) and log_times.dtype not in (pl.Int64, pl.UInt64):
+        log_times = log_times.to_list()  # e.g. Int128: Python ints, exact
+    raw = np.asarray(log_times)
+    if raw.dtype.kind not in "iu" or (
+        raw.size and (raw.min() < TIME_MIN_NS or raw.max() > TIME_MAX_NS)
+    ):
+        check_log_times([int(v) for v in raw.tolist()])
+    return raw.astype(np.int64, copy=False)
+
+
+def check_log_times(log_times: Sequence[int], what: str = "message") -> None:
+    """Raise :class:`LogTimeError` when a log time is not representable."""
+    bad = first_bad_log_time(log_times)
+    if bad is not None:
+        i, t = bad
+        raise LogTimeError(
+            f"{what} {i}: log time {t} ns ({describe_time(t)}) is outside the representable "
+            f"range [{TIME_MIN_NS}, {TIME_MAX_NS}] ns (1970-01-01 .. 2262-04-11 UTC)"
+        )
+
+
+@dataclass(frozen=True)
+class ChannelSpec:
+    """One channel to write: topic, message encoding, optional schema, metadata."""
+
+    topic: str
+    message_encoding: str
+    schema_name: str | None = None
+    schema_encoding: str = "jsonschema"
+    schema_data: bytes = b""
+    metadata: Mapping[str, str] = field(default_factory=dict)
+
+
+def write_messages(
+    path: Path,
+    channels: Sequence[ChannelSpec],
+    channel_index: Sequence[int],
+    log_times: Sequence[int],
+    payloads: Sequence[bytes],
+    *,
+    metadata: Mapping[str, Mapping[str, str]] | None = None,
+    library: str = MCAP_LIBRARY,
+) -> dict[str, int]:
+    """Write messages in the given order (a source file's order), atomically; returns the
+    message count per topic. ``channel_index[i]`` indexes ``channels``; ``metadata``:
+    name -> key/value metadata records. Raises :class:`LogTimeError` (nothing written)
+    when a log time is not representable."""
+    check_log_times(log_times)
+    if not len(channel_index) == len(log_times) == len(payloads):
+        raise ValueError("channel_index, log_times and payloads differ in length")
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            w = Writer(f, compression=CompressionType.ZSTD)
+            w.start(profile=MCAP_PROFILE, library=library)
+            schema_ids: dict[tuple[str, str, bytes], int] = {}
+            ids = []
+            for c in channels:
+                sid = 0
+                if c.schema_name is not None:
+                    key = (c.schema_name, c.schema_encoding, c.schema_data)
+                    if key not in schema_ids:
+                        schema_ids[key] = w.register_schema(*key)
+                    sid = schema_ids[key]
+                ids.append(w.register_channel(c.topic, c.message_encoding, sid,
+                                              metadata=dict(c.metadata)))  # fmt: skip
+            for name, record in (metadata or {}).items():
+                w.add_metadata(name, dict(record))
+            seq = [0] * len(ids)
+            # one add_message call per message: the mcap writer has no bulk API
+            for ch, t, p in zip(channel_index, log_times, payloads, strict=True):
+                w.add_message(ids[ch], int(t), p, int(t), seq[ch])
+                seq[ch] += 1
+            w.finish()
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+    return {c.topic: n for c, n in zip(channels, seq, strict=True) if n}
+
 
 def schema_bytes(file_name: str) -> tuple[bytes, list[str]]:
     data = (resource_path("schemas") / file_name).read_bytes()
@@ -89,10 +203,12 @@ def write_mcap_file(
     ``channels``: (topic, message encoding, JSON-schema name or None[, channel metadata])
     per channel id; ``df``: log_time_ns, channel (index into ``channels``), payload (bytes),
     in log-time order. Deterministic for the same inputs (no wall-clock anywhere).
-    Byte for byte the file of :func:`write_mcap_file_reference`.
+    Byte for byte the file of :func:`write_mcap_file_reference`. Raises
+    :class:`LogTimeError` (no file written) when a log time is not representable.
     """
+    times = checked_log_times(df["log_time_ns"])
     with McapFileWriter(path, channels, schemas, metadata, library=library) as w:
-        w.add(df["log_time_ns"], df["channel"], df["payload"])
+        w.add(times, df["channel"], df["payload"])
 
 
 def write_mcap_file_reference(
@@ -106,6 +222,7 @@ def write_mcap_file_reference(
 ) -> None:
     """:func:`write_mcap_file` through the ``mcap`` package's ``Writer``, one call per
     message: the reference the batched writer is tested against."""
+    check_log_times(df["log_time_ns"].to_list())
     fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(fd, "wb") as f:
@@ -246,7 +363,7 @@ class McapFileWriter:
         """Append messages: ``log_time_ns`` (int64), ``channel`` (index into the
         ``channels`` given at construction) and ``payload`` (binary), equal lengths, in
         the order they go into the file."""
-        t = np.asarray(log_time_ns, np.int64)
+        t = checked_log_times(log_time_ns)
         ch = np.asarray(channel, np.int64)
         data = payload.to_list() if hasattr(payload, "to_list") else list(payload)
         n = t.size

@@ -12,7 +12,7 @@
  * Same results: every number that decides something is computed with the same
  * operations in the same order as associate.py (gated_d2, the persistence bonus, the
  * eq. 14 candidate state, _predict, the _resolve_ids costs), so the gates and costs are
- * bit for bit those of the reference. The grid only skips pairs that cannot pass the
+ * those of the reference (to the last bit but for libm vs numpy, see below). The grid only skips pairs that cannot pass the
  * position gate: d^2 = D^T S^-1 D >= |D|^2 / lambda_max(S) and lambda_max(P_a + P_b) <=
  * lambda_max(P_a) + lambda_max(P_b), so a pair farther apart than
  * sqrt(gate lambda_a) + sqrt(gate lambda_b) fails it; rows or candidates whose
@@ -23,8 +23,19 @@
  * paths give the same system track of every row.
  *
  * Candidate state (eq. 14): sums of per-channel terms (computed by the caller, 10 per
- * row, the columns associate._Candidates.add accumulates) turned into a fused state by
- * cand_state(), the formula of associate._Candidates.state.
+ * row, the columns associate._Candidates.add accumulates: fuse.Information) turned into a
+ * fused state by cand_state(), the formula of fuse.Information.estimate.
+ *
+ * Cost (associate.gated_d2): the position d^2, plus, with ``velocity`` and when both
+ * sides carry speed and course sigmas (rows and candidates do, extrapolated system
+ * tracks do not), the velocity d^2 with the covariance of associate.velocity_covariance;
+ * the clustering gates on ``gate`` (4 dof with the velocity, else 2), the ids against
+ * past system tracks on ``gate_pos`` (2 dof). sin and cos are libm's, as numpy's float64
+ * ufuncs (a test compares). The candidate state's atan2 and pow(w, -0.5) are libm's too,
+ * where numpy may use its own SIMD versions (SVML on AVX-512 CPUs: 1 ulp apart in ~1% /
+ * ~5% of calls here), so a candidate's course and sigmas can differ from the
+ * reference's in the last bit: a decision could only differ at an exact tie or exactly
+ * on a gate; the ids agree on every test set and on the demo hour.
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -36,17 +47,21 @@
 
 #define NT 10   /* eq. 14 terms per channel */
 #define NSTATE 9 /* x, y, Pxx, Pyy, Pxy, V, C, sigma_V, sigma_C */
+#define NBUF 14  /* array arguments of assign_ids */
 #define TWO_PI (2.0 * 3.141592653589793)
 #define PI 3.141592653589793
 
 typedef struct {
     double x, y, pxx, pyy, pxy, v, c;
+    double sv, sc; /* sigmas of speed and course (valid when has_vel) */
+    int has_vel;
 } kin_t;
 
 typedef struct {
-    double gate, max_course, max_speed, min_speed, bonus;
+    double gate, gate_pos, max_course, max_speed, min_speed, bonus;
     int64_t timeout_ns;
-    int form; /* 0: per-axis sums (1/P_xx, x/P_xx, ...); 1: information form */
+    int form;     /* 0: per-axis sums (1/P_xx, x/P_xx, ...); 1: information form */
+    int velocity; /* [association] velocity_cost */
     PyObject *lsa;
 } params_t;
 
@@ -62,16 +77,45 @@ static double py_mod(double a, double b)
     return m;
 }
 
-/* associate.gated_d2 for one pair: d^2, or +inf when a gate fails */
-static double gated_d2(const kin_t *a, const kin_t *b, const params_t *p)
+/* associate._d2: (dx, dy) S^-1 (dx, dy)^T, closed-form inverse */
+static double quad2(double dx, double dy, double sxx, double syy, double sxy)
+{
+    return (syy * dx * dx - 2.0 * sxy * dx * dy + sxx * dy * dy) / (sxx * syy - sxy * sxy);
+}
+
+/* associate.velocity_covariance for one track: (V_xx, V_yy, V_xy) of v = V (sin C, cos C)
+ * and v itself */
+static void velocity(const kin_t *k, double min_speed, double *vx, double *vy, double *cov)
+{
+    double s = sin(k->c), c = cos(k->c);
+    double along = k->sv * k->sv, across = (k->v * k->sc) * (k->v * k->sc);
+    if (k->v < min_speed && !isnan(across)) /* np.maximum: NaN propagates */
+        across = (isnan(along) || along > across) ? along : across;
+    cov[0] = along * s * s + across * c * c;
+    cov[1] = along * c * c + across * s * s;
+    cov[2] = (along - across) * s * c;
+    *vx = k->v * s;
+    *vy = k->v * c;
+}
+
+/* associate.gated_d2 for one pair: d^2 (position, plus velocity when p->velocity and
+ * both carry sigmas), or +inf when a gate fails (d^2 below ``gate``, course, speed) */
+static double gated_d2(const kin_t *a, const kin_t *b, const params_t *p, double gate)
 {
     double dx = a->x - b->x, dy = a->y - b->y;
     double sxx = a->pxx + b->pxx, syy = a->pyy + b->pyy, sxy = a->pxy + b->pxy;
-    double d2 = (syy * dx * dx - 2.0 * sxy * dx * dy + sxx * dy * dy) / (sxx * syy - sxy * sxy);
+    double d2 = quad2(dx, dy, sxx, syy, sxy);
     double va = a->v, vb = b->v;
     int slow = (va < p->min_speed) && (vb < p->min_speed);
     double dc = fabs(py_mod((a->c - b->c) + PI, TWO_PI) - PI);
-    int ok = (d2 < p->gate) && (fabs(va - vb) <= p->max_speed) && (slow || dc <= p->max_course);
+    int ok;
+    if (p->velocity && a->has_vel && b->has_vel) {
+        double ax, ay, bx, by, ca[3], cb[3];
+        velocity(a, p->min_speed, &ax, &ay, ca);
+        velocity(b, p->min_speed, &bx, &by, cb);
+        d2 = d2 + quad2(ax - bx, ay - by, ca[0] + cb[0], ca[1] + cb[1], ca[2] + cb[2]);
+    }
+    ok = (d2 < gate) && (fabs(va - vb) <= p->max_speed) && (slow || dc <= p->max_course);
     return ok ? d2 : INFINITY;
 }
 
@@ -97,6 +141,9 @@ static void cand_state(const double *s, int form, kin_t *k, double *sv, double *
     k->c = py_mod(atan2(s[8], s[9]), TWO_PI);
     *sv = pow(s[5], -0.5);
     *sc = pow(s[7], -0.5);
+    k->sv = *sv;
+    k->sc = *sc;
+    k->has_vel = 1;
 }
 
 /* gate radius sqrt(gate * lambda_max(P)) (slightly widened), or -1 when P is not
@@ -249,6 +296,7 @@ static int cmp_i64(const void *a, const void *b)
 typedef struct {
     int64_t row, col;
     double cost;
+    int persist; /* a persisting pair (its cost carries the continuity bonus) */
 } entry_t;
 
 static int cmp_entry(const void *a, const void *b)
@@ -262,12 +310,13 @@ static int cmp_entry(const void *a, const void *b)
  * given entry is admissible (finite and below its row's miss cost). Writes match[row] =
  * col or -1. Same result as associate.assign(cost, miss).
  *
- * ``forced`` (the clustering step, where a persisting pair costs d^2 - 1000 gate < 0 and
- * every other entry lies in [0, gate)): a persisting pair whose row and column have no
- * other persisting entry belongs to EVERY optimal assignment (leaving it out costs more
- * than 998 gates, more than all the other entries of its row and column can give back),
- * so it is matched first and its row and column leave the problem; the rest is solved
- * as associate.assign would. The optimum is the same; only when the rest has several
+ * ``forced`` (the clustering step, where a persisting pair costs d^2 - 1000 gate and the
+ * other entries lie in [0, gate) unless a covariance is not positive definite): a
+ * persisting pair whose row and column have no other persisting entry and no negative
+ * entry belongs to EVERY optimal assignment (leaving it out costs more than 998 gates,
+ * more than the other entries of its row and column can give back), so it is matched
+ * first and its row and column leave the problem; the rest is solved as
+ * associate.assign would. The optimum is the same; only when the rest has several
  * optima (exactly equal sums) could the tie be broken differently. */
 static int assign_sparse(entry_t *e, int64_t ne, int64_t nr, int64_t nc, const double *miss,
                          const params_t *p, int64_t *match, int forced)
@@ -286,10 +335,12 @@ static int assign_sparse(entry_t *e, int64_t ne, int64_t nr, int64_t nc, const d
     if (forced) {
         /* persisting entries per row and column; forced pairs drop out of the problem */
         int64_t w = 0;
+        for (i = 0; i < ne; i++) /* counts of persisting entries; a negative other entry
+                                  * (non-PD covariance) blocks its row and column */
+            if (e[i].persist) { row_n[e[i].row]++; col_n[e[i].col]++; }
+            else if (e[i].cost < 0) { row_n[e[i].row] += 2; col_n[e[i].col] += 2; }
         for (i = 0; i < ne; i++)
-            if (e[i].cost < 0) { row_n[e[i].row]++; col_n[e[i].col]++; }
-        for (i = 0; i < ne; i++)
-            if (e[i].cost < 0 && row_n[e[i].row] == 1 && col_n[e[i].col] == 1)
+            if (e[i].persist && row_n[e[i].row] == 1 && col_n[e[i].col] == 1)
                 match[e[i].row] = e[i].col;
         memset(col_n, 0, sizeof(int64_t) * (size_t)(nc + 1));
         for (i = 0; i < ne; i++)
@@ -381,7 +432,7 @@ typedef struct {
     int64_t n, cap;
 } elist_t;
 
-static int elist_push(elist_t *l, int64_t row, int64_t col, double cost)
+static int elist_push(elist_t *l, int64_t row, int64_t col, double cost, int persist)
 {
     if (l->n == l->cap) {
         int64_t cap = l->cap ? 2 * l->cap : 1024;
@@ -393,6 +444,7 @@ static int elist_push(elist_t *l, int64_t row, int64_t col, double cost)
     l->e[l->n].row = row;
     l->e[l->n].col = col;
     l->e[l->n].cost = cost;
+    l->e[l->n].persist = persist;
     l->n++;
     return 0;
 }
@@ -438,10 +490,11 @@ static void predict(const sysmem_t *m, int64_t s, int64_t t_ns, kin_t *k)
     k->pxy = st[4] + ((along - across) * sn * cs);
     k->v = V;
     k->c = C;
+    k->has_vel = 0; /* a stale velocity: ids against past tracks stay on position */
 }
 
 static int run(int64_t n, const int64_t *t, const int64_t *site, const int64_t *key,
-               const double *col[7], const double *terms, int64_t n_keys, int64_t n_sites,
+               const double *col[9], const double *terms, int64_t n_keys, int64_t n_sites,
                const params_t *p, int64_t *out)
 {
     int64_t *key_sys = malloc(sizeof(int64_t) * (size_t)(n_keys + 1));
@@ -499,6 +552,9 @@ static int run(int64_t n, const int64_t *t, const int64_t *site, const int64_t *
             rk[i].pxy = col[4][a + i];
             rk[i].v = col[5][a + i];
             rk[i].c = col[6][a + i];
+            rk[i].sv = col[7][a + i];
+            rk[i].sc = col[8][a + i];
+            rk[i].has_vel = 1;
         }
         /* sequential clustering over the sites of the epoch (associate._cluster_epoch) */
         for (s0 = 0; s0 < m; s0 = s1) {
@@ -520,16 +576,20 @@ static int run(int64_t n, const int64_t *t, const int64_t *site, const int64_t *
                     for (j = 0; j < q; j++) {
                         int64_t c = found[j], h;
                         double d2;
+                        int persist = 0;
                         if (!may_gate(&rk[i], rr, &ck[c], rad[c])) continue;
-                        d2 = gated_d2(&rk[i], &ck[c], p);
+                        d2 = gated_d2(&rk[i], &ck[c], p, p->gate);
                         if (!isfinite(d2)) continue;
                         if (prev[i] >= 0) {
                             for (h = 0; h < n_sites; h++)
                                 if (prev_ids[c * n_sites + h] == prev[i]) break;
-                            if (h < n_sites) d2 = d2 - p->bonus * p->gate;
+                            if (h < n_sites) { d2 = d2 - p->bonus * p->gate; persist = 1; }
                         }
                         if (!(d2 < p->gate)) continue;
-                        if (elist_push(&el, i - s0, c, d2) < 0) { grid_free(&g); goto done; }
+                        if (elist_push(&el, i - s0, c, d2, persist) < 0) {
+                            grid_free(&g);
+                            goto done;
+                        }
                     }
                 }
                 grid_free(&g);
@@ -570,7 +630,7 @@ static int run(int64_t n, const int64_t *t, const int64_t *site, const int64_t *
                     live_pos[l] = n_live;
                     live[n_live] = l;
                     predict(&mem, l, tn, &lk[n_live]);
-                    live_rad[n_live] = gate_radius(&lk[n_live], p->gate);
+                    live_rad[n_live] = gate_radius(&lk[n_live], p->gate_pos);
                     n_live++;
                 }
             }
@@ -595,28 +655,28 @@ static int run(int64_t n, const int64_t *t, const int64_t *site, const int64_t *
                     int64_t u;
                     for (u = 0; u < nv; u++) {
                         int64_t lp = vote_l[u], votes = 0;
-                        double d2 = gated_d2(&ck[i], &lk[lp], p), q, rank;
+                        double d2 = gated_d2(&ck[i], &lk[lp], p, p->gate_pos), q, rank;
                         for (h = 0; h < n_sites; h++)
                             if (prev_ids[i * n_sites + h] == live[lp]) votes++;
                         rank = (double)lp / (double)(n_live > 1 ? n_live : 1);
-                        q = d2 / p->gate;
+                        q = d2 / p->gate_pos;
                         if (!(q < 1.0)) q = 1.0;
-                        if (elist_push(&el, i, lp, -10.0 * (double)votes + rank + 0.01 * q) < 0) {
+                        if (elist_push(&el, i, lp, -10.0 * (double)votes + rank + 0.01 * q, 0) < 0) {
                             grid_free(&g);
                             goto done;
                         }
                     }
                 } else {
-                    double rr = gate_radius(&ck[i], p->gate);
+                    double rr = gate_radius(&ck[i], p->gate_pos);
                     int64_t q = grid_query(&g, ck[i].x, ck[i].y, rr, found), j;
                     for (j = 0; j < q; j++) {
                         double d2;
                         if (!may_gate(&ck[i], rr, &lk[found[j]], live_rad[found[j]])) continue;
-                        d2 = gated_d2(&ck[i], &lk[found[j]], p);
+                        d2 = gated_d2(&ck[i], &lk[found[j]], p, p->gate_pos);
                         if (!isfinite(d2)) continue;
-                        d2 = d2 / p->gate - 1.0;
+                        d2 = d2 / p->gate_pos - 1.0;
                         if (!(d2 < 0.0)) continue;
-                        if (elist_push(&el, i, found[j], d2) < 0) { grid_free(&g); goto done; }
+                        if (elist_push(&el, i, found[j], d2, 0) < 0) { grid_free(&g); goto done; }
                     }
                 }
             }
@@ -688,13 +748,16 @@ done:
 /* -- Python entry point --------------------------------------------------------------- */
 
 PyDoc_STRVAR(assign_ids_doc,
-"assign_ids(t, site, key, x, y, P_xx, P_yy, P_xy, speed, course, terms, out, n_keys,\n"
-"           n_sites, gate, max_course, max_speed, min_speed, bonus, timeout_ns, form, lsa)\n"
+"assign_ids(t, site, key, x, y, P_xx, P_yy, P_xy, speed, course, sigma_speed,\n"
+"           sigma_course, terms, out, n_keys, n_sites, gate, gate_pos, max_course,\n"
+"           max_speed, min_speed, bonus, timeout_ns, form, velocity, lsa)\n"
 "\n"
 "The epoch loop of associate._assign_ids. Arrays (any object with the buffer protocol,\n"
 "C-contiguous): t, site, key int64 (n,), rows sorted by (t, site, local track); the\n"
 "kinematics float64 (n,); terms float64 (n, 10); out int64 (n,) receives each row's system\n"
-"index. ``form`` 0/1: the eq. 14 sums per axis / in information form. ``lsa(cost, k, m)``:\n"
+"index. ``gate``: the clustering's d^2 gate, ``gate_pos``: the position gate of the ids\n"
+"against past system tracks; ``velocity``: 1 = position + velocity cost in the\n"
+"clustering. ``form`` 0/1: the eq. 14 sums per axis / in information form. ``lsa(cost, k, m)``:\n"
 "cost bytes of a (k, m) float64 matrix -> bytes of k int64 columns (the row-wise result\n"
 "of scipy.optimize.linear_sum_assignment).");
 
@@ -714,30 +777,32 @@ static int get(PyObject *o, Py_buffer *v, Py_ssize_t n, Py_ssize_t itemsize, int
 
 static PyObject *assign_ids(PyObject *self, PyObject *args)
 {
-    PyObject *o[12], *lsa;
-    Py_buffer v[12];
-    const char *names[12] = {"t", "site", "key", "x", "y", "P_xx", "P_yy", "P_xy",
-                             "speed", "course", "terms", "out"};
+    PyObject *o[NBUF], *lsa;
+    Py_buffer v[NBUF];
+    const char *names[NBUF] = {"t", "site", "key", "x", "y", "P_xx", "P_yy", "P_xy", "speed",
+                               "course", "sigma_speed", "sigma_course", "terms", "out"};
     long long n_keys, n_sites, timeout_ns;
-    double gate, max_course, max_speed, min_speed, bonus;
-    int form, got = 0, rc;
+    double gate, gate_pos, max_course, max_speed, min_speed, bonus;
+    int form, vel, got = 0, rc;
     Py_ssize_t n;
     params_t p;
-    const double *cols[7];
+    const double *cols[9];
     (void)self;
-    if (!PyArg_ParseTuple(args, "OOOOOOOOOOOOLLdddddLiO", &o[0], &o[1], &o[2], &o[3], &o[4],
-                          &o[5], &o[6], &o[7], &o[8], &o[9], &o[10], &o[11], &n_keys, &n_sites,
-                          &gate, &max_course, &max_speed, &min_speed, &bonus, &timeout_ns, &form,
-                          &lsa))
+    if (!PyArg_ParseTuple(args, "OOOOOOOOOOOOOOLLddddddLiiO", &o[0], &o[1], &o[2], &o[3],
+                          &o[4], &o[5], &o[6], &o[7], &o[8], &o[9], &o[10], &o[11], &o[12],
+                          &o[13], &n_keys, &n_sites, &gate, &gate_pos, &max_course, &max_speed,
+                          &min_speed, &bonus, &timeout_ns, &form, &vel, &lsa))
         return NULL;
     if (PyObject_GetBuffer(o[0], &v[0], PyBUF_C_CONTIGUOUS) < 0) return NULL;
     n = v[0].len / 8;
     PyBuffer_Release(&v[0]);
-    for (got = 0; got < 12; got++) {
-        Py_ssize_t items = got == 10 ? n * NT : n;
-        if (get(o[got], &v[got], items, 8, got == 11, names[got]) < 0) goto fail;
+    for (got = 0; got < NBUF; got++) {
+        Py_ssize_t items = got == NBUF - 2 ? n * NT : n;
+        if (get(o[got], &v[got], items, 8, got == NBUF - 1, names[got]) < 0) goto fail;
     }
     p.gate = gate;
+    p.gate_pos = gate_pos;
+    p.velocity = vel;
     p.max_course = max_course;
     p.max_speed = max_speed;
     p.min_speed = min_speed;
@@ -745,9 +810,10 @@ static PyObject *assign_ids(PyObject *self, PyObject *args)
     p.timeout_ns = timeout_ns;
     p.form = form;
     p.lsa = lsa;
-    for (int j = 0; j < 7; j++) cols[j] = v[3 + j].buf;
-    rc = run(n, v[0].buf, v[1].buf, v[2].buf, cols, v[10].buf, n_keys, n_sites, &p, v[11].buf);
-    for (int j = 0; j < 12; j++) PyBuffer_Release(&v[j]);
+    for (int j = 0; j < 9; j++) cols[j] = v[3 + j].buf;
+    rc = run(n, v[0].buf, v[1].buf, v[2].buf, cols, v[NBUF - 2].buf, n_keys, n_sites, &p,
+             v[NBUF - 1].buf);
+    for (int j = 0; j < NBUF; j++) PyBuffer_Release(&v[j]);
     if (rc < 0) return NULL;
     Py_RETURN_NONE;
 fail:

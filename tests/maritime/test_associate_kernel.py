@@ -66,6 +66,7 @@ def test_region_same_ids(region) -> None:
     {"track_timeout_s": 8.0},                           # ids forgotten quickly
     {"max_course_difference_rad": 0.05, "course_gate_min_speed_mps": 5.0},
     {"max_speed_difference_mps": 0.3},
+    {"velocity_cost": False},                           # the position-only cost, 2 dof
 ])
 def test_region_same_ids_other_gates(region, change) -> None:
     cfg, radar = region
@@ -114,3 +115,16 @@ def test_empty() -> None:
                                   "sigma_speed_mps": pl.Float64})
     native, ref = _both(synced, maritime_config(load_config()).association)
     assert native.size == ref.size == 0
+
+
+def test_libm_sin_cos_are_numpys() -> None:
+    """_associate.c takes sin and cos (the velocity cost's v = V (sin C, cos C) and its
+    covariance) from libm where the reference calls numpy's float64 ufuncs: the same
+    functions. (atan2 and pow of the candidate state are not always: numpy may use its
+    own SIMD versions, 1 ulp apart at times; the ids above still agree.)"""
+    import math
+
+    rng = np.random.default_rng(2)
+    x = np.r_[rng.uniform(-7.0, 7.0, 20_000), rng.normal(0.0, 1e3, 2_000)]
+    for f, m in ((np.sin, math.sin), (np.cos, math.cos)):
+        np.testing.assert_array_equal(f(x), np.array([m(v) for v in x.tolist()]))
