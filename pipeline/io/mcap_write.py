@@ -30,7 +30,6 @@ left behind); the converters divert such messages to rejects beforehand
 
 from __future__ import annotations
 
-import json
 import os
 import struct
 import tempfile
@@ -61,7 +60,6 @@ from mcap.records import (
 )
 from mcap.writer import MCAP0_MAGIC, CompressionType, Writer
 
-from pipeline.resources import resource_path
 from pipeline.units import NS, TIME_MAX_NS, TIME_MIN_NS, describe_time
 
 MCAP_PROFILE = ""
@@ -169,11 +167,6 @@ def write_messages(
             os.unlink(tmp)
         raise
     return {c.topic: n for c, n in zip(channels, seq, strict=True) if n}
-
-
-def schema_bytes(file_name: str) -> tuple[bytes, list[str]]:
-    data = (resource_path("schemas") / file_name).read_bytes()
-    return data, list(json.loads(data)["properties"])
 
 
 def json_payloads(df: pl.DataFrame, fields: list[str]) -> pl.Series:

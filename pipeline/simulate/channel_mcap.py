@@ -28,7 +28,8 @@ from pathlib import Path
 import polars as pl
 
 from pipeline.config import Config
-from pipeline.io.mcap_write import archive_file_name, json_payloads, schema_bytes, write_mcap_file
+from pipeline.io.mcap_write import archive_file_name, json_payloads, write_mcap_file
+from pipeline.messages import RADAR_REPORT, message_layout
 from pipeline.simulate.channel import ChannelScenario, simulate_channel
 from pipeline.units import NS
 
@@ -60,8 +61,9 @@ def write_channel_archive(
         raise ValueError(f"file_period_s must be positive, got {file_period_s}")
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    radar_schema, radar_fields = schema_bytes("radar_track_report.schema.json")
-    truth_schema, truth_fields = schema_bytes("truth_state.schema.json")
+    radar, truth_layout = message_layout(RADAR_REPORT), message_layout("truth_state.schema.json")
+    radar_schema, radar_fields = radar.data, radar.names
+    truth_schema, truth_fields = truth_layout.data, truth_layout.names
 
     # (topic, message encoding, schema name or None) in channel-id order
     site_ids = list(scenario.site_ids)

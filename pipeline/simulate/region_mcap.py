@@ -22,7 +22,8 @@ from pathlib import Path
 import polars as pl
 
 from pipeline.config import Config
-from pipeline.io.mcap_write import McapFileWriter, archive_file_name, json_payloads, schema_bytes
+from pipeline.io.mcap_write import McapFileWriter, archive_file_name, json_payloads
+from pipeline.messages import RADAR_REPORT, message_layout
 from pipeline.simulate.channel_mcap import (
     AIS_TOPIC,
     RADAR_SCHEMA_NAME,
@@ -75,8 +76,9 @@ def simulate_region_archive(
     layout = region_layout(radars)
     sim = RegionSimulation(layout, n_ships=ships, seed=seed, start_ns=start_ns,
                            duration_s=duration_s)
-    radar_schema, radar_fields = schema_bytes("radar_track_report.schema.json")
-    truth_schema, truth_fields = schema_bytes("truth_state.schema.json")
+    radar, truth = message_layout(RADAR_REPORT), message_layout("truth_state.schema.json")
+    radar_schema, radar_fields = radar.data, radar.names
+    truth_schema, truth_fields = truth.data, truth.names
     site_ids = [s.site_id for s in layout.sites]
     channels: list[tuple] = [
         *((radar_topic(s), "json", RADAR_SCHEMA_NAME) for s in site_ids),

@@ -12,10 +12,10 @@ from mcap.reader import make_reader
 from pipeline.io.mcap_write import (
     CHUNK_SIZE,
     McapFileWriter,
-    schema_bytes,
     write_mcap_file,
     write_mcap_file_reference,
 )
+from pipeline.messages import RADAR_REPORT, message_layout
 
 CHANNELS = [("/radar/R1/tracks", "json", "S"), ("/ais/nmea", "nmea0183", None),
             ("/truth", "json", "S", {"k": "v"})]
@@ -33,7 +33,7 @@ def _messages(n: int, seed: int, max_len: int = 900) -> pl.DataFrame:
 @pytest.mark.parametrize(("n", "max_len"), [(0, 10), (1, 10), (7, 10), (3000, 900),
                                             (5000, 2 * CHUNK_SIZE // 1000)])
 def test_same_bytes_as_reference(tmp_path: Path, n: int, max_len: int) -> None:
-    schema, _ = schema_bytes("radar_track_report.schema.json")
+    schema = message_layout(RADAR_REPORT).data
     df = _messages(n, n, max_len)
     fast, ref = tmp_path / "fast.mcap", tmp_path / "ref.mcap"
     write_mcap_file(fast, CHANNELS, {"S": schema}, {"name": "t"}, df)
@@ -44,7 +44,7 @@ def test_same_bytes_as_reference(tmp_path: Path, n: int, max_len: int) -> None:
 def test_batches_stream_to_the_same_file(tmp_path: Path) -> None:
     """Adding messages in several batches gives the file of one batch (and of the
     reference), including a message larger than a whole chunk."""
-    schema, _ = schema_bytes("radar_track_report.schema.json")
+    schema = message_layout(RADAR_REPORT).data
     df = _messages(4000, 3)
     big = pl.DataFrame({"log_time_ns": [df["log_time_ns"][-1]], "channel": [1],
                         "payload": pl.Series([b"x" * (CHUNK_SIZE + 17)], dtype=pl.Binary)})
