@@ -222,8 +222,9 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--no-stonesoup", action="store_true")
     ap.add_argument("--ray", action="store_true",
-                    help="also: the maritime batch of the 1,000-ship slice as Ray tasks on a "
-                         "local cluster of 1, then 2 CPUs (needs surveil-pipeline[ray])")
+                    help="also: the maritime batch of the densest slice (several volume units) "
+                         "as Ray tasks on a local cluster of 1, then 2 CPUs (needs the ray "
+                         "extra)")
     a = ap.parse_args()
     from jobs.common import parse_duration
 
@@ -302,16 +303,18 @@ def main() -> None:
         result["linear"] = rows
         result["linear_spread"] = max(per) / min(per)
         print(f"spread of the per-report CPU time: x{max(per) / min(per):.2f} (goal <= 1.5)")
-    if a.ray:
-        d = prepare(work, 1000, a.radars, a.seed, dens_s)
+    if a.ray:  # the densest slice: ~300k reports per unit, so several units to spread
+        ray_ships = max(int(x) for x in a.densities.split(",") if x)
+        d = prepare(work, ray_ships, a.radars, a.seed, dens_s)
         cfg = str(d / "archive" / "region.toml")
         w = {"start_ns": START_NS, "end_ns": START_NS + int(dens_s * NS)}
         one = child("ray", config=cfg, warehouse=str(d / "wh"), cpus=1, repeat=a.repeat, **w)
         two = child("ray", config=cfg, warehouse=str(d / "wh"), cpus=2, repeat=a.repeat, **w)
         w1, w2 = statistics.median(one["wall_s"]), statistics.median(two["wall_s"])
-        result["ray_scaling"] = {"units": two["units"], "one_worker_wall_s": w1,
+        result["ray_scaling"] = {"ships": ray_ships, "units": two["units"], "one_worker_wall_s": w1,
                                  "two_workers_wall_s": w2, "speedup": w1 / w2}
-        print(f"\nRay, local cluster, 1,000 ships x {a.density_slice} ({two['units']} units): "
+        print(f"\nRay, local cluster, {ray_ships:,} ships x {a.density_slice} "
+              f"({two['units']} units): "
               f"1 worker {w1:.1f} s, 2 workers {w2:.1f} s wall (median of {a.repeat}); "
               f"speed-up x{w1 / w2:.2f}")
     print(f"work dir: {work}")
