@@ -89,7 +89,8 @@ def cli(ctx: click.Context, config_path, warehouse, log_level, log_json) -> None
 
 
 @cli.command()
-@click.option("--scenario", type=click.Choice(["channel", "airfield", "gaps", "ownship"]),
+@click.option("--scenario", type=click.Choice(["channel", "channel-clean", "airfield", "gaps",
+                                              "ownship"]),
               default="channel", show_default=True)
 @click.option("--duration", default="1h", show_default=True, help="e.g. 1h, 30m, 90s")
 @click.option("--seed", type=int, default=7, show_default=True)

@@ -1,5 +1,6 @@
 """The maritime family's configuration: ``[sync]``, ``[association]``, ``[siap]``,
-``[radar_bias]`` and ``[fairway]`` (the geography it shares with the other families,
+``[radar_bias]``, ``[fairway]``, ``[channel_integrity]`` and the channel scenario's fault
+schedule ``[[channel_faults]]`` (the geography it shares with the other families,
 radar sites, AIS settings, legs and sectors, is in the core :class:`~pipeline.config.Config`).
 
 Degrees and seconds in the file; radians and seconds here.
@@ -14,7 +15,9 @@ from typing import Any
 
 from pipeline.config import Config
 
-SECTIONS = ("sync", "association", "siap", "radar_bias", "fairway")
+SECTIONS = (
+    "sync", "association", "siap", "radar_bias", "fairway", "channel_integrity", "channel_faults",
+)
 
 
 @dataclass(frozen=True)
@@ -74,6 +77,105 @@ class SiapConfig:
     swap_window_s: float = 60.0
 
 
+RADAR_FAULT_KINDS = (
+    "radar_outage", "radar_blank", "radar_range_bias", "radar_azimuth_bias",
+    "radar_time_offset", "radar_noise",
+)
+AIS_FAULT_KINDS = ("ais_offset", "ais_stuck", "ais_mmsi_swap", "ais_spoof")
+FAULT_KINDS = RADAR_FAULT_KINDS + AIS_FAULT_KINDS
+# TOML keys each kind takes besides kind, start_s, duration_s
+_FAULT_KEYS: dict[str, tuple[str, ...]] = {
+    "radar_outage": ("site_id",),
+    "radar_blank": ("site_id", "azimuth_from_deg", "azimuth_to_deg"),
+    "radar_range_bias": ("site_id", "bias_m"),
+    "radar_azimuth_bias": ("site_id", "bias_deg"),
+    "radar_time_offset": ("site_id", "offset_s"),
+    "radar_noise": ("site_id", "factor"),
+    "ais_offset": ("vessel_id", "sector", "east_m", "north_m"),
+    "ais_stuck": ("vessel_id", "sector"),
+    "ais_mmsi_swap": ("vessel_id", "other_vessel_id", "sector"),
+    "ais_spoof": ("mmsi", "start", "course_deg", "speed_mps"),
+}
+
+
+@dataclass(frozen=True)
+class ChannelFault:
+    """One fault the ``channel`` simulator injects (``[[channel_faults]]``), from
+    ``start_s`` for ``duration_s`` (s from the scenario start). Radar faults name a
+    ``site_id``: ``radar_outage`` (the site publishes no scans), ``radar_blank`` (no
+    detections in the azimuths [azimuth_from_rad, azimuth_to_rad), clockwise: the
+    tracker coasts, then drops its tracks there), ``radar_range_bias`` (``value`` m added
+    to ranges), ``radar_azimuth_bias`` (``value`` rad added to azimuths and courses),
+    ``radar_time_offset`` (``value`` s added to report times), ``radar_noise`` (range,
+    azimuth, course and speed noise x ``value``; the reported sigmas unchanged). AIS
+    faults name a vessel (``vessel_id``; None: the simulator picks, with the run's seed, a
+    Class A vessel in the scene for the whole fault, in ``sector`` when given):
+    ``ais_offset`` (positions moved ``east_m``, ``north_m``: an antenna/GNSS fault),
+    ``ais_stuck`` (position, SOG and COG frozen at the fault start), ``ais_mmsi_swap``
+    (the vessel and ``other_vessel_id`` transmit each other's MMSI), ``ais_spoof`` (a
+    transponder that is on no ship, ``mmsi``, sails a straight line from ``start_lat_deg``,
+    ``start_lon_deg`` at ``course_rad``, ``speed_mps``)."""
+
+    kind: str
+    start_s: float
+    duration_s: float
+    site_id: str | None = None
+    value: float = 0.0
+    azimuth_from_rad: float = 0.0
+    azimuth_to_rad: float = 0.0
+    vessel_id: int | None = None
+    other_vessel_id: int | None = None
+    sector: str | None = None
+    east_m: float = 0.0
+    north_m: float = 0.0
+    mmsi: int = 0
+    start_lat_deg: float = 0.0
+    start_lon_deg: float = 0.0
+    course_rad: float = 0.0
+    speed_mps: float = 0.0
+
+    @property
+    def end_s(self) -> float:
+        return self.start_s + self.duration_s
+
+    @property
+    def sensor_kind(self) -> str:
+        return "radar" if self.kind in RADAR_FAULT_KINDS else "ais"
+
+
+@dataclass(frozen=True)
+class ChannelIntegrityConfig:
+    """``[channel_integrity]``: the maritime channel integrity test (airfield paper eq.
+    21-23 applied to radars and AIS, ``pipeline.maritime.integrity``).
+
+    - ``q``: false-alarm probability of one decision (eq. 22);
+    - ``readmit_run``: consecutive passing checks that readmit an excluded channel;
+    - ``exclusion``: false records every check but fuses and identifies with every channel;
+    - ``ais_sigma_position_m``: AIS position sigma the test assumes (the transponder's
+      GNSS), ``ais_max_age_s``: an AIS report is a reference this long after it was sent;
+    - ``ais_warmup_reports``: a transponder without a reference track is decided from its
+      report number ``ais_warmup_reports + 1`` on (a new ship's radar track needs ~3 scans);
+    - ``outlier_q``: a radar's per-track NIS above chi2_2(1 - outlier_q) marks the track an
+      outlier; outliers fewer than half of the channel's tracks in a sector are left out of
+      its test (an AIS fault of one ship, not the radar);
+    - ``coverage_min_targets``, ``coverage_miss_share``: a radar misses a sector when at
+      least ``coverage_min_targets`` ships that other channels see in its range there are
+      not detected by it, for more than ``coverage_miss_share`` of them;
+    - ``scan_gap_factor``: a site whose last scan ended more than this many scan periods
+      ago is in outage (missing scans)."""
+
+    q: float = 0.01
+    readmit_run: int = 5
+    exclusion: bool = True
+    ais_sigma_position_m: float = 3.0
+    ais_max_age_s: float = 10.0
+    ais_warmup_reports: int = 2
+    outlier_q: float = 1e-4
+    coverage_min_targets: int = 2
+    coverage_miss_share: float = 0.5
+    scan_gap_factor: float = 1.5
+
+
 @dataclass(frozen=True)
 class MaritimeConfig:
     """Everything the maritime stage reads beyond the core config."""
@@ -83,11 +185,36 @@ class MaritimeConfig:
     siap: SiapConfig = field(default_factory=SiapConfig)
     radar_bias: RadarBiasConfig = field(default_factory=RadarBiasConfig)
     max_cross_track_m: float = 2000.0
+    integrity: ChannelIntegrityConfig = field(default_factory=ChannelIntegrityConfig)
+    faults: tuple[ChannelFault, ...] = ()
 
 
 def maritime_config(cfg: Config) -> MaritimeConfig:
     """The maritime family's config, parsed when ``cfg`` was loaded."""
     return cfg.family("maritime")
+
+
+def channel_faults(cfg: Config) -> tuple[ChannelFault, ...]:
+    """The channel scenario's fault schedule (``[[channel_faults]]``)."""
+    return maritime_config(cfg).faults
+
+
+def without_faults(cfg: Config) -> Config:
+    """``cfg`` with an empty ``[[channel_faults]]`` schedule (the fault-free scenario)."""
+    from dataclasses import replace
+
+    fam = dict(cfg.families)
+    fam["maritime"] = replace(maritime_config(cfg), faults=())
+    return replace(cfg, families=fam)
+
+
+def with_faults(cfg: Config, faults: tuple[ChannelFault, ...]) -> Config:
+    """``cfg`` with ``faults`` as the channel scenario's schedule."""
+    from dataclasses import replace
+
+    fam = dict(cfg.families)
+    fam["maritime"] = replace(maritime_config(cfg), faults=tuple(faults))
+    return replace(cfg, families=fam)
 
 
 def radar_bias_config(cfg: Config) -> RadarBiasConfig:
@@ -120,6 +247,76 @@ def parse_maritime(raw: Mapping[str, Any], core: Config) -> MaritimeConfig:
         siap=siap,
         radar_bias=_radar_bias(raw.get("radar_bias", {})),
         max_cross_track_m=raw.get("fairway", {}).get("max_cross_track_m", 2000.0),
+        integrity=_integrity(raw.get("channel_integrity", {})),
+        faults=tuple(_fault(f, core) for f in raw.get("channel_faults", [])),
+    )
+
+
+def _integrity(raw: Mapping[str, Any]) -> ChannelIntegrityConfig:
+    """``[channel_integrity]`` (unknown keys are errors)."""
+    d = ChannelIntegrityConfig()
+    unknown = set(raw) - set(d.__dataclass_fields__)
+    if unknown:
+        raise ValueError(f"[channel_integrity]: unknown keys {sorted(unknown)}")
+    out = ChannelIntegrityConfig(**{
+        k: type(getattr(d, k))(v) for k, v in raw.items()
+    })
+    if not 0.0 < out.q < 1.0 or not 0.0 < out.outlier_q < 1.0:
+        raise ValueError("[channel_integrity]: q and outlier_q must be in (0, 1)")
+    if out.readmit_run < 1 or out.ais_warmup_reports < 0 or out.coverage_min_targets < 1:
+        raise ValueError("[channel_integrity]: readmit_run and coverage_min_targets >= 1, "
+                         "ais_warmup_reports >= 0")
+    return out
+
+
+def _fault(raw: Mapping[str, Any], core: Config) -> ChannelFault:
+    """One ``[[channel_faults]]`` entry (degrees in the file, radians here)."""
+    kind = raw.get("kind")
+    if kind not in _FAULT_KEYS:
+        raise ValueError(f"[[channel_faults]]: kind must be one of {FAULT_KINDS}, got {kind!r}")
+    allowed = {"kind", "start_s", "duration_s", *_FAULT_KEYS[kind]}
+    unknown = set(raw) - allowed
+    if unknown:
+        raise ValueError(f"[[channel_faults]] {kind}: unknown keys {sorted(unknown)}")
+    start, duration = float(raw["start_s"]), float(raw["duration_s"])
+    if start < 0.0 or duration <= 0.0:
+        raise ValueError(f"[[channel_faults]] {kind}: start_s >= 0 and duration_s > 0")
+    site = raw.get("site_id")
+    if kind in RADAR_FAULT_KINDS and site not in {s.site_id for s in core.radar_sites}:
+        raise ValueError(f"[[channel_faults]] {kind}: site_id {site!r} is not a radar site")
+    sector = raw.get("sector")
+    if sector is not None and sector not in {s.name for s in core.sectors}:
+        raise ValueError(f"[[channel_faults]] {kind}: sector {sector!r} is not a sector")
+    value = {
+        "radar_range_bias": float(raw.get("bias_m", 0.0)),
+        "radar_azimuth_bias": math.radians(float(raw.get("bias_deg", 0.0))),
+        "radar_time_offset": float(raw.get("offset_s", 0.0)),
+        "radar_noise": float(raw.get("factor", 1.0)),
+    }.get(kind, 0.0)
+    if kind == "radar_noise" and value < 1.0:
+        raise ValueError("[[channel_faults]] radar_noise: factor >= 1")
+    start_ll = raw.get("start", [0.0, 0.0])
+    if kind == "ais_spoof" and ("start" not in raw or "mmsi" not in raw):
+        raise ValueError("[[channel_faults]] ais_spoof: needs mmsi and start = [lat, lon]")
+    vid, other = raw.get("vessel_id"), raw.get("other_vessel_id")
+    return ChannelFault(
+        kind=kind,
+        start_s=start,
+        duration_s=duration,
+        site_id=site,
+        value=value,
+        azimuth_from_rad=math.radians(float(raw.get("azimuth_from_deg", 0.0))),
+        azimuth_to_rad=math.radians(float(raw.get("azimuth_to_deg", 0.0))),
+        vessel_id=None if vid is None else int(vid),
+        other_vessel_id=None if other is None else int(other),
+        sector=sector,
+        east_m=float(raw.get("east_m", 0.0)),
+        north_m=float(raw.get("north_m", 0.0)),
+        mmsi=int(raw.get("mmsi", 0)),
+        start_lat_deg=float(start_ll[0]),
+        start_lon_deg=float(start_ll[1]),
+        course_rad=math.radians(float(raw.get("course_deg", 0.0))),
+        speed_mps=float(raw.get("speed_mps", 0.0)),
     )
 
 

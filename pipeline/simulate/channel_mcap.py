@@ -9,6 +9,7 @@ topic                     message encoding    schema                        payl
 ``/radar/<site_id>/tracks``  ``json``          ``surveil.RadarTrackReport``   compact JSON
 ``/ais/nmea``             ``nmea0183``        none (schema id 0)            one sentence
 ``/truth/vessels``        ``json``            ``surveil.TruthState``         compact JSON
+``/truth/faults``         ``json``            ``surveil.FaultTruth``         compact JSON
 ========================  ==================  ============================  ============
 
 JSON payloads carry exactly the fields of the channel's JSON schema (``schemas/``), in
@@ -29,13 +30,16 @@ import polars as pl
 
 from pipeline.config import Config
 from pipeline.io.mcap_write import archive_file_name, json_payloads, schema_bytes, write_mcap_file
+from pipeline.maritime.config import without_faults
 from pipeline.simulate.channel import ChannelScenario, simulate_channel
 from pipeline.units import NS
 
 RADAR_SCHEMA_NAME = "surveil.RadarTrackReport"
 TRUTH_SCHEMA_NAME = "surveil.TruthState"
+FAULT_SCHEMA_NAME = "surveil.FaultTruth"
 AIS_TOPIC = "/ais/nmea"
 TRUTH_TOPIC = "/truth/vessels"
+FAULT_TOPIC = "/truth/faults"
 
 
 def radar_topic(site_id: str) -> str:
@@ -62,6 +66,7 @@ def write_channel_archive(
     out_dir.mkdir(parents=True, exist_ok=True)
     radar_schema, radar_fields = schema_bytes("radar_track_report.schema.json")
     truth_schema, truth_fields = schema_bytes("truth_state.schema.json")
+    fault_schema, fault_fields = schema_bytes("fault_truth.schema.json")
 
     # (topic, message encoding, schema name or None) in channel-id order
     site_ids = list(scenario.site_ids)
@@ -69,6 +74,7 @@ def write_channel_archive(
         *((radar_topic(s), "json", RADAR_SCHEMA_NAME) for s in site_ids),
         (AIS_TOPIC, "nmea0183", None),
         (TRUTH_TOPIC, "json", TRUTH_SCHEMA_NAME),
+        (FAULT_TOPIC, "json", FAULT_SCHEMA_NAME),
     ]
     rank = {topic: i for i, (topic, _, _) in enumerate(channels)}
 
@@ -104,6 +110,17 @@ def write_channel_archive(
             }
         )
     )
+    faults = scenario.fault_truth
+    parts.append(
+        pl.DataFrame(
+            {
+                "log_time_ns": faults["start_ns"],
+                "channel": rank[FAULT_TOPIC],
+                "payload": json_payloads(faults, fault_fields),
+            },
+            schema={"log_time_ns": pl.Int64, "channel": pl.Int64, "payload": pl.Binary},
+        )
+    )
     messages = (
         pl.concat(
             [
@@ -125,7 +142,11 @@ def write_channel_archive(
         "duration_s": repr(float(scenario.duration_s)),
         "start_utc": datetime.fromtimestamp(scenario.start_ns / NS, tz=UTC).isoformat(),
     }
-    schemas = {RADAR_SCHEMA_NAME: radar_schema, TRUTH_SCHEMA_NAME: truth_schema}
+    schemas = {
+        RADAR_SCHEMA_NAME: radar_schema,
+        TRUTH_SCHEMA_NAME: truth_schema,
+        FAULT_SCHEMA_NAME: fault_schema,
+    }
     paths: list[Path] = []
     for (file_index,), df in messages.group_by(["file_index"], maintain_order=True):
         period_start = int(file_index) * period_ns
@@ -143,6 +164,18 @@ def write_channel_archive(
 def simulate_channel_archive(
     cfg: Config, start_ns: int, duration_s: float, seed: int, out_dir: Path
 ) -> list[Path]:
-    """Simulate the ``channel`` scenario and write it under ``out_dir``; return the files."""
+    """Simulate the ``channel`` scenario (with the config's ``[[channel_faults]]``) and
+    write it under ``out_dir``; return the files."""
     scenario = simulate_channel(cfg, start_ns=start_ns, duration_s=duration_s, seed=seed)
     return write_channel_archive(scenario, out_dir, scenario_name="channel")
+
+
+def simulate_channel_clean_archive(
+    cfg: Config, start_ns: int, duration_s: float, seed: int, out_dir: Path
+) -> list[Path]:
+    """The ``channel-clean`` scenario: ``channel`` without the fault schedule (the same
+    ships, reports and noise where no fault acts)."""
+    scenario = simulate_channel(
+        without_faults(cfg), start_ns=start_ns, duration_s=duration_s, seed=seed
+    )
+    return write_channel_archive(scenario, out_dir, scenario_name="channel-clean")
