@@ -155,6 +155,8 @@ class ChannelIntegrityConfig:
       GNSS), ``ais_max_age_s``: an AIS report is a reference this long after it was sent;
     - ``ais_warmup_reports``: a transponder without a reference track is decided from its
       report number ``ais_warmup_reports + 1`` on (a new ship's radar track needs ~3 scans);
+    - ``ais_jump_m``: a report this far from the transponder's previous one dead-reckoned
+      with its SOG/COG is a jump (another ship sends the MMSI, a position fault);
     - ``outlier_q``: a radar's per-track NIS above chi2_2(1 - outlier_q) marks the track an
       outlier; outliers fewer than half of the channel's tracks in a sector are left out of
       its test (an AIS fault of one ship, not the radar);
@@ -170,6 +172,7 @@ class ChannelIntegrityConfig:
     ais_sigma_position_m: float = 3.0
     ais_max_age_s: float = 10.0
     ais_warmup_reports: int = 2
+    ais_jump_m: float = 150.0
     outlier_q: float = 1e-4
     coverage_min_targets: int = 2
     coverage_miss_share: float = 0.5
