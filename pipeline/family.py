@@ -25,6 +25,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from functools import partial
 from typing import Any
 
 import polars as pl
@@ -80,3 +81,15 @@ class Family:
     stage: Stage
     unit_s: int | None = 3600
     join_units: Callable[[UnitParts], UnitParts] | None = None
+
+
+def _parse_section(name: str, parse: Callable[[Mapping[str, Any], Config], Any],
+                   raw: Mapping[str, Any], core: Config) -> Any:
+    return parse(raw.get(name, {}), core)
+
+
+def one_section(name: str, parse: Callable[[Mapping[str, Any], Config], Any]
+                ) -> Callable[[Mapping[str, Any], Config], Any]:
+    """``Family.parse_config`` of a family that owns one section: ``parse(raw[name], core)``
+    (an empty mapping when the file has no such section)."""
+    return partial(_parse_section, name, parse)

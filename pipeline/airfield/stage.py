@@ -12,9 +12,7 @@ warehouse without airfield data) yields empty tables.
 from __future__ import annotations
 
 import logging
-from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
 
 import polars as pl
 
@@ -24,7 +22,7 @@ from pipeline.airfield.frames import config_sensor_id, sensor_rows, to_common_fr
 from pipeline.airfield.fusion import fuse_airfield
 from pipeline.airfield.score import score
 from pipeline.config import Config
-from pipeline.family import Family, Inputs, Outputs, TableInput, Window
+from pipeline.family import Family, Inputs, Outputs, TableInput, Window, one_section
 
 log = logging.getLogger(__name__)
 
@@ -107,14 +105,11 @@ def stage(tables: Inputs, window: Window, cfg: Config) -> Outputs:
     return {k: v for k, v in result.items() if v.height}
 
 
-def _parse(raw: Mapping[str, Any], core: Config) -> AirfieldConfig | None:
-    return parse_airfield_section(raw.get("airfield", {}), core)
-
 
 FAMILY = Family(
     name="airfield",
     sections=("airfield",),
-    parse_config=_parse,
+    parse_config=one_section("airfield", parse_airfield_section),
     inputs=inputs,
     outputs=OUTPUTS,
     stage=stage,

@@ -18,14 +18,11 @@ window reproduces its rows exactly.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from typing import Any
-
 import numpy as np
 
 from pipeline.config import Config
-from pipeline.family import Family, Inputs, Outputs, TableInput, Window
-from pipeline.gaps.config import GapsConfig, gaps_config, parse_gaps
+from pipeline.family import Family, Inputs, Outputs, TableInput, Window, one_section
+from pipeline.gaps.config import gaps_config, parse_gaps
 from pipeline.gaps.forecast import forecast_gaps
 from pipeline.units import NS
 
@@ -73,14 +70,11 @@ def stage(tables: Inputs, window: Window, cfg: Config) -> Outputs:
     return {"gap_forecasts": out}
 
 
-def _parse(raw: Mapping[str, Any], core: Config) -> GapsConfig:
-    return parse_gaps(raw.get("gaps", {}), core)
-
 
 FAMILY = Family(
     name="gaps",
     sections=("gaps",),
-    parse_config=_parse,
+    parse_config=one_section("gaps", parse_gaps),
     inputs=inputs,
     outputs=OUTPUTS,
     stage=stage,

@@ -20,7 +20,8 @@ unpaired costs the gate, which yields cases B and C (and any m x n) naturally.
 
 N radars: sites are taken in a fixed order; site k's tracks are assigned to the
 candidate system tracks built from sites < k (their eq. 14 fused position/course/speed,
-see pipeline.maritime.fuse), unassigned ones start new candidates.
+position in matrix form: the same ``Information`` sums that pipeline.maritime.fuse
+publishes), unassigned ones start new candidates.
 
 Continuity over epochs: (site_id, local_track_id) -> system_track_id. A local track keeps
 its system track as long as the gates still pass (its pairing gets a bonus that no
@@ -43,6 +44,7 @@ from scipy.stats import chi2
 
 from pipeline.frames import wrap_angle
 from pipeline.maritime.config import AssociationConfig
+from pipeline.maritime.fuse import Information, channel_information, channel_information_of_columns
 from pipeline.maritime.sync import extrapolate_position, extrapolation_covariance
 from pipeline.units import NS
 
@@ -127,12 +129,14 @@ def assign(cost: np.ndarray, miss_cost: np.ndarray | float) -> tuple[np.ndarray,
 
 
 class _Candidates:
-    """Candidate system tracks of one epoch, as eq. 14 running sums (arrays of size
-    n_rows of the epoch): weights 1/P_xx, 1/P_yy, 1/sigma_v^2, 1/sigma_c^2."""
+    """Candidate system tracks of one epoch as running sums of eq. 14 in information
+    form (multi-radar paper, eq. 14; :class:`pipeline.maritime.fuse.Information`, one
+    row of ``sums`` per candidate), so a candidate's state is exactly what
+    :func:`pipeline.maritime.fuse.fuse` publishes for the same members."""
 
     def __init__(self, capacity: int, n_sites: int) -> None:
         self.n = 0
-        self.sums = np.zeros((capacity, 10))
+        self.sums = np.zeros((capacity, len(fields(Information))))
         self.prev_ids = np.full((capacity, n_sites), -1, dtype=np.int64)
 
     def add(
@@ -144,22 +148,18 @@ class _Candidates:
         prev: np.ndarray,
         site: int,
     ) -> None:
-        wx, wy, wv, wc = 1.0 / rows.P_xx, 1.0 / rows.P_yy, sv**-2, sc**-2
-        contrib = np.column_stack(
-            [
-                wx,
-                wx * rows.x_m,
-                wy,
-                wy * rows.y_m,
-                wx * wy * rows.P_xy,
-                wv,
-                wv * rows.speed_mps,
-                wc,
-                wc * np.sin(rows.course_rad),
-                wc * np.cos(rows.course_rad),
-            ]
+        own = channel_information(
+            rows.x_m,
+            rows.y_m,
+            rows.P_xx,
+            rows.P_yy,
+            rows.P_xy,
+            rows.speed_mps,
+            sv,
+            rows.course_rad,
+            sc,
         )
-        np.add.at(self.sums, clusters, contrib)
+        np.add.at(self.sums, clusters, np.column_stack(own.terms()))
         self.prev_ids[clusters, site] = prev
 
     def new(self, k: int) -> np.ndarray:
@@ -168,18 +168,11 @@ class _Candidates:
         return idx
 
     def state(self) -> tuple[Kinematics, np.ndarray, np.ndarray]:
-        """Fused kinematics of the candidates, with (sigma_speed, sigma_course)."""
-        s = self.sums[: self.n].T
-        kin = Kinematics(
-            s[1] / s[0],
-            s[3] / s[2],
-            1.0 / s[0],
-            1.0 / s[2],
-            s[4] / (s[0] * s[2]),
-            s[6] / s[5],
-            np.mod(np.arctan2(s[8], s[9]), 2 * np.pi),
-        )
-        return kin, s[5] ** -0.5, s[7] ** -0.5
+        """Fused kinematics of the candidates (eq. 14, :meth:`Information.estimate`),
+        with (sigma_speed, sigma_course)."""
+        f = Information(*self.sums[: self.n].T).estimate()
+        kin = Kinematics(f.x_m, f.y_m, f.P_xx, f.P_yy, f.P_xy, f.speed_mps, f.course_rad)
+        return kin, f.sigma_speed_mps, f.sigma_course_rad
 
 
 @dataclass
@@ -349,26 +342,20 @@ def _predict(mem: _Memory, sys: np.ndarray, t_ns: int) -> Kinematics:
 
 
 def _with_leave_one_out_d2(df: pl.DataFrame) -> pl.DataFrame:
-    """mahalanobis_d2 of each row to the eq. 14 fusion of the other members of its
-    system track at that epoch (group sums minus the row's own terms); null when alone."""
+    """mahalanobis_d2 of each row to the eq. 14 fusion (matrix form, the same
+    :class:`pipeline.maritime.fuse.Information` as :func:`pipeline.maritime.fuse.fuse`)
+    of the OTHER members of its system track at that epoch: the group's sums minus the
+    row's own terms, then d^2 = D^T (P + P_others)^-1 D; null when alone."""
     g = ["time_ns", "system_track_id"]
-    wx, wy = 1.0 / pl.col("P_xx"), 1.0 / pl.col("P_yy")
-    ox = wx.sum().over(g) - wx
-    oy = wy.sum().over(g) - wy
-    tmp = df.with_columns(
-        ((wx * pl.col("x_enu_m")).sum().over(g) - wx * pl.col("x_enu_m")).truediv(ox).alias("_xo"),
-        ((wy * pl.col("y_enu_m")).sum().over(g) - wy * pl.col("y_enu_m")).truediv(oy).alias("_yo"),
-        (1.0 / ox).alias("_Pxx"),
-        (1.0 / oy).alias("_Pyy"),
-        (((wx * wy * pl.col("P_xy")).sum().over(g) - wx * wy * pl.col("P_xy")) / (ox * oy)).alias(
-            "_Pxy"
-        ),
-        pl.len().over(g).alias("_n"),
-    )
-    dx, dy = pl.col("x_enu_m") - pl.col("_xo"), pl.col("y_enu_m") - pl.col("_yo")
-    sxx, syy = pl.col("P_xx") + pl.col("_Pxx"), pl.col("P_yy") + pl.col("_Pyy")
-    sxy = pl.col("P_xy") + pl.col("_Pxy")
+    own = channel_information_of_columns()
+    others = own.map(lambda t: t.sum().over(g)) - own
+    o_cols = others.aliased("_o_")
+    tmp = df.with_columns(*o_cols, pl.len().over(g).alias("_n"))
+    o = Information.columns("_o_").estimate()
+    dx, dy = pl.col("x_enu_m") - o.x_m, pl.col("y_enu_m") - o.y_m
+    sxx, syy = pl.col("P_xx") + o.P_xx, pl.col("P_yy") + o.P_yy
+    sxy = pl.col("P_xy") + o.P_xy
     d2 = (syy * dx * dx - 2.0 * sxy * dx * dy + sxx * dy * dy) / (sxx * syy - sxy * sxy)
     return tmp.with_columns(
         pl.when(pl.col("_n") > 1).then(d2).otherwise(None).alias("mahalanobis_d2")
-    ).drop("_xo", "_yo", "_Pxx", "_Pyy", "_Pxy", "_n")
+    ).drop(*(e.meta.output_name() for e in o_cols), "_n")

@@ -30,11 +30,19 @@ docs/maritime.md). With matrix weights n^T P̂ n <= n^T P_i n for every directio
 every channel i, so the fused sigma of any projection (cross-track deviation included)
 never exceeds the best channel's.
 
+The sums of eq. 14 (information matrix and vector for the position, weight sums for
+speed and course) are kept in one place, :class:`Information`, used by :func:`fuse`, by
+the candidate system tracks of the track-to-track association and by its leave-one-out
+distance (``pipeline.maritime.associate``): system track ids are decided on the same
+fused state that is published.
+
 Course is averaged as a weighted circular mean (weights 1/sigma_c^2), its sigma is
 (sum w_c)^-1/2 (small-angle approximation, fine for sigma_c of a few degrees).
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass, fields
 
 import numpy as np
 import polars as pl
@@ -57,10 +65,154 @@ FUSED_COLUMNS = (
     "sources",
 )
 
+#: the per-channel columns eq. 14 reads (order of :func:`channel_information`'s arguments)
+CHANNEL_COLUMNS = (
+    "x_enu_m",
+    "y_enu_m",
+    "P_xx",
+    "P_yy",
+    "P_xy",
+    "speed_mps",
+    "sigma_speed_mps",
+    "course_rad",
+    "sigma_course_rad",
+)
+
+#: a numpy array (one value per channel or per set of channels) or a polars expression
+Terms = np.ndarray | pl.Expr
+
+
+@dataclass(frozen=True)
+class Information:
+    """The sums of eq. 14 over a set of channels (multi-radar paper, eq. 14; position in
+    matrix, i.e. information, form):
+
+    .. math:: I = \\sum_i P_i^{-1}, \\quad \\mathbf i = \\sum_i P_i^{-1} \\mathbf p_i,
+              \\quad \\sum_i w_{V,i}, \\ \\sum_i w_{V,i} V_i, \\quad
+              \\sum_i w_{C,i}, \\ \\sum_i w_{C,i} (\\sin C_i, \\cos C_i)
+
+    Fields: I_xx, I_yy, I_xy (m^-2), i_x, i_y (m^-1), w_v = sum 1/sigma_V^2 (s^2/m^2),
+    wv = sum V/sigma_V^2 (s/m), w_c = sum 1/sigma_C^2 (rad^-2), wc_sin, wc_cos (rad^-2).
+
+    This is the ONE implementation of eq. 14: :func:`fuse` aggregates it per (epoch,
+    system track), the track-to-track association keeps its candidate system tracks as
+    running sums of it and takes a row's own terms out of its group's sums for the
+    leave-one-out distance (``pipeline.maritime.associate``). Every field is either a
+    numpy array or a polars expression: the same arithmetic (and numpy ufuncs, which
+    polars expressions implement) serves both, so the two paths cannot drift apart.
+    Sets of channels add (``+``) and a channel's terms subtract (``-``).
+    """
+
+    I_xx: Terms
+    I_yy: Terms
+    I_xy: Terms
+    i_x: Terms
+    i_y: Terms
+    w_v: Terms
+    wv: Terms
+    w_c: Terms
+    wc_sin: Terms
+    wc_cos: Terms
+
+    def terms(self) -> tuple[Terms, ...]:
+        """The fields in declaration order (e.g. the columns of a (n, 10) array)."""
+        return tuple(getattr(self, f.name) for f in fields(self))
+
+    def map(self, fn) -> Information:
+        """``fn`` applied to every field (e.g. ``lambda e: e.sum().over(key)``)."""
+        return Information(*(fn(t) for t in self.terms()))
+
+    def __add__(self, other: Information) -> Information:
+        return Information(*(a + b for a, b in zip(self.terms(), other.terms(), strict=True)))
+
+    def __sub__(self, other: Information) -> Information:
+        return Information(*(a - b for a, b in zip(self.terms(), other.terms(), strict=True)))
+
+    def aliased(self, prefix: str) -> list[pl.Expr]:
+        """Polars fields as expressions named ``prefix + field``."""
+        return [t.alias(prefix + f.name) for f, t in zip(fields(self), self.terms(), strict=True)]
+
+    @staticmethod
+    def columns(prefix: str) -> Information:
+        """The sums read back from columns written by :meth:`aliased`."""
+        return Information(*(pl.col(prefix + f.name) for f in fields(Information)))
+
+    def estimate(self) -> FusedEstimate:
+        """The fused state of the set, eq. 14 in matrix form for the position
+        (P_hat = I^-1, p_hat = P_hat i, closed-form 2x2 inverse), per parameter for
+        speed and course (weighted circular mean), sigmas (sum w)^-1/2 (not eq. 15)."""
+        det = self.I_xx * self.I_yy - self.I_xy * self.I_xy
+        P_xx, P_yy, P_xy = self.I_yy / det, self.I_xx / det, -self.I_xy / det
+        return FusedEstimate(
+            x_m=P_xx * self.i_x + P_xy * self.i_y,
+            y_m=P_xy * self.i_x + P_yy * self.i_y,
+            P_xx=P_xx,
+            P_yy=P_yy,
+            P_xy=P_xy,
+            speed_mps=self.wv / self.w_v,
+            course_rad=np.arctan2(self.wc_sin, self.wc_cos) % TWO_PI,
+            sigma_speed_mps=self.w_v**-0.5,
+            sigma_course_rad=self.w_c**-0.5,
+        )
+
+
+@dataclass(frozen=True)
+class FusedEstimate:
+    """Eq. 14 estimate of sets of channels (arrays or polars expressions): x_m, y_m
+    (regional ENU, m), P_xx, P_yy, P_xy (m^2), speed_mps, course_rad (rad in [0, 2pi)),
+    sigma_speed_mps, sigma_course_rad."""
+
+    x_m: Terms
+    y_m: Terms
+    P_xx: Terms
+    P_yy: Terms
+    P_xy: Terms
+    speed_mps: Terms
+    course_rad: Terms
+    sigma_speed_mps: Terms
+    sigma_course_rad: Terms
+
+
+def channel_information(
+    x_m: Terms,
+    y_m: Terms,
+    P_xx: Terms,
+    P_yy: Terms,
+    P_xy: Terms,
+    speed_mps: Terms,
+    sigma_speed_mps: Terms,
+    course_rad: Terms,
+    sigma_course_rad: Terms,
+) -> Information:
+    """Each channel's own terms of eq. 14: I_i = P_i^-1 (closed-form 2x2 inverse),
+    I_i p_i, w_V = 1/sigma_V^2, w_V V, w_C = 1/sigma_C^2, w_C (sin C, cos C). Arguments
+    are arrays (n,) or polars expressions, units as in :data:`CHANNEL_COLUMNS`."""
+    det = P_xx * P_yy - P_xy * P_xy
+    ixx, iyy, ixy = P_yy / det, P_xx / det, -P_xy / det
+    wv, wc = sigma_speed_mps**-2, sigma_course_rad**-2
+    return Information(
+        I_xx=ixx,
+        I_yy=iyy,
+        I_xy=ixy,
+        i_x=ixx * x_m + ixy * y_m,
+        i_y=ixy * x_m + iyy * y_m,
+        w_v=wv,
+        wv=wv * speed_mps,
+        w_c=wc,
+        wc_sin=wc * np.sin(course_rad),
+        wc_cos=wc * np.cos(course_rad),
+    )
+
+
+def channel_information_of_columns() -> Information:
+    """:func:`channel_information` of the frame's :data:`CHANNEL_COLUMNS` (expressions)."""
+    return channel_information(*(pl.col(c) for c in CHANNEL_COLUMNS))
+
 
 def fuse(associated: pl.DataFrame) -> pl.DataFrame:
     """Fuse the radars' synchronised tracks of each (epoch, system track), eq. 14
-    (position in matrix form, see the module docstring).
+    (position in matrix form, see the module docstring): the sums of
+    :class:`Information` per group, then :meth:`Information.estimate`.
 
     Consumes (from ``associate_tracks``): time_ns, system_track_id, site_id, x_enu_m,
     y_enu_m, P_xx, P_yy, P_xy (m^2), course_rad, speed_mps, sigma_course_rad,
@@ -71,40 +223,24 @@ def fuse(associated: pl.DataFrame) -> pl.DataFrame:
     sigma_course_rad, sigma_speed_mps, n_sources (int16), sources (comma-joined sorted
     site ids); sorted by (time_ns, system_track_id).
     """
-    # information matrix I_i = P_i^-1 of each channel (closed-form 2x2 inverse)
-    det = pl.col("P_xx") * pl.col("P_yy") - pl.col("P_xy") ** 2
-    ixx, iyy, ixy = pl.col("P_yy") / det, pl.col("P_xx") / det, -pl.col("P_xy") / det
-    x, y = pl.col("x_enu_m"), pl.col("y_enu_m")
-    wv, wc = pl.col("sigma_speed_mps").pow(-2), pl.col("sigma_course_rad").pow(-2)
     sums = associated.group_by("time_ns", "system_track_id").agg(
-        ixx.sum().alias("sixx"),
-        iyy.sum().alias("siyy"),
-        ixy.sum().alias("sixy"),
-        (ixx * x + ixy * y).sum().alias("six"),
-        (ixy * x + iyy * y).sum().alias("siy"),
-        wv.sum().alias("swv"),
-        wc.sum().alias("swc"),
-        (wv * pl.col("speed_mps")).sum().alias("sv"),
-        (wc * pl.col("course_rad").sin()).sum().alias("ss"),
-        (wc * pl.col("course_rad").cos()).sum().alias("sc"),
+        *channel_information_of_columns().map(lambda t: t.sum()).aliased("_s_"),
         pl.len().cast(pl.Int16).alias("n_sources"),
         pl.col("site_id").unique().sort().str.join(",").alias("sources"),
     )
-    # P_hat = (sum I_i)^-1, p_hat = P_hat sum I_i p_i
-    d = pl.col("sixx") * pl.col("siyy") - pl.col("sixy") ** 2
-    pxx, pyy, pxy = pl.col("siyy") / d, pl.col("sixx") / d, -pl.col("sixy") / d
+    f = Information.columns("_s_").estimate()
     return sums.select(
         "time_ns",
         "system_track_id",
-        (pxx * pl.col("six") + pxy * pl.col("siy")).alias("x_enu_m"),
-        (pxy * pl.col("six") + pyy * pl.col("siy")).alias("y_enu_m"),
-        pxx.sqrt().alias("sigma_x_m"),
-        pyy.sqrt().alias("sigma_y_m"),
-        pxy.alias("cov_xy_m2"),
-        (pl.arctan2(pl.col("ss"), pl.col("sc")) % TWO_PI).alias("course_rad"),
-        (pl.col("sv") / pl.col("swv")).alias("speed_mps"),
-        pl.col("swc").pow(-0.5).alias("sigma_course_rad"),
-        pl.col("swv").pow(-0.5).alias("sigma_speed_mps"),
+        f.x_m.alias("x_enu_m"),
+        f.y_m.alias("y_enu_m"),
+        np.sqrt(f.P_xx).alias("sigma_x_m"),
+        np.sqrt(f.P_yy).alias("sigma_y_m"),
+        f.P_xy.alias("cov_xy_m2"),
+        f.course_rad.alias("course_rad"),
+        f.speed_mps.alias("speed_mps"),
+        f.sigma_course_rad.alias("sigma_course_rad"),
+        f.sigma_speed_mps.alias("sigma_speed_mps"),
         "n_sources",
         "sources",
     ).sort("time_ns", "system_track_id")

@@ -10,12 +10,9 @@ and ``nav_outages`` (outages starting in the window). Deterministic: no randomne
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from typing import Any
-
 from pipeline.config import Config
-from pipeline.family import Family, Inputs, Outputs, TableInput, Window
-from pipeline.nav.config import OwnshipConfig, ownship_config, parse_ownship
+from pipeline.family import Family, Inputs, Outputs, TableInput, Window, one_section
+from pipeline.nav.config import ownship_config, parse_ownship
 from pipeline.nav.solution import nav_window
 
 OUTPUTS = ("nav_solution", "nav_outages")
@@ -49,14 +46,11 @@ def stage(tables: Inputs, window: Window, cfg: Config) -> Outputs:
         start_ns=window.start_ns, end_ns=window.end_ns, cfg=cfg, oc=ownship_config(cfg))
 
 
-def _parse(raw: Mapping[str, Any], core: Config) -> OwnshipConfig:
-    return parse_ownship(raw.get("ownship", {}), core)
-
 
 FAMILY = Family(
     name="nav",
     sections=("ownship",),
-    parse_config=_parse,
+    parse_config=one_section("ownship", parse_ownship),
     inputs=inputs,
     outputs=OUTPUTS,
     stage=stage,

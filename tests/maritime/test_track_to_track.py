@@ -24,12 +24,14 @@ from pipeline.families import load_config
 from pipeline.maritime.align import align_reports
 from pipeline.maritime.associate import (
     Kinematics,
+    _cluster_epoch,
     assign,
     associate_tracks,
     gate_threshold,
     gated_d2,
 )
 from pipeline.maritime.config import AssociationConfig, maritime_config
+from pipeline.maritime.fuse import fuse
 from pipeline.maritime.sync import synchronise
 
 ID_BASE = 5_000
@@ -219,3 +221,115 @@ def test_empty_input(cfg):
     assert out.height == 0 and {"system_track_id", "mahalanobis_d2"} <= set(out.columns)
 
 
+# --- one eq. 14 (matrix form) for association and fusion --------------------------------
+
+
+def _ellipse(a_m: float, b_m: float, angle_rad: float) -> np.ndarray:
+    """Covariance (m^2) with semi-axes sigmas a_m along angle_rad (from east), b_m across."""
+    c, s = np.cos(angle_rad), np.sin(angle_rad)
+    R = np.array([[c, -s], [s, c]])
+    return R @ np.diag([a_m**2, b_m**2]) @ R.T
+
+
+def _matrix_eq14(P: list[np.ndarray], p: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """(p_hat, P_hat) of eq. 14 in matrix form, recomputed inline."""
+    P_hat = np.linalg.inv(sum(np.linalg.inv(Pi) for Pi in P))
+    return P_hat @ sum(np.linalg.solve(Pi, pi) for Pi, pi in zip(P, p, strict=True)), P_hat
+
+
+def _per_axis_eq14(P: list[np.ndarray], p: list[np.ndarray]) -> np.ndarray:
+    """The old per-axis mean (weights 1/P_xx, 1/P_yy): what the tests must tell apart."""
+    w = np.array([[1 / Pi[0, 0], 1 / Pi[1, 1]] for Pi in P])
+    return (w * np.array(p)).sum(0) / w.sum(0)
+
+
+def _epoch_rows(rng: np.random.Generator, n_ships: int, sites: tuple[str, ...]) -> pl.DataFrame:
+    """One synchronised epoch: n_ships 3 km apart, each seen by every site with a
+    rotated, elongated error ellipse (different per site) and its noise drawn from it."""
+    rows = []
+    for k in range(n_ships):
+        truth = np.array([3000.0 * k, 500.0 * (k % 2)])
+        for s_i, site in enumerate(sites):
+            P = _ellipse(rng.uniform(40, 90), rng.uniform(8, 20),
+                         rng.uniform(0, np.pi) + s_i * np.pi / len(sites))
+            x, y = rng.multivariate_normal(truth, P)
+            rows.append({"site_id": site, "local_track_id": 100 * (s_i + 1) + k,
+                         "x_enu_m": x, "y_enu_m": y, "P_xx": P[0, 0], "P_yy": P[1, 1],
+                         "P_xy": P[0, 1], "course_rad": 1.0 + rng.normal(0, 0.03),
+                         "speed_mps": 5.0 + rng.normal(0, 0.2),
+                         "sigma_course_rad": rng.uniform(0.02, 0.05),
+                         "sigma_speed_mps": rng.uniform(0.15, 0.4)})
+    return _synced(rows).sort("site_id", "local_track_id")
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_candidate_state_equals_fuse_for_the_same_members(seed):
+    """Two paths agree: the association's candidate system tracks (numpy running sums,
+    the state its ids are decided on) and fuse() (polars group sums, the state that is
+    published), for the same members, to 1e-9."""
+    syn = _epoch_rows(np.random.default_rng(seed), 6, ("R1", "R2", "R3"))
+    cfg = AssociationConfig()
+    kin = Kinematics(*(syn[c].to_numpy() for c in (
+        "x_enu_m", "y_enu_m", "P_xx", "P_yy", "P_xy", "speed_mps", "course_rad")))
+    site = syn["site_id"].replace_strict(["R1", "R2", "R3"], [0, 1, 2]).to_numpy()
+    cand, member = _cluster_epoch(
+        kin, syn["sigma_speed_mps"].to_numpy(), syn["sigma_course_rad"].to_numpy(),
+        np.full(syn.height, -1), site, 3, cfg, gate_threshold(cfg.gate_probability))
+    assert cand.n == 6 and np.bincount(member).tolist() == [3] * 6  # one per ship
+    state, sigma_v, sigma_c = cand.state()
+    fused = fuse(syn.with_columns(pl.Series("system_track_id", member, pl.Int64)))
+    assert fused["system_track_id"].to_list() == list(range(6))
+    for got, col in ((state.x_m, "x_enu_m"), (state.y_m, "y_enu_m"),
+                     (state.speed_mps, "speed_mps"), (sigma_v, "sigma_speed_mps"),
+                     (sigma_c, "sigma_course_rad"), (state.P_xy, "cov_xy_m2")):
+        np.testing.assert_allclose(got, fused[col].to_numpy(), rtol=0, atol=1e-9, err_msg=col)
+    np.testing.assert_allclose(np.sqrt(state.P_xx), fused["sigma_x_m"], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(np.sqrt(state.P_yy), fused["sigma_y_m"], rtol=0, atol=1e-9)
+    dc = np.abs(np.angle(np.exp(1j * (state.course_rad - fused["course_rad"].to_numpy()))))
+    assert dc.max() < 1e-9
+
+
+def test_candidate_state_is_the_matrix_form_not_per_axis():
+    """Rotated ellipses (+-45 deg, 100 m x 10 m): the matrix form of eq. 14 and the
+    per-axis mean differ by metres; candidates, fuse() and the inline matrix form agree."""
+    P = [_ellipse(100.0, 10.0, np.pi / 4), _ellipse(100.0, 10.0, -np.pi / 4),
+         _ellipse(60.0, 15.0, np.pi / 3)]
+    p = [np.array([1000.0, 2000.0]), np.array([1040.0, 1985.0]), np.array([990.0, 2030.0])]
+    p_hat, P_hat = _matrix_eq14(P, p)
+    assert np.linalg.norm(_per_axis_eq14(P, p) - p_hat) > 5.0  # the old form differs
+    syn = _synced([{"site_id": f"R{i + 1}", "local_track_id": i + 1, "x_enu_m": pi[0],
+                    "y_enu_m": pi[1], "P_xx": Pi[0, 0], "P_yy": Pi[1, 1], "P_xy": Pi[0, 1]}
+                   for i, (Pi, pi) in enumerate(zip(P, p, strict=True))])
+    cfg = AssociationConfig()
+    kin = Kinematics(*(syn[c].to_numpy() for c in (
+        "x_enu_m", "y_enu_m", "P_xx", "P_yy", "P_xy", "speed_mps", "course_rad")))
+    cand, member = _cluster_epoch(
+        kin, syn["sigma_speed_mps"].to_numpy(), syn["sigma_course_rad"].to_numpy(),
+        np.full(3, -1), np.arange(3), 3, cfg, gate_threshold(cfg.gate_probability))
+    assert member.tolist() == [0, 0, 0]
+    state, _, _ = cand.state()
+    np.testing.assert_allclose([state.x_m[0], state.y_m[0]], p_hat, rtol=0, atol=1e-9)
+    np.testing.assert_allclose([[state.P_xx[0], state.P_xy[0]], [state.P_xy[0], state.P_yy[0]]],
+                               P_hat, rtol=1e-12)
+    f = fuse(syn.with_columns(pl.lit(1, pl.Int64).alias("system_track_id"))).row(0, named=True)
+    assert [f["x_enu_m"], f["y_enu_m"]] == pytest.approx(p_hat.tolist(), abs=1e-9)
+
+
+def test_leave_one_out_d2_is_to_the_matrix_fusion_of_the_others():
+    """Three radars, rotated ellipses: each row's mahalanobis_d2 is to the matrix-form
+    eq. 14 fusion of the two others (recomputed inline), not to their per-axis mean."""
+    P = [_ellipse(90.0, 10.0, np.pi / 4), _ellipse(90.0, 10.0, -np.pi / 4),
+         _ellipse(70.0, 12.0, np.pi / 2.5)]
+    p = [np.array([0.0, 0.0]), np.array([30.0, 20.0]), np.array([-15.0, 25.0])]
+    syn = _synced([{"site_id": f"R{i + 1}", "local_track_id": i + 1, "x_enu_m": pi[0],
+                    "y_enu_m": pi[1], "P_xx": Pi[0, 0], "P_yy": Pi[1, 1], "P_xy": Pi[0, 1]}
+                   for i, (Pi, pi) in enumerate(zip(P, p, strict=True))])
+    out = associate_tracks(syn, cfg=AssociationConfig(), id_base=ID_BASE).sort("site_id")
+    assert out["system_track_id"].n_unique() == 1
+    for i, d2 in enumerate(out["mahalanobis_d2"]):
+        others = [j for j in range(3) if j != i]
+        p_o, P_o = _matrix_eq14([P[j] for j in others], [p[j] for j in others])
+        D, S = p[i] - p_o, P[i] + P_o
+        assert d2 == pytest.approx(D @ np.linalg.solve(S, D), rel=1e-9)
+        D_axis = p[i] - _per_axis_eq14([P[j] for j in others], [p[j] for j in others])
+        assert abs(D_axis @ np.linalg.solve(S, D_axis) - d2) > 0.1 * d2  # would differ
