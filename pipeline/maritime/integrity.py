@@ -86,6 +86,7 @@ from pipeline.filters.integrity import chi2_thresholds, eta, step_exclusion
 from pipeline.geometry import assign_sectors
 from pipeline.maritime.associate import gate_threshold
 from pipeline.maritime.config import ChannelIntegrityConfig, MaritimeConfig
+from pipeline.maritime.fuse import channel_information
 from pipeline.maritime.identity import ais_at_epochs
 from pipeline.maritime.sync import extrapolation_covariance
 from pipeline.units import NS
@@ -181,11 +182,12 @@ _UNIT = np.array([1.0, 1.0, 0.0])  # a covariance (xx, yy, xy) that is never sin
 
 
 def _info(P: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """(n, 5) information terms I_xx, I_yy, I_xy, i_x, i_y of positions with
-    covariance P (n, 3) (multi-radar paper eq. 14, matrix form)."""
-    det = P[:, 0] * P[:, 1] - P[:, 2] ** 2
-    ixx, iyy, ixy = P[:, 1] / det, P[:, 0] / det, -P[:, 2] / det
-    return np.column_stack([ixx, iyy, ixy, ixx * x + ixy * y, ixy * x + iyy * y])
+    """(n, 5) position terms I_xx, I_yy, I_xy, i_x, i_y of eq. 14 (matrix form) for
+    positions with covariance P (n, 3): :func:`pipeline.maritime.fuse.channel_information`,
+    the one implementation of eq. 14 (speed and course are not tested here)."""
+    one = np.ones(x.shape)
+    info = channel_information(x, y, P[:, 0], P[:, 1], P[:, 2], one, one, one, one)
+    return np.column_stack(info.terms()[:5])
 
 
 def _estimate(info: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -33,6 +33,9 @@ class OwnshipScenarioConfig:
     gnss_speed_sigma_mps: float = 0.053  # paper eq. 4
     gnss_velocity_tau_s: float = 15.0
     outages_s: tuple[tuple[float, float], ...] = ((960.0, 30.0), (1320.0, 120.0))
+    # GNSS position jumps (start_s, duration_s, east_m, north_m): positions moved, the
+    # velocity not (spoofing, multipath, a receiver fault)
+    jumps: tuple[tuple[float, float, float, float], ...] = ()
     outlier_count: int = 6
     outlier_position_m: tuple[float, float] = (40.0, 150.0)
     outlier_velocity_mps: tuple[float, float] = (1.0, 3.0)
@@ -60,6 +63,10 @@ class NavSettings:
     gnss_position_sigma_m: float = math.radians(2.9e-5) * 6_371_000.0
     dr_correction_window_s: float = 120.0
     dr_bound_n_sigma: float = 3.0
+    gnss_position_tau_s: float = 60.0  # correlation time of the GNSS position error
+    gnss_q: float = 0.001  # false-alarm probability of the GNSS position test
+    gnss_readmit_run: int = 5  # fixes in a row that pass before the position is used again
+    gnss_exclusion: bool = True  # false: test the fixes, use them anyway
 
 
 @dataclass(frozen=True)
@@ -95,7 +102,13 @@ def parse_ownship(raw: Mapping[str, Any], core: Config | None = None) -> Ownship
         * 6_371_000.0,
         dr_correction_window_s=_f(raw, "dr_correction_window_s", d.nav.dr_correction_window_s),
         dr_bound_n_sigma=_f(raw, "dr_bound_n_sigma", d.nav.dr_bound_n_sigma),
+        gnss_position_tau_s=_f(raw, "gnss_position_tau_s", d.nav.gnss_position_tau_s),
+        gnss_q=_f(raw, "gnss_q", d.nav.gnss_q),
+        gnss_readmit_run=int(_f(raw, "gnss_readmit_run", d.nav.gnss_readmit_run)),
+        gnss_exclusion=bool(raw.get("gnss_exclusion", d.nav.gnss_exclusion)),
     )
+    if not 0.0 < nav.gnss_q < 1.0 or nav.gnss_readmit_run < 1:
+        raise ConfigError("[ownship] gnss_q must be in (0, 1) and gnss_readmit_run >= 1")
     if nav.filter_step_s <= 0 or nav.gnss_timeout_s <= 0:
         raise ConfigError("[ownship] filter_step_s and gnss_timeout_s must be positive")
     g, r = raw.get("gyro", {}), raw.get("roll", {})
@@ -149,6 +162,7 @@ def _scenario(sc: Mapping[str, Any], gyro: GyroModel, roll: RollModel,
         turn_start_s=_f(sc, "turn_start_s", d.turn_start_s),
         turn_duration_s=_f(sc, "turn_duration_s", d.turn_duration_s),
         outages_s=outages,
+        jumps=tuple((float(a), float(b), float(c), float(e)) for a, b, c, e in sc.get("jumps", ())),
         outlier_count=int(sc.get("outlier_count", d.outlier_count)),
         log_sigma_mps=cl.log_sigma_mps,
         log_bias_mps=_f(sc, "log_bias_mps", d.log_bias_mps),
