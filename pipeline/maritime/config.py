@@ -148,7 +148,11 @@ class ChannelIntegrityConfig:
     """``[channel_integrity]``: the maritime channel integrity test (airfield paper eq.
     21-23 applied to radars and AIS, ``pipeline.maritime.integrity``).
 
-    - ``q``: false-alarm probability of one decision (eq. 22);
+    - ``radar_q``, ``ais_q``: false-alarm probability of one radar decision (a radar in a
+      sector at an epoch) and of one AIS report (eq. 22). A radar excluded by a false
+      alarm takes its information out of the fused picture of a whole sector for
+      ``readmit_run`` epochs; a transponder only its reports out of the identification
+      vote: the radars' q is the smaller;
     - ``readmit_run``: consecutive passing checks that readmit an excluded channel;
     - ``exclusion``: false records every check but fuses and identifies with every channel;
     - ``ais_sigma_position_m``: AIS position sigma the test assumes (the transponder's
@@ -166,7 +170,8 @@ class ChannelIntegrityConfig:
     - ``scan_gap_factor``: a site whose last scan ended more than this many scan periods
       ago is in outage (missing scans)."""
 
-    q: float = 0.01
+    radar_q: float = 0.001
+    ais_q: float = 0.01
     readmit_run: int = 5
     exclusion: bool = True
     ais_sigma_position_m: float = 3.0
@@ -264,8 +269,8 @@ def _integrity(raw: Mapping[str, Any]) -> ChannelIntegrityConfig:
     out = ChannelIntegrityConfig(**{
         k: type(getattr(d, k))(v) for k, v in raw.items()
     })
-    if not 0.0 < out.q < 1.0 or not 0.0 < out.outlier_q < 1.0:
-        raise ValueError("[channel_integrity]: q and outlier_q must be in (0, 1)")
+    if not all(0.0 < v < 1.0 for v in (out.radar_q, out.ais_q, out.outlier_q)):
+        raise ValueError("[channel_integrity]: radar_q, ais_q and outlier_q must be in (0, 1)")
     if out.readmit_run < 1 or out.ais_warmup_reports < 0 or out.coverage_min_targets < 1:
         raise ValueError("[channel_integrity]: readmit_run and coverage_min_targets >= 1, "
                          "ais_warmup_reports >= 0")

@@ -64,8 +64,10 @@ Per epoch the radars are tested first (with the AIS exclusions of the previous e
 their exclusions updated, then the AIS reports against the radar picture of the radars
 in service: a radar fault is attributed to the radar, not to every transponder it sees.
 Exclusion and readmission follow the airfield rule
-(:func:`pipeline.filters.integrity.step_exclusion`): excluded on eta = 1, readmitted
-after ``readmit_run`` passing checks in a row. With ``exclusion = false`` every check is
+(:func:`pipeline.filters.integrity.step_exclusion`): excluded on a failure of an upper
+threshold (eta = 1 from the lower tail of the NIS sum, a channel agreeing better than
+its sigmas, is recorded but excludes nothing: it harms no fusion), readmitted after
+``readmit_run`` passing checks in a row. With ``exclusion = false`` every check is
 recorded and nothing is excluded.
 
 The loop runs over epochs; inside it every track, radar row and AIS report of the epoch
@@ -147,6 +149,7 @@ class _Radar:
     P_all: np.ndarray  # (N, 3)
     near: np.ndarray  # (N, C) within each site's range
     detected: np.ndarray  # (N, C) the site reported it at the epoch, not coasted
+    detected_row: np.ndarray  # (n,) the row is not a coasted report
 
 
 @dataclass(frozen=True, eq=False)
@@ -178,6 +181,7 @@ class _Ais:
 
 
 NEAREST = 4  # candidate tracks kept per AIS report
+COVERAGE_MARGIN = 0.97  # share of a radar's max range where it is expected to see a ship
 _UNIT = np.array([1.0, 1.0, 0.0])  # a covariance (xx, yy, xy) that is never singular
 
 
@@ -241,9 +245,10 @@ class _Geometry:
     G: int  # sectors (index G: outside every sector)
 
     def near(self, xy: np.ndarray) -> np.ndarray:
-        """(n, C): positions within each site's range."""
+        """(n, C): positions well inside each site's range (``COVERAGE_MARGIN`` of it: a
+        ship at the edge may be out of range for the radar and in for the estimate)."""
         d = xy[:, None, :] - self.site_xy[None, :, :]
-        return np.hypot(d[..., 0], d[..., 1]) <= self.site_range[None, :]
+        return np.hypot(d[..., 0], d[..., 1]) <= COVERAGE_MARGIN * self.site_range[None, :]
 
 
 def _radar_arrays(
@@ -295,7 +300,7 @@ def _radar_arrays(
         info=info, H=H, v=np.column_stack([vx, vy]), sv=df["sigma_speed_mps"].to_numpy(),
         sc=df["sigma_course_rad"].to_numpy(), slot_bounds=slot_bounds, track=track,
         slot_sector=sector[first], p_all=p_all, P_all=P_all, near=geo.near(p_all),
-        detected=detected,
+        detected=detected, detected_row=seen,
     )
 
 
@@ -402,10 +407,14 @@ def _nearest_slots(xy: np.ndarray, k: np.ndarray, rad: _Radar, var: float
     return cand, cd2
 
 
-def _scan_gaps(aligned: pl.DataFrame, epochs: np.ndarray, cfg: Config) -> np.ndarray:
+def _scan_gaps(aligned: pl.DataFrame, epochs: np.ndarray, cfg: Config
+               ) -> tuple[np.ndarray, np.ndarray]:
     """(K, C) time since each site's last published scan at each epoch, s (NaN before the
-    site's first report in the inputs: the recording may start there, no decision)."""
+    site's first report in the inputs: the recording may start there, no decision), and
+    (K, C) whether the site's tracker has had 4 scan periods since its first report to
+    initiate the tracks of the ships in range (before that, no coverage decision)."""
     out = np.full((epochs.size, len(cfg.radar_sites)), np.nan)
+    ready = np.zeros(out.shape, bool)
     ends = aligned.group_by("site_id").agg(pl.col("log_time_ns").unique().sort())
     by_site = dict(zip(ends["site_id"].to_list(), ends["log_time_ns"].to_list(), strict=True))
     for c, s in enumerate(cfg.radar_sites):  # a handful of sites
@@ -414,7 +423,8 @@ def _scan_gaps(aligned: pl.DataFrame, epochs: np.ndarray, cfg: Config) -> np.nda
             continue
         i = np.searchsorted(t, epochs, side="right") - 1
         out[:, c] = np.where(i >= 0, (epochs - t[np.maximum(i, 0)]) / NS, np.nan)
-    return out
+        ready[:, c] = epochs - t[0] >= round(4 * s.scan_period_s * NS)
+    return out, ready
 
 
 class _Tables:
@@ -422,11 +432,11 @@ class _Tables:
 
     def __init__(self, ic: ChannelIntegrityConfig, n_max: int) -> None:
         n = np.arange(1, n_max + 1)
-        q = ic.q
+        q = ic.radar_q
         self.nis_d1 = np.r_[np.nan, stats.chi2.ppf(q / 4.0, 2 * n)]  # sum test, q/2 in all
         self.nis_d2 = np.r_[np.nan, stats.chi2.ppf(1.0 - q / 4.0, 2 * n)]
         self.bias_d2 = float(stats.chi2.ppf(1.0 - q / 2.0, 3))
-        self.ais_d1, self.ais_d2 = chi2_thresholds(q, 2)
+        self.ais_d1, self.ais_d2 = chi2_thresholds(ic.ais_q, 2)
         self.outlier = float(stats.chi2.ppf(1.0 - ic.outlier_q, 2))
 
 
@@ -461,7 +471,7 @@ class _RadarOut:
     checked: np.ndarray
     eta: np.ndarray
     excluded: np.ndarray
-    check: np.ndarray  # 0 nis, 1 bias, 2 coverage, 3 scan
+    check: np.ndarray  # 0 nis, 1 bias, 2 coverage, 3 scan, 4 site
     n: np.ndarray
     nis: np.ndarray
     T: np.ndarray
@@ -521,7 +531,7 @@ def check_channels(
     epoch_ns = round(mc.sync.epoch_period_s * NS)
     rad = _radar_arrays(assoc, coasted_reports(aligned), epochs, cfg, geo, sector_index)
     ais = _ais_arrays(ais_reports, epochs, start_ns, cfg, ic, epoch_ns, sector_index, geo, rad)
-    scan_gap = _scan_gaps(aligned, epochs, cfg)
+    scan_gap, tracking = _scan_gaps(aligned, epochs, cfg)
     scan_down = scan_gap > ic.scan_gap_factor * np.array([s.scan_period_s
                                                           for s in cfg.radar_sites])
     K, n_groups = epochs.size, C * (G + 1)
@@ -578,17 +588,32 @@ def check_channels(
         S = rad.P[a:b] + P_ref
         xi = np.where(checkable, _d2(np.where(checkable[:, None], r, 0.0),
                                      np.where(checkable[:, None], S, _UNIT)), np.nan)
+        checkable &= ~_ais_odd(xi, tot, own, info, rad.xy[a:b], rad.P[a:b], n_other, has_ais,
+                               inv, T, thr)
         grp = _radar_groups(xi, r, S, checkable, rad.H[a:b], g, n_groups, thr)
-        # -- coverage: ships trusted channels see in the site's range, the site misses
-        trusted = in_use & ~_suspect(grp, thr)[g]
-        expected, missed = _coverage(inv, T, rad.site[a:b], trusted, has_ais, rad, s0, s1,
-                                     ais, ra, rb, m_ref, pos, hit, st, t_k, timeout_ns, C, G)
-        flagged, below, checked = _radar_decisions(k, grp, expected, missed,
-                                                   scan_down[k], site_sectors, G, thr, ic, ro)
+        # -- coverage: ships trusted channels see in the site's range, the site misses; a
+        # radar excluded or failing in any sector is no witness anywhere (a registration
+        # fault splits its tracks off the others' where it is not tested)
+        doubt = (st.rad_excl | _suspect(grp, thr)).reshape(C, G + 1).any(axis=1)
+        trusted = ~doubt[rad.site[a:b]]
+        expected, missed = _coverage(inv, T, rad.site[a:b], trusted, has_ais, rad, a, s0, s1,
+                                     ais, ra, rb, m_ref, pos, hit, st, t_k, timeout_ns, C, G,
+                                     gate)
+        expected = np.where(np.repeat(tracking[k], G + 1), expected, 0)
+        below, checked = _radar_decisions(k, grp, expected, missed, scan_down[k],
+                                          site_sectors, G, thr, ic, ro)
         if ic.exclusion:
             in_fault = st.rad_age > lasting
-            st.rad_excl, st.rad_run = step_exclusion(st.rad_excl, st.rad_run, flagged, below,
-                                                     checked, ic.readmit_run)
+            # only an upper-tail failure excludes: a NIS sum below d1 (the channel agrees
+            # better than its sigmas say) is flagged by eq. 23 but harms no fusion
+            # and a group that cannot be checked while its site publishes scans and fails
+            # nowhere counts a pass (after an outage, a sector where the radar has no
+            # testable track would otherwise stay excluded for good)
+            failing = (~below & checked).reshape(C, G + 1).any(axis=1) | scan_down[k]
+            idle = st.rad_excl & ~checked & ~np.repeat(failing, G + 1)
+            st.rad_excl, st.rad_run = step_exclusion(st.rad_excl, st.rad_run, ~below & checked,
+                                                     below | idle, checked | idle,
+                                                     ic.readmit_run)
             if (in_fault & ~st.rad_excl).any():
                 _release(st, in_fault & ~st.rad_excl, ais.mmsi_near, G)
             st.rad_age = np.where(st.rad_excl, st.rad_age + 1, 0)
@@ -665,6 +690,26 @@ def _radar_groups(
         np.int64), "T": stat, "theta": theta}
 
 
+def _ais_odd(xi: np.ndarray, tot: np.ndarray, own: np.ndarray, info: np.ndarray,
+             xy: np.ndarray, P: np.ndarray, n_other: np.ndarray, has_ais: np.ndarray,
+             inv: np.ndarray, T: int, thr: _Tables) -> np.ndarray:
+    """Rows of tracks whose radars agree with one another but every one of them is an
+    outlier against the track's transponder: the transponder is the odd one out (an AIS
+    fault), the track says nothing of the radars (the minority rule of
+    :func:`_radar_groups` cannot tell one of two tracks from the radar's fault)."""
+    multi = has_ais[inv] & (n_other >= 1)
+    if not multi.any():
+        return np.zeros(xi.size, bool)
+    p, Pr = _estimate(tot[inv] - own)  # the other radars alone
+    m = np.flatnonzero(multi)
+    agree = np.ones(xi.size, bool)
+    agree[m] = _d2(xy[m] - p[m], P[m] + Pr[m]) < thr.outlier
+    odd_row = multi & agree & (xi > thr.outlier)
+    n_rows = np.bincount(inv, minlength=T)
+    odd_track = np.bincount(inv, weights=odd_row, minlength=T) == n_rows
+    return odd_track[inv] & multi
+
+
 def _suspect(grp: dict[str, np.ndarray], thr: _Tables) -> np.ndarray:
     """Groups whose NIS sum or registration test exceeds its upper threshold now: not a
     trusted witness of what the other radars should see."""
@@ -675,8 +720,9 @@ def _suspect(grp: dict[str, np.ndarray], thr: _Tables) -> np.ndarray:
 
 def _coverage(
     inv: np.ndarray, T: int, site: np.ndarray, trusted: np.ndarray, has_ais: np.ndarray,
-    rad: _Radar, s0: int, s1: int, ais: _Ais, ra: int, rb: int, m_ref: np.ndarray,
+    rad: _Radar, a0: int, s0: int, s1: int, ais: _Ais, ra: int, rb: int, m_ref: np.ndarray,
     pos: np.ndarray, hit: np.ndarray, st: _State, t_k: int, timeout_ns: int, C: int, G: int,
+    gate: float,
 ) -> tuple[np.ndarray, np.ndarray]:
     """(expected, missed) per (site, sector) group: ships trusted channels see in the
     site's range that the site does not detect. Ships = the epoch's tracks (sector of
@@ -684,7 +730,10 @@ def _coverage(
     transponders in service whose reference track is gone (the radars lost the ship)."""
     by_site = np.bincount(inv * C + site, weights=trusted, minlength=T * C).reshape(T, C)
     other = (by_site.sum(axis=1, keepdims=True) - by_site) > 0
-    exp = (other | has_ais[:, None]) & rad.near[s0:s1]
+    # a transponder vouches for a track only where no untrusted radar reports it (a
+    # faulty radar's track may hold a ship the association split off the others')
+    clean = np.bincount(inv, weights=~trusted, minlength=T) == 0
+    exp = (other | (has_ais & clean)[:, None]) & rad.near[s0:s1]
     miss = exp & ~rad.detected[s0:s1]
     idx = (np.arange(C)[None, :] * (G + 1) + rad.slot_sector[s0:s1, None]).ravel()
     n = C * (G + 1)
@@ -693,11 +742,18 @@ def _coverage(
     ref = st.ais_ref[m_ref]
     lost = (ref >= 0) & ~hit & ~st.ais_excl[m_ref] & (st.ais_ref_seen[m_ref] >= t_k - timeout_ns)
     if lost.any():
+        # the ship of a transponder whose track vanished: missed by a site with no
+        # detection at the transponder's position (the association may have given the
+        # ship a new track id, which its transponder does not know yet)
         near = ais.ref_near[ra:rb][lost]
+        xy = ais.ref_xy[ra:rb][lost]
+        rows = slice(a0, a0 + site.size)
+        d2 = _pair_d2(xy, rad.xy[rows], rad.P[rows] + ais.var)
+        seen = (d2 < gate) & (rad.detected_row[rows])[None, :]
+        by = np.stack([(seen & (site == c)[None, :]).any(axis=1) for c in range(C)], axis=1)
         idx = (np.arange(C)[None, :] * (G + 1) + ais.ref_sector[ra:rb][lost, None]).ravel()
-        extra = np.bincount(idx, weights=near.ravel(), minlength=n)
-        expected += extra
-        missed += extra
+        expected += np.bincount(idx, weights=near.ravel(), minlength=n)
+        missed += np.bincount(idx, weights=(near & ~by).ravel(), minlength=n)
     return expected, missed
 
 
@@ -705,25 +761,34 @@ def _radar_decisions(
     k: int, grp: dict[str, np.ndarray], expected: np.ndarray, missed: np.ndarray,
     scan_down: np.ndarray, site_sectors: np.ndarray, G: int, thr: _Tables,
     ic: ChannelIntegrityConfig, ro: _RadarOut,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray]:
     """eta per (site, sector) group from its NIS sum, registration, coverage and scan
-    checks (recorded in ``ro``): (flagged, passing: below the upper thresholds, checked)."""
+    checks (recorded in ``ro``): (passing: below every upper threshold, checked).
+
+    A registration or NIS-sum failure in one sector fails the site in every sector it
+    covers (check ``site``): a range, azimuth or clock fault, or a noisy receiver, is
+    the site's, also where no track of it can be tested; a coverage failure (a blanked
+    sector) stays the sector's."""
     n, nis = grp["n"], grp["nis"]
     nis_dec = n >= 1
     nis_flag = nis_dec & ((nis <= thr.nis_d1[n]) | (nis >= thr.nis_d2[n]))
+    nis_high = nis_dec & (nis >= thr.nis_d2[n])
     bias_flag = (n >= 2) & (np.nan_to_num(grp["T"]) >= thr.bias_d2)
     cov_dec = expected >= ic.coverage_min_targets
     cov_flag = cov_dec & (missed > ic.coverage_miss_share * expected)
     scan_flag = np.repeat(scan_down, G + 1) & site_sectors
-    flagged = nis_flag | bias_flag | cov_flag | scan_flag
+    site_flag = np.repeat((nis_high | bias_flag).reshape(-1, G + 1).any(axis=1), G + 1)
+    site_flag &= site_sectors & ~(nis_high | bias_flag)
+    flagged = nis_flag | bias_flag | cov_flag | scan_flag  # eta: the tests made here
     below = (~nis_dec | (nis < thr.nis_d2[n])) & ~bias_flag & ~cov_flag & ~scan_flag
-    checked = nis_dec | cov_dec | scan_flag
+    below &= ~site_flag
+    checked = nis_dec | cov_dec | scan_flag | site_flag
     ro.checked[k], ro.eta[k], ro.n[k], ro.nis[k], ro.T[k] = checked, flagged, n, nis, grp["T"]
-    ro.check[k] = np.where(scan_flag, 3, np.where(cov_flag | ~nis_dec, 2,
-                                                  np.where(bias_flag, 1, 0)))
+    ro.check[k] = np.where(scan_flag, 3, np.where(cov_flag, 2, np.where(
+        bias_flag, 1, np.where(site_flag, 4, np.where(nis_dec, 0, 2)))))
     ro.theta[k] = grp["theta"]
     ro.expected[k], ro.missed[k], ro.outliers[k] = expected, missed, grp["outliers"]
-    return flagged, below, checked
+    return below, checked
 
 
 @dataclass(frozen=True, eq=False)
@@ -811,7 +876,7 @@ def _ais_epoch(
         if ic.exclusion and decided.any():
             md = mj[decided]
             st.ais_excl[md], st.ais_run[md] = step_exclusion(
-                st.ais_excl[md], st.ais_run[md], flag[decided], passed[decided],
+                st.ais_excl[md], st.ais_run[md], ~passed[decided], passed[decided],
                 np.ones(md.size, bool), ic.readmit_run)
         failed = decided & test & ~passed
         st.ais_jumped[mj[passed]] = False
@@ -888,7 +953,7 @@ def _extrapolated(pic: _Picture, pos: np.ndarray, dt: np.ndarray
 
 # --- output ------------------------------------------------------------------------------
 
-_CHECKS_RADAR = np.array(["nis", "bias", "coverage", "scan"], dtype=object)
+_CHECKS_RADAR = np.array(["nis", "bias", "coverage", "scan", "site"], dtype=object)
 _CHECKS_AIS = np.array(["ais", "ais_unmatched"], dtype=object)
 
 
@@ -917,7 +982,9 @@ def _health_frame(
         "d2": thr.nis_d2[n],
         "bias_stat": ro.T[kk, gg],
         "bias_d2": np.full(kk.size, thr.bias_d2),
-        "eta": ro.eta[kk, gg].astype(np.int16),
+        # a group failed for its site's sake was not tested: no decision (null eta)
+        "eta": pl.Series(ro.eta[kk, gg].astype(np.int16)).set(
+            pl.Series(ro.check[kk, gg] == 4), None),
         "excluded": ro.excluded[kk, gg],
         "range_bias_m": theta[:, 0],
         "azimuth_bias_rad": theta[:, 1],
@@ -951,7 +1018,8 @@ def _health_frame(
             pl.Series(ao.track[d] < 0), None),
     })
     out = pl.concat([radar, aisf], how="diagonal_relaxed").with_columns(
-        pl.lit(ic.q).alias("q"))
+        pl.when(pl.col("sensor_kind") == "radar").then(ic.radar_q).otherwise(ic.ais_q)
+        .alias("q"))
     return (
         out.with_columns(pl.col(pl.Float64).fill_nan(None))
         .select(pl.col(c).cast(t) if c in out.columns else pl.lit(None, t).alias(c)
