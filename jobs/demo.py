@@ -1,5 +1,7 @@
-"""`surveil demo`: simulate one hour of the `channel` scenario into an archive, ingest it,
-run the batch over the hour and print the accuracy and identification reports."""
+"""`surveil demo`: simulate one hour of the `channel` scenario (with the config's fault
+schedule, ``[[channel_faults]]``) and of the own ship (``ownship``: its GNSS outages and
+jump) into an archive, ingest it, run the batch over the hour and print the accuracy,
+identification and channel-fault reports."""
 
 from __future__ import annotations
 
@@ -13,7 +15,8 @@ from jobs.report import format_report, run_named_report
 from jobs.simulate import DEFAULT_START_NS, run_simulate
 from pipeline.config import Config
 
-DEMO_REPORTS = ("accuracy_by_sector", "identification_by_sector")
+DEMO_REPORTS = ("accuracy_by_sector", "identification_by_sector", "channel_faults_by_sector")
+DEMO_SCENARIOS = ("channel", "ownship")
 
 
 @dataclass
@@ -37,15 +40,19 @@ def run_demo(
     executor_kind: str | None = None,
 ) -> DemoResult:
     archive_dir = warehouse / "demo-archive"
-    echo(f"1/4 simulate: channel scenario, {duration_s:.0f} s, seed {seed} -> {archive_dir}")
-    files = run_simulate("channel", duration_s, seed, archive_dir, cfg, start_ns=DEFAULT_START_NS)
+    echo(f"1/4 simulate: {' + '.join(DEMO_SCENARIOS)} scenarios, {duration_s:.0f} s, seed {seed}"
+         f" -> {archive_dir}")
+    files = [f for name in DEMO_SCENARIOS
+             for f in run_simulate(name, duration_s, seed, archive_dir, cfg,
+                                   start_ns=DEFAULT_START_NS)]
     echo(f"    {len(files)} MCAP file(s): " + ", ".join(f.name for f in files))
     echo(f"2/4 ingest -> {warehouse}")
     ingest = run_ingest(files, cfg, warehouse, executor=executor_kind)
     echo(ingest.render())
     start_ns = DEFAULT_START_NS
     end_ns = start_ns + int(duration_s * 1e9)
-    echo("3/4 batch: every sensor family (maritime: align, sync, associate, fuse, identify, score)")
+    echo("3/4 batch: every sensor family (maritime: align, sync, associate, channel integrity, "
+         "fuse, identify, score; nav: own-ship solution and GNSS integrity)")
     batch = run_batch(cfg, warehouse, start_ns=start_ns, end_ns=end_ns, executor_kind=executor_kind)
     echo(batch.render())
     echo("4/4 reports")

@@ -7,7 +7,9 @@
 --   channel-wide fault episodes (epochs where at least half of the channel's targets in
 --   the sector are excluded; radar, AIS and GNSS are tested once per sector and epoch, so
 --   there the two are the same), their total and longest duration, and the share of
---   decisions after which the channel was excluded.
+--   decisions after which the channel was excluded. p_chance: the probability of at least
+--   as many flags from false alarms alone (Poisson, mean decisions x q): a channel in
+--   fault has p_chance ~0, a healthy one shows a flagged share above q now and then.
 -- grain: one row per (sector, family, channel)
 -- params: $start_ns (BIGINT, inclusive), $end_ns (BIGINT, exclusive),
 --         $sector (VARCHAR, NULL = every sector)
@@ -94,6 +96,13 @@ checks AS (
     FROM h
     GROUP BY family, sector, channel
 ),
+chance AS (   -- P(X >= flagged), X ~ Poisson(decisions q): 1 - sum_{j < flagged} pmf(j)
+    SELECT c.family, c.sector, c.channel,
+           greatest(0.0, 1.0 - coalesce(sum(exp(-lam + j * ln(lam) - lgamma(j + 1))), 0.0)) AS p
+    FROM (SELECT *, decisions * q AS lam FROM checks WHERE decisions > 0) AS c
+    LEFT JOIN LATERAL (SELECT unnest(range(c.flagged)) AS j) AS r ON TRUE
+    GROUP BY c.family, c.sector, c.channel
+),
 te AS (
     SELECT family, sector, channel, count(*) AS n, sum(dur_ns) AS total, max(dur_ns) AS longest
     FROM target_episodes GROUP BY family, sector, channel
@@ -110,6 +119,7 @@ SELECT
     c.decisions::BIGINT                                            AS decisions,         -- checks with an eta
     round(c.flagged / nullif(c.decisions, 0), 5)::DOUBLE           AS flagged_share,     -- share with eta = 1 (healthy: ~q)
     round(c.q, 5)::DOUBLE                                          AS q,                 -- nominal false-alarm probability of a decision
+    round(p.p, 6)::DOUBLE                                          AS p_chance,          -- P(this many flags or more | false alarms only)
     coalesce(te.n, 0)::BIGINT                                      AS target_episodes,   -- exclusion runs of one target
     round(coalesce(te.total, 0) / 1e9, 1)::DOUBLE                  AS target_excluded_s, -- their summed duration, s
     round(coalesce(te.longest, 0) / 1e9, 1)::DOUBLE                AS target_longest_s,  -- longest, s
@@ -118,6 +128,7 @@ SELECT
     round(coalesce(ce.longest, 0) / 1e9, 1)::DOUBLE                AS channel_longest_s, -- longest, s
     round(c.excluded_rows / nullif(c.rows_total, 0), 5)::DOUBLE    AS excluded_share     -- share of decisions excluded
 FROM checks AS c
+LEFT JOIN chance AS p ON p.family = c.family AND p.sector = c.sector AND p.channel = c.channel
 LEFT JOIN te ON te.family = c.family AND te.sector = c.sector AND te.channel = c.channel
 LEFT JOIN ce ON ce.family = c.family AND ce.sector = c.sector AND ce.channel = c.channel
 ORDER BY sector, family, sensor_kind, channel;
