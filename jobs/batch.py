@@ -16,8 +16,10 @@ import contextlib
 import itertools
 import logging
 import shutil
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import polars as pl
@@ -56,6 +58,8 @@ class BatchSummary:
     rows: dict[str, int] = field(default_factory=dict)
     rejects: int = 0
     committed: bool = False
+    family_s: dict[str, float] = field(default_factory=dict)  # summed unit wall time
+    commit_s: float = 0.0
 
     @property
     def exit_code(self) -> int:
@@ -68,6 +72,10 @@ class BatchSummary:
             f"{'committed' if self.committed else 'NOT committed (previous data kept)'}"
         ]
         lines += [f"  {name:<16} {n:>9} rows" for name, n in self.rows.items()]
+        if self.family_s:
+            lines.append("  time: " + ", ".join(f"{fam} {s:.1f} s" for fam, s in
+                                                 self.family_s.items())
+                         + f" (summed over units); commit {self.commit_s:.1f} s")
         if self.rejects:
             lines.append(f"  rejects (batch)  {self.rejects:>9} rows")
         lines += [f"  failed: {u}" for u in self.failed_units]
@@ -96,10 +104,12 @@ class UnitManifest:
     family: str
     start_ns: int
     files: dict[str, str]
+    elapsed_s: float = 0.0
 
 
 def run_unit(unit: BatchUnit) -> UnitManifest:
     """Worker: read, compute, stage."""
+    t0 = time.perf_counter()
     fam = family(unit.family)
     window = Window(unit.start_ns, unit.end_ns)
     out = fam.stage(read_inputs(fam, Path(unit.warehouse), unit.cfg, window), window, unit.cfg)
@@ -117,7 +127,7 @@ def run_unit(unit: BatchUnit) -> UnitManifest:
         pq.write_table(table, tmp)
         tmp.replace(path)
         manifest[name] = str(path)
-    return UnitManifest(unit.family, unit.start_ns, manifest)
+    return UnitManifest(unit.family, unit.start_ns, manifest, time.perf_counter() - t0)
 
 
 def plan_units(
@@ -147,11 +157,13 @@ def run_batch(
     start_ns: int,
     end_ns: int,
     executor_kind: str | None = None,
+    progress: Any = None,
 ) -> BatchSummary:
-    """Run the batch for [start_ns, end_ns) and commit it atomically per table."""
+    """Run the batch for [start_ns, end_ns) and commit it atomically per table.
+    ``progress``: the CLI's :class:`~jobs.progress.TerminalProgress` (or None)."""
     if end_ns <= start_ns:
         raise ValueError("--to must be after --from")
-    warm_up()  # the views file's DuckDB instance, built while the batch runs
+    warm_up(warehouse)  # the views file's DuckDB instance, built while the batch runs
     staging = warehouse / "_staging" / f"batch-{start_ns}-{end_ns}"
     shutil.rmtree(staging, ignore_errors=True)
     units = plan_units(warehouse, cfg, start_ns, end_ns, staging)
@@ -161,9 +173,15 @@ def run_batch(
         executor_kind or ex.executor, min(ex.max_workers, len(units)), ex.threads_per_worker
     )
     manifests = []
+    if progress is not None:
+        progress.batch_units(len(units))
     for result in executor.map_units(run_unit, units):
+        if progress is not None:
+            progress.batch_result(result)
         if result.ok:
             manifests.append(result.value)
+            m = result.value
+            summary.family_s[m.family] = summary.family_s.get(m.family, 0.0) + m.elapsed_s
         else:
             u = result.unit
             label = f"{u.family} [{_iso(u.start_ns)}, {_iso(u.end_ns)}): {result.error}"
@@ -171,7 +189,9 @@ def run_batch(
             log.error("batch unit failed %s", label)
     if summary.failed_units:
         return summary
+    t0 = time.perf_counter()
     _commit(warehouse, manifests, summary)
+    summary.commit_s = time.perf_counter() - t0
     shutil.rmtree(staging, ignore_errors=True)
     with contextlib.suppress(OSError):  # only when empty: another job may be staging
         (warehouse / "_staging").rmdir()

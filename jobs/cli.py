@@ -1,8 +1,12 @@
 """The `surveil` command: every command declared here, each a few lines over a job
 function (``jobs/<job>.py``) that tests call directly.
 
-The config file is loaded and validated once, before any command runs (every family's
-sections included), so a bad config is exit 2 at start, never a failed work unit.
+The config file is loaded and validated once, before any command does its work (every
+family's sections included), so a bad config is exit 2 at start, never a failed work unit.
+``--config`` and ``--warehouse`` are accepted before or after the subcommand.
+
+Shell completion (click): ``eval "$(_SURVEIL_COMPLETE=bash_source surveil)"`` (zsh:
+``zsh_source``, fish: ``fish_source``); report names, sectors and table names complete.
 
 Exit codes: 0 ok, 1 some units/files failed (re-runnable), 2 usage or config error,
 130 interrupted.
@@ -10,9 +14,12 @@ Exit codes: 0 ok, 1 some units/files failed (re-runnable), 2 usage or config err
 
 from __future__ import annotations
 
+import contextlib
+import functools
 import json
 import sys
 from pathlib import Path
+from typing import Any
 
 import click
 
@@ -28,14 +35,105 @@ from pipeline.config import Config, ConfigError
 from pipeline.families import load_config
 
 LOG_LEVELS = ("DEBUG", "INFO", "WARNING", "ERROR", "CRITICAL")
+# the scenarios of pipeline.simulate.scenarios.SCENARIOS (a test checks), named here so
+# that `surveil --help` does not import every simulator
+SCENARIO_NAMES = ("channel", "channel-clean", "airfield", "gaps", "ownship")
 
 
 class _State:
-    """What every command gets: the validated config and the warehouse path."""
+    """What every command gets: the validated config and the warehouse path. Both are
+    resolved on first use, so that ``--config`` / ``--warehouse`` given after the
+    subcommand (parsed after the group's) still apply; every command uses them first."""
 
-    def __init__(self, cfg: Config, warehouse: str | None) -> None:
-        self.cfg = cfg
-        self.warehouse = Path(warehouse or cfg.warehouse_path).resolve()
+    def __init__(self, config_path: str | None, warehouse: str | None) -> None:
+        self.config_path = config_path
+        self.warehouse_option = warehouse
+        self._cfg: Config | None = None
+
+    @property
+    def cfg(self) -> Config:
+        if self._cfg is None:
+            self._cfg = load_config(self.config_path)
+        return self._cfg
+
+    @property
+    def warehouse(self) -> Path:
+        return Path(self.warehouse_option or self.cfg.warehouse_path).resolve()
+
+    def sector(self, name: str | None) -> str | None:
+        """``--sector``, checked against the config's sectors (maritime and airfield)."""
+        if name is None:
+            return None
+        known = sector_names(self.cfg)
+        if name not in known:
+            raise UsageError(f"unknown sector {name!r}; the config's sectors are: "
+                             f"{', '.join(known)}")
+        return name
+
+
+def sector_names(cfg: Config) -> list[str]:
+    """Every sector a --sector may name: maritime sectors, then airfield sectors."""
+    names = [s.name for s in cfg.sectors]
+    airfield = (cfg.families or {}).get("airfield")
+    names += [s.name for s in getattr(airfield, "sectors", ()) or () if s.name not in names]
+    return names
+
+
+def _set_config(ctx: click.Context, _param: click.Parameter, value: str | None) -> None:
+    if value is not None:
+        ctx.ensure_object(_State).config_path = value
+        ctx.find_object(_State)._cfg = None
+
+
+def _set_warehouse(ctx: click.Context, _param: click.Parameter, value: str | None) -> None:
+    if value is not None:
+        ctx.find_object(_State).warehouse_option = value
+
+
+def _global_options(cmd: click.Command, validate: bool = True) -> click.Command:
+    """``--config`` / ``--warehouse`` after the subcommand, too; the config is loaded
+    and validated once every option is parsed, before the command's body runs."""
+    body = cmd.callback
+
+    def validated(*args: Any, **kwargs: Any) -> Any:
+        click.get_current_context().find_object(_State).cfg  # noqa: B018 (exit 2 when bad)
+        return body(*args, **kwargs)
+
+    if validate and body is not None:
+        cmd.callback = functools.update_wrapper(validated, body)
+    cmd.params += [
+        click.Option(["--config"], type=click.Path(dir_okay=False), expose_value=False,
+                     callback=_set_config, is_eager=True,
+                     help="TOML config (also accepted before the subcommand)."),
+        click.Option(["--warehouse"], type=click.Path(file_okay=False), expose_value=False,
+                     callback=_set_warehouse,
+                     help="Warehouse directory (also accepted before the subcommand)."),
+    ]
+    return cmd
+
+
+def _complete_reports(ctx: click.Context, _param: click.Parameter, incomplete: str) -> list:
+    from pipeline.reports import list_reports, reports_config
+
+    try:
+        dirs = reports_config(load_config(ctx.find_root().params.get("config_path"))).dirs
+    except ConfigError:
+        dirs = ()
+    return [n for n in list_reports(dirs) if n.startswith(incomplete)]
+
+
+def _complete_sectors(ctx: click.Context, _param: click.Parameter, incomplete: str) -> list:
+    try:
+        cfg = load_config(ctx.find_root().params.get("config_path"))
+    except ConfigError:
+        return []
+    return [n for n in sector_names(cfg) if n.startswith(incomplete)]
+
+
+def _complete_tables(_ctx: click.Context, _param: click.Parameter, incomplete: str) -> list:
+    from pipeline.tables import table_specs
+
+    return [n for n in table_specs() if n.startswith(incomplete)]
 
 
 def _window(from_: str | None, to: str | None, required: bool) -> tuple[int | None, int | None]:
@@ -56,12 +154,16 @@ def _duration_s(text: str) -> float:
         raise UsageError(str(exc)) from None
 
 
-_FROM = click.option("--from", "from_", default=None,
-                     help="window start, ISO 8601 (naive = UTC) or int ns")
-_TO = click.option("--to", default=None, help="window end, exclusive")
-_FROM_REQUIRED = click.option("--from", "from_", required=True,
-                              help="window start, ISO 8601 (naive = UTC) or int ns")
-_TO_REQUIRED = click.option("--to", required=True, help="window end, exclusive")
+_FROM_HELP = ("window start (inclusive): ISO 8601 such as 2026-01-15T00:00:00Z (no zone "
+              "= UTC), or integer ns since 1970 UTC")
+_TO_HELP = "window end (exclusive), same forms as --from"
+_FROM = click.option("--from", "from_", default=None, metavar="TIME", help=_FROM_HELP)
+_TO = click.option("--to", default=None, metavar="TIME", help=_TO_HELP)
+_FROM_REQUIRED = click.option("--from", "from_", required=True, metavar="TIME", help=_FROM_HELP)
+_TO_REQUIRED = click.option("--to", required=True, metavar="TIME", help=_TO_HELP)
+_SECTOR = click.option("--sector", default=None, shell_complete=_complete_sectors,
+                       help="one sector of the config (default: every sector); an unknown "
+                            "name lists them")
 _EXECUTOR = click.option(
     "--executor", type=click.Choice(["serial", "process", "ray"]), default=None,
     help="How work units run (default from config: process pool).",
@@ -82,15 +184,14 @@ _EXECUTOR = click.option(
 def cli(ctx: click.Context, config_path, warehouse, log_level, log_json) -> None:
     """surveil: MCAP surveillance archives -> Delta warehouse -> batch -> DuckDB reports."""
     setup_logging(log_level, log_json)
-    ctx.obj = _State(load_config(config_path), warehouse)
+    ctx.obj = _State(config_path, warehouse)
 
 
 # --- archive: simulate, import, ingest -------------------------------------------------
 
 
 @cli.command()
-@click.option("--scenario", type=click.Choice(["channel", "channel-clean", "airfield", "gaps",
-                                              "ownship"]),
+@click.option("--scenario", type=click.Choice(SCENARIO_NAMES),
               default="channel", show_default=True)
 @click.option("--duration", default="1h", show_default=True, help="e.g. 1h, 30m, 90s")
 @click.option("--seed", type=int, default=7, show_default=True)
@@ -134,11 +235,17 @@ def import_command(paths, out_dir, base_time) -> None:
 @click.pass_obj
 def ingest(st: _State, paths, from_, to, force, executor) -> None:
     """Decode MCAP files into the warehouse's raw tables."""
-    from jobs.ingest import run_ingest
+    from jobs.ingest import expand_paths, run_ingest
+    from jobs.progress import terminal_progress
 
     start, end = _window(from_, to, required=False)
-    summary = run_ingest([Path(p) for p in paths], st.cfg, st.warehouse,
-                         start_ns=start, end_ns=end, force=force, executor=executor)
+    progress = terminal_progress()
+    with progress or contextlib.nullcontext():
+        if progress is not None:
+            progress.ingest_total(expand_paths([Path(p) for p in paths]))
+        summary = run_ingest([Path(p) for p in paths], st.cfg, st.warehouse,
+                             start_ns=start, end_ns=end, force=force, executor=executor,
+                             on_result=progress.ingest_result if progress else None)
     click.echo(summary.render())
     sys.exit(summary.exit_code)
 
@@ -154,9 +261,13 @@ def ingest(st: _State, paths, from_, to, force, executor) -> None:
 def batch(st: _State, from_, to, executor) -> None:
     """Run every sensor family's batch over one window; commit it atomically."""
     from jobs.batch import run_batch
+    from jobs.progress import terminal_progress
 
     start, end = _window(from_, to, required=True)
-    summary = run_batch(st.cfg, st.warehouse, start_ns=start, end_ns=end, executor_kind=executor)
+    progress = terminal_progress()
+    with progress or contextlib.nullcontext():
+        summary = run_batch(st.cfg, st.warehouse, start_ns=start, end_ns=end,
+                            executor_kind=executor, progress=progress)
     click.echo(summary.render())
     sys.exit(summary.exit_code)
 
@@ -168,11 +279,14 @@ def batch(st: _State, from_, to, executor) -> None:
 @click.pass_obj
 def reprocess(st: _State, from_, to, executor) -> None:
     """Re-ingest the archived files overlapping a window and re-run its batch."""
+    from jobs.progress import terminal_progress
     from jobs.reprocess import run_reprocess
 
     start, end = _window(from_, to, required=True)
-    summary = run_reprocess(st.cfg, st.warehouse, start_ns=start, end_ns=end,
-                            executor_kind=executor)
+    progress = terminal_progress()
+    with progress or contextlib.nullcontext():
+        summary = run_reprocess(st.cfg, st.warehouse, start_ns=start, end_ns=end,
+                                executor_kind=executor, progress=progress)
     click.echo(summary.render())
     sys.exit(summary.exit_code)
 
@@ -180,14 +294,22 @@ def reprocess(st: _State, from_, to, executor) -> None:
 @cli.command()
 @click.option("--seed", type=int, default=7, show_default=True)
 @click.option("--duration", default="1h", show_default=True)
+@click.option("--scenarios", default="channel,airfield,ownship", show_default=True,
+              help="comma-separated scenarios to simulate (channel, airfield, gaps, ownship)")
 @_EXECUTOR
 @click.pass_obj
-def demo(st: _State, seed, duration, executor) -> None:
-    """Simulate one hour, ingest, batch, and print the accuracy and identification reports."""
+def demo(st: _State, seed, duration, scenarios, executor) -> None:
+    """Simulate one hour, ingest, batch, and print the accuracy and identification reports
+    (then `surveil audit` draws the hour: the command is printed at the end)."""
     from jobs.demo import run_demo
 
+    chosen = [s.strip() for s in scenarios.split(",") if s.strip()]
+    unknown = [s for s in chosen if s not in SCENARIO_NAMES]
+    if unknown or not chosen:
+        raise UsageError(f"--scenarios: unknown {', '.join(unknown) or '(none given)'}; "
+                         f"choose from {', '.join(SCENARIO_NAMES)}")
     result = run_demo(st.cfg, st.warehouse, seed=seed, duration_s=_duration_s(duration),
-                      echo=click.echo, executor_kind=executor)
+                      echo=click.echo, executor_kind=executor, scenarios=chosen)
     sys.exit(result.exit_code)
 
 
@@ -195,29 +317,183 @@ def demo(st: _State, seed, duration, executor) -> None:
 
 
 @cli.command()
-@click.argument("name", required=False)
+@click.argument("name", required=False, shell_complete=_complete_reports)
 @_FROM
 @_TO
-@click.option("--sector", default=None, help="one sector name (default: every sector)")
+@_SECTOR
 @click.option("--format", "fmt", type=click.Choice(["table", "csv", "json"]), default="table",
               show_default=True)
+@click.option("--param", "params", multiple=True, metavar="NAME=VALUE",
+              help="a parameter the report's header declares (repeatable)")
 @click.option("--list", "list_", is_flag=True, help="list the available reports")
 @click.pass_obj
-def report(st: _State, name, from_, to, sector, fmt, list_) -> None:
-    """Run a report from sql/ over the warehouse."""
-    from jobs.report import format_report, run_named_report
-    from pipeline.reports import UnknownReportError, list_reports, load_report
+def report(st: _State, name, from_, to, sector, fmt, params, list_) -> None:
+    """Run a report (sql/ or a [reports] dirs folder) over the warehouse."""
+    from jobs.report import explain_empty, format_report, run_named_report
+    from pipeline.reports import (
+        ReportError,
+        UnknownReportError,
+        list_reports,
+        load_report,
+        reports_config,
+    )
 
+    dirs = reports_config(st.cfg).dirs
     if list_ or not name:
-        for n in list_reports():
-            click.echo(f"{n:<28} {load_report(n).description[:100]}")
+        _list_reports(dirs)
         return
     start, end = _window(from_, to, required=False)
+    sector = st.sector(sector)
     try:
-        table = run_named_report(st.warehouse, name, start_ns=start, end_ns=end, sector=sector)
+        table = run_named_report(st.warehouse, name, start_ns=start, end_ns=end, sector=sector,
+                                 cfg=st.cfg, params=_params(params))
     except UnknownReportError as exc:
-        raise UsageError(f"no report {name!r}; available: {', '.join(list_reports())}") from exc
+        raise UsageError(f"no report {name!r}; available: {', '.join(list_reports(dirs))}"
+                         ) from exc
+    except ReportError as exc:
+        raise UsageError(str(exc)) from exc
+    if table.num_rows == 0:
+        why = explain_empty(st.warehouse, load_report(name, dirs), start_ns=start, end_ns=end,
+                            sector=sector, cfg=st.cfg)
+        click.echo(f"{name}: no rows. {why}", err=True)
     click.echo(format_report(table, fmt, title=name), nl=fmt != "table")
+
+
+def _list_reports(dirs: tuple[Path, ...]) -> None:
+    from pipeline.reports import ReportError, list_reports, load_report
+
+    width = max((len(n) for n in list_reports(dirs)), default=20) + 2
+    for n in list_reports(dirs):
+        try:
+            r = load_report(n, dirs)
+            text = r.description
+            origin = "" if r.shipped else f"  [{r.origin}]"
+        except ReportError as exc:
+            text, origin = f"(unusable: {exc})", ""
+        click.echo(f"{n:<{width}}{text[:110]}{'...' if len(text) > 110 else ''}{origin}")
+
+
+def _params(items: tuple[str, ...]) -> dict[str, str]:
+    out = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            raise UsageError(f"--param {item!r}: use NAME=VALUE")
+        out[key.lstrip("$")] = value
+    return out
+
+
+@cli.command()
+@_FROM_REQUIRED
+@_TO_REQUIRED
+@_SECTOR
+@click.option("--out", "out_dir", type=click.Path(file_okay=False), required=True,
+              help="folder for audit_<from>_<to>[_<sector>].html (and .pdf)")
+@click.option("--pdf", is_flag=True, help="also print the page to PDF with headless Chromium")
+@click.pass_obj
+def audit(st: _State, from_, to, sector, out_dir, pdf) -> None:
+    """One self-contained HTML page (opens without a network): requirement verdicts,
+    accuracy, identification, SIAP, cross-track, bias, faults, heading, gaps and a map."""
+    from jobs.audit import run_audit
+
+    start, end = _window(from_, to, required=True)
+    result = run_audit(st.cfg, st.warehouse, Path(out_dir), start_ns=start, end_ns=end,
+                       sector=st.sector(sector), pdf=pdf)
+    click.echo(result.render())
+    sys.exit(EXIT_USAGE if pdf and result.pdf is None else 0)
+
+
+@cli.command()
+@_FROM_REQUIRED
+@_TO_REQUIRED
+@click.option("--out", "out_path", type=click.Path(dir_okay=False), required=True,
+              help="the MCAP file to write")
+@click.pass_obj
+def export(st: _State, from_, to, out_path) -> None:
+    """Fused, per-radar, AIS and airfield tracks and the config's geometry as an MCAP file
+    in Foxglove's schemas (protobuf): open it in Foxglove's Map and 3D panels."""
+    from jobs.export import run_export
+
+    start, end = _window(from_, to, required=True)
+    summary = run_export(st.cfg, st.warehouse, Path(out_path), start_ns=start, end_ns=end)
+    click.echo(summary.render())
+
+
+@cli.command()
+@click.argument("query", required=False)
+@click.option("--format", "fmt", type=click.Choice(["table", "csv", "json"]), default="table",
+              show_default=True)
+@click.pass_obj
+def sql(st: _State, query, fmt) -> None:
+    """Run SQL over the warehouse views (the tables reports use; `surveil schema` lists
+    them). Without QUERY: an interactive prompt (end a statement with ';', quit with
+    .quit or Ctrl-D)."""
+    import duckdb
+
+    from jobs.report import format_report, open_warehouse
+
+    con = open_warehouse(st.warehouse)
+    try:
+        if query is not None:
+            try:
+                table = con.sql(query)
+            except duckdb.Error as exc:
+                raise UsageError(str(exc).strip()) from None
+            if table is not None:
+                click.echo(format_report(table.to_arrow_table(), fmt), nl=fmt != "table")
+            return
+        _prompt(con, fmt)
+    finally:
+        con.close()
+
+
+def _prompt(con: Any, fmt: str) -> None:
+    import contextlib
+
+    import duckdb
+
+    from jobs.report import format_report
+
+    with contextlib.suppress(ImportError):
+        import readline  # noqa: F401  (line editing and history for input())
+    click.echo("surveil sql: the warehouse tables are views (`surveil schema`); end a "
+               "statement with ';', .quit to leave", err=True)
+    buf: list[str] = []
+    while True:
+        try:
+            line = input("surveil> " if not buf else "    ...> ")
+        except EOFError:
+            click.echo("", err=True)
+            return
+        if not buf and line.strip() in (".quit", ".exit", "\\q"):
+            return
+        buf.append(line)
+        if not line.rstrip().endswith(";"):
+            continue
+        text, buf = "\n".join(buf), []
+        try:
+            rel = con.sql(text)
+        except duckdb.Error as exc:
+            click.echo(f"error: {str(exc).strip()}", err=True)
+            continue
+        if rel is not None:
+            click.echo(format_report(rel.to_arrow_table(), fmt), nl=fmt != "table")
+
+
+@cli.command()
+@click.argument("table", required=False, shell_complete=_complete_tables)
+@click.option("--format", "fmt", type=click.Choice(["table", "csv", "json"]), default="table",
+              show_default=True)
+def schema(table, fmt) -> None:
+    """Every warehouse table (kind, meaning), or one TABLE's columns with their types,
+    units and meanings, from schemas/tables.toml."""
+    from jobs.report import format_report, schema_table
+    from pipeline.tables import table_specs
+
+    if table is not None and table not in table_specs():
+        raise UsageError(f"no table {table!r}; tables: {', '.join(table_specs())}")
+    click.echo(format_report(schema_table(table), fmt, title=table or "warehouse tables"),
+               nl=fmt != "table")
 
 
 # --- calibration ----------------------------------------------------------------------------
@@ -370,6 +646,32 @@ def gaps_montecarlo(st: _State, runs, first_seed, duration, particles, by_lead, 
         forecasts.write_parquet(out_path)
     table = summarise(forecasts, by_lead=by_lead)
     click.echo(format_report(table.to_arrow(), fmt, title="gaps Monte Carlo"))
+
+
+# --- configuration ------------------------------------------------------------------------
+
+
+@cli.group("config")
+def config_group() -> None:
+    """The configuration file."""
+
+
+@config_group.command("check")
+@click.argument("file", required=False, type=click.Path(dir_okay=False))
+@click.pass_obj
+def config_check(st: _State, file: str | None) -> None:
+    """Validate FILE (default: the --config file) as every command does and print it
+    resolved: every section, values in file units, defaults marked. Exit 0, or 2
+    listing every problem."""
+    from jobs.config_check import resolved_config
+
+    click.echo(resolved_config(file or st.config_path), nl=False)
+
+
+for _cmd in [*cli.commands.values(), *experiment.commands.values()]:
+    if not isinstance(_cmd, click.Group):
+        _global_options(_cmd)
+_global_options(config_check, validate=False)  # it validates FILE (or --config) itself
 
 
 def main() -> None:

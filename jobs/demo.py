@@ -1,22 +1,24 @@
-"""`surveil demo`: simulate one hour of the `channel` scenario (with the config's fault
-schedule, ``[[channel_faults]]``) and of the own ship (``ownship``: its GNSS outages and
-jump) into an archive, ingest it, run the batch over the hour and print the accuracy,
-identification and channel-fault reports."""
+"""`surveil demo`: simulate one hour (the `channel`, `airfield` and `ownship` scenarios:
+every family's tables, so the audit page has every section; with the config's fault
+schedules: ``[[channel_faults]]``, ``[[airfield.faults]]``, the own ship's GNSS outages
+and jump) into an archive, ingest it, run the batch over the hour and print the
+accuracy, identification and channel-fault reports."""
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 from jobs.batch import BatchSummary, run_batch
+from jobs.common import iso
 from jobs.ingest import IngestSummary, run_ingest
 from jobs.report import format_report, run_named_report
 from jobs.simulate import DEFAULT_START_NS, run_simulate
 from pipeline.config import Config
 
 DEMO_REPORTS = ("accuracy_by_sector", "identification_by_sector", "channel_faults_by_sector")
-DEMO_SCENARIOS = ("channel", "ownship")
+DEMO_SCENARIOS = ("channel", "airfield", "ownship")
 
 
 @dataclass
@@ -38,13 +40,15 @@ def run_demo(
     duration_s: float = 3600.0,
     echo: Callable[[str], None] = print,
     executor_kind: str | None = None,
+    scenarios: Sequence[str] = DEMO_SCENARIOS,
 ) -> DemoResult:
     archive_dir = warehouse / "demo-archive"
-    echo(f"1/4 simulate: {' + '.join(DEMO_SCENARIOS)} scenarios, {duration_s:.0f} s, seed {seed}"
-         f" -> {archive_dir}")
-    files = [f for name in DEMO_SCENARIOS
-             for f in run_simulate(name, duration_s, seed, archive_dir, cfg,
-                                   start_ns=DEFAULT_START_NS)]
+    echo(f"1/4 simulate: {', '.join(scenarios)} scenario(s), {duration_s:.0f} s, seed {seed} "
+         f"-> {archive_dir}")
+    files = []
+    for scenario in scenarios:
+        files += run_simulate(scenario, duration_s, seed, archive_dir, cfg,
+                              start_ns=DEFAULT_START_NS)
     echo(f"    {len(files)} MCAP file(s): " + ", ".join(f.name for f in files))
     echo(f"2/4 ingest -> {warehouse}")
     ingest = run_ingest(files, cfg, warehouse, executor=executor_kind)
@@ -62,4 +66,7 @@ def run_demo(
     echo(
         f"warehouse: {warehouse} (open {warehouse / 'surveil.duckdb'} in DuckDB for your own SQL)"
     )
+    window = f"--from {iso(start_ns)} --to {iso(end_ns)}"
+    echo(f"audit page: surveil audit {window} --out audit/   (docs/audit.md)")
+    echo(f"Foxglove:   surveil export {window} --out demo.mcap   (docs/foxglove.md)")
     return DemoResult(archive=files, ingest=ingest, batch=batch)

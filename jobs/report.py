@@ -4,13 +4,22 @@ from __future__ import annotations
 
 import io
 import json
+import os
+import shutil
+import sys
+from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 import duckdb
 import pyarrow as pa
 import pyarrow.csv as pacsv
 
-from pipeline.reports import run_report
+from pipeline.catalog import explain_empty_report
+from pipeline.config import Config
+from pipeline.reports import ReportSql, reports_config, run_report
+from pipeline.requirements import requirements_config
+from pipeline.tables import column_doc, column_unit, table_specs
 from pipeline.warehouse.views import register_tables
 
 ALL_TIME = (0, 2**63 - 1)
@@ -30,7 +39,12 @@ def run_named_report(
     start_ns: int | None = None,
     end_ns: int | None = None,
     sector: str | None = None,
+    cfg: Config | None = None,
+    params: Mapping[str, Any] | None = None,
 ) -> pa.Table:
+    """Report ``name`` over the warehouse (all time when no window). ``cfg``: its
+    ``[requirements]`` are bound and its ``[reports] dirs`` searched (None: the shipped
+    figures, shipped reports only)."""
     con = open_warehouse(warehouse)
     try:
         return run_report(
@@ -39,13 +53,58 @@ def run_named_report(
             start_ns=ALL_TIME[0] if start_ns is None else start_ns,
             end_ns=ALL_TIME[1] if end_ns is None else end_ns,
             sector=sector,
+            requirements=requirements_config(cfg) if cfg is not None else None,
+            params=params,
+            dirs=reports_config(cfg).dirs if cfg is not None else (),
         )
     finally:
         con.close()
 
 
-def format_report(table: pa.Table, fmt: str, title: str = "") -> str:
-    """Render a report as a terminal table, CSV or JSON (a list of row objects)."""
+def explain_empty(warehouse: Path, report: ReportSql, *, start_ns: int | None,
+                  end_ns: int | None, sector: str | None, cfg: Config | None = None) -> str:
+    """Why ``report`` has no rows in the window: what its source tables hold and which
+    command writes them."""
+    con = open_warehouse(warehouse)
+    try:
+        return explain_empty_report(
+            con, report, start_ns=ALL_TIME[0] if start_ns is None else start_ns,
+            end_ns=ALL_TIME[1] if end_ns is None else end_ns, sector=sector, cfg=cfg)
+    finally:
+        con.close()
+
+
+def schema_table(name: str | None) -> pa.Table:
+    """``surveil schema``: every table (name, kind, rows' meaning), or one table's
+    columns (name, type, nullable, unit, meaning), from schemas/."""
+    if name is None:
+        specs = table_specs().values()
+        return pa.table({"table": [s.name for s in specs], "kind": [s.kind for s in specs],
+                         "one row is": [s.doc for s in specs]})
+    fields = list(table_specs()[name].schema)
+    return pa.table({
+        "column": [f.name for f in fields],
+        "type": [str(f.type).replace("date32[day]", "date32") for f in fields],
+        "null": ["yes" if f.nullable else "no" for f in fields],
+        "unit": [column_unit(f.name) for f in fields],
+        "meaning": [column_doc(f) for f in fields],
+    })
+
+
+def terminal_width() -> int:
+    """Columns of the terminal on stdout (``$COLUMNS`` first); not a terminal and no
+    ``$COLUMNS``: no limit (a file or a pipe gets the table at its natural width)."""
+    if not sys.stdout.isatty() and "COLUMNS" not in os.environ:
+        return 100_000
+    return shutil.get_terminal_size((100, 24)).columns
+
+
+def format_report(table: pa.Table, fmt: str, title: str = "", width: int | None = None) -> str:
+    """Render a report as a terminal table, CSV or JSON (a list of row objects).
+
+    The table never cuts a value: text columns wrap at word boundaries to fit ``width``
+    (the terminal's); when even then it does not fit (numbers are never wrapped), each
+    row is printed as a block of ``column: value`` lines instead."""
     if fmt == "csv":
         buf = io.BytesIO()
         pacsv.write_csv(table, buf)
@@ -55,14 +114,46 @@ def format_report(table: pa.Table, fmt: str, title: str = "") -> str:
     from rich.console import Console
     from rich.table import Table
 
+    if table.num_rows == 0:
+        return f"{title + ': ' if title else ''}(no rows)\n"
+    width = width or terminal_width()
+    cells = [[("" if v is None else str(v)) for v in row.values()] for row in table.to_pylist()]
+    names = table.column_names
+    numeric = [_numeric(table.schema.field(n).type) for n in names]
+    # the narrowest each column can be: numbers and headers whole, text at its longest word
+    least = []
+    for j, n in enumerate(names):
+        values = [r[j] for r in cells]
+        if numeric[j]:
+            least.append(max([len(n), *map(len, values)]))
+        else:
+            words = [len(w) for v in values for w in v.split()] or [0]
+            least.append(max(len(n), min(max(words), 40)))
+    if sum(least) + 3 * len(names) + 1 > width and names:
+        return _vertical(names, cells, title)
     t = Table(title=title or None, show_lines=False)
-    for name in table.column_names:
-        t.add_column(name, justify="right" if _numeric(table.schema.field(name).type) else "left")
-    for row in table.to_pylist():
-        t.add_row(*("" if v is None else str(v) for v in row.values()))
-    console = Console(width=160, record=True, file=io.StringIO())
+    for j, name in enumerate(names):
+        t.add_column(name, justify="right" if numeric[j] else "left", no_wrap=numeric[j],
+                     overflow="fold", min_width=least[j])
+    for row in cells:
+        t.add_row(*row)
+    natural = sum(max([len(n), *(len(r[j]) for r in cells)]) for j, n in enumerate(names))
+    console = Console(width=min(width, natural + 3 * len(names) + 1) if names else width,
+                      record=True, file=io.StringIO())
     console.print(t)
     return console.export_text()
+
+
+def _vertical(names: list[str], cells: list[list[str]], title: str) -> str:
+    """One block per row, ``column  value`` per line: for tables wider than the terminal."""
+    pad = max(len(n) for n in names)
+    out = [title] if title else []
+    for i, row in enumerate(cells, start=1):
+        out.append(f"-- row {i} " + "-" * max(0, pad - 4))
+        out += [f"{n:<{pad}}  {v}" for n, v in zip(names, row, strict=True)]
+    if not cells:
+        out.append("(no rows)")
+    return "\n".join(out) + "\n"
 
 
 def _numeric(t: pa.DataType) -> bool:

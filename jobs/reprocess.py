@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import pyarrow.compute as pc
 
@@ -51,8 +52,11 @@ def files_overlapping(warehouse: Path, start_ns: int, end_ns: int) -> list[str]:
 
 
 def run_reprocess(
-    cfg: Config, warehouse: Path, *, start_ns: int, end_ns: int, executor_kind: str | None = None
+    cfg: Config, warehouse: Path, *, start_ns: int, end_ns: int, executor_kind: str | None = None,
+    progress: Any = None,
 ) -> ReprocessSummary:
+    """Re-ingest the files overlapping the window, then batch it. ``progress``: the
+    CLI's :class:`~jobs.progress.TerminalProgress` (or None)."""
     if end_ns <= start_ns:
         raise UsageError("--to must be after --from")
     files = files_overlapping(warehouse, start_ns, end_ns)
@@ -60,9 +64,13 @@ def run_reprocess(
     missing = [f for f in files if not Path(f).is_file()]
     ingest = None
     if present:
+        if progress is not None:
+            progress.ingest_total([Path(f) for f in present])
         ingest = run_ingest(
             [Path(f) for f in present], cfg, warehouse,
             start_ns=start_ns, end_ns=end_ns, force=True, executor=executor_kind,
+            on_result=progress.ingest_result if progress is not None else None,
         )
-    batch = run_batch(cfg, warehouse, start_ns=start_ns, end_ns=end_ns, executor_kind=executor_kind)
+    batch = run_batch(cfg, warehouse, start_ns=start_ns, end_ns=end_ns,
+                      executor_kind=executor_kind, progress=progress)
     return ReprocessSummary(ingest=ingest, batch=batch, missing_files=missing)

@@ -1,97 +1,111 @@
 """Typed, frozen configuration loaded from one TOML file (``config/surveil.toml``).
 
 Angles are degrees in the file and radians here; durations are seconds in the file
-and keep the ``_s`` suffix here. Nothing reads configuration from globals: stages
-receive the parts they need as arguments.
+and keep the ``_s`` suffix here. Each value's file key, default and valid range are
+declared beside its field (:func:`pipeline.configspec.setting`); one reader checks
+them all when the file loads and reports every problem at once. Nothing reads
+configuration from globals: stages receive the parts they need as arguments.
 """
 
 from __future__ import annotations
 
-import math
 import tomllib
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
+from pipeline.configspec import (
+    ConfigError,
+    Document,
+    count,
+    height,
+    latitude,
+    longitude,
+    polygon,
+    positive,
+    probability,
+    setting,
+    text,
+)
 from pipeline.resources import resource_path
 
-
-class ConfigError(ValueError):
-    """The configuration file is missing, malformed or inconsistent (exit code 2)."""
+__all__ = ["Config", "ConfigError", "load_config"]
 
 
 @dataclass(frozen=True)
 class RegionConfig:
-    name: str
-    origin_lat_deg: float
-    origin_lon_deg: float
-    origin_height_m: float = 0.0
+    name: str = text()
+    origin_lat_deg: float = latitude()
+    origin_lon_deg: float = longitude()
+    origin_height_m: float = height(0.0)
 
 
 @dataclass(frozen=True)
 class RadarSite:
-    site_id: str
-    lat_deg: float
-    lon_deg: float
-    height_m: float
-    north_alignment_rad: float
-    scan_period_s: float
-    max_range_m: float
-    sigma_range_m: float
-    sigma_azimuth_rad: float
-    sigma_speed_mps: float
-    sigma_course_rad: float
+    site_id: str = text(unique=True)
+    lat_deg: float = latitude()
+    lon_deg: float = longitude()
+    height_m: float = height(0.0, file_only=True)
+    north_alignment_rad: float = setting(0.0, unit="deg", ge=-180.0, le=180.0, file_only=True)
+    scan_period_s: float = positive()
+    max_range_m: float = positive()
+    sigma_range_m: float = positive()
+    sigma_azimuth_rad: float = setting(unit="deg", gt=0.0, lt=180.0)
+    sigma_speed_mps: float = positive()
+    sigma_course_rad: float = setting(unit="deg", gt=0.0, lt=180.0)
 
 
 @dataclass(frozen=True)
 class AisConfig:
-    gate_probability: float = 0.999
-    max_report_age_s: float = 30.0
-    sigma_position_m: float = 10.0
-    sigma_sog_mps: float = 0.3
-    identity_window_s: float = 300.0
-    min_identity_matches: int = 3
+    gate_probability: float = probability(0.999)
+    max_report_age_s: float = positive(30.0)
+    sigma_position_m: float = positive(10.0)
+    sigma_sog_mps: float = positive(0.3)
+    identity_window_s: float = positive(300.0)
+    min_identity_matches: int = count(3)
 
 
 @dataclass(frozen=True)
 class ValidationConfig:
-    max_speed_mps: float = 40.0
-    max_range_m: float = 60000.0
+    max_speed_mps: float = positive(40.0)
+    max_range_m: float = positive(60000.0)
 
 
 @dataclass(frozen=True)
 class FairwayLeg:
-    leg_id: str
-    start_lat_deg: float
-    start_lon_deg: float
-    end_lat_deg: float
-    end_lon_deg: float
+    """``start = [lat_deg, lon_deg]``, ``end = [lat_deg, lon_deg]`` in the file."""
+
+    leg_id: str = text(unique=True)
+    start_lat_deg: float = latitude(key=("start", 0))
+    start_lon_deg: float = longitude(key=("start", 1))
+    end_lat_deg: float = latitude(key=("end", 0))
+    end_lon_deg: float = longitude(key=("end", 1))
 
 
 @dataclass(frozen=True)
 class Sector:
-    name: str
-    polygon_lat_lon_deg: tuple[tuple[float, float], ...]
+    name: str = text(unique=True)
+    polygon_lat_lon_deg: tuple[tuple[float, float], ...] = polygon()
 
 
 @dataclass(frozen=True)
 class ExecutionConfig:
-    executor: str = "process"
-    max_workers: int = 2
-    threads_per_worker: int = 1
+    executor: str = setting("process", choices=("serial", "process", "ray"))
+    max_workers: int = count(2)
+    threads_per_worker: int = count(1)
 
 
 @dataclass(frozen=True)
 class Config:
-    region: RegionConfig
-    radar_sites: tuple[RadarSite, ...]
-    ais: AisConfig
-    validation: ValidationConfig
-    fairway_legs: tuple[FairwayLeg, ...]
-    sectors: tuple[Sector, ...]
-    warehouse_path: str = "warehouse"
-    execution: ExecutionConfig = field(default_factory=ExecutionConfig)
+    region: RegionConfig = setting()
+    radar_sites: tuple[RadarSite, ...] = setting(min_len=1)
+    ais: AisConfig = setting({})
+    validation: ValidationConfig = setting({})
+    fairway_legs: tuple[FairwayLeg, ...] = setting([], file_only=True)
+    sectors: tuple[Sector, ...] = setting([], file_only=True)
+    warehouse_path: str = text("warehouse", key=("warehouse", "path"))
+    execution: ExecutionConfig = setting({}, factory=ExecutionConfig)
     source: str = ""
     # The whole parsed TOML (raw), and each sensor family's section parsed into its own
     # typed config object when the file loaded ({family name: object}).
@@ -122,93 +136,75 @@ class Config:
 DEFAULT_CONFIG_PATH = resource_path("config") / "surveil.toml"
 
 
-FamilyParser = Callable[[Mapping[str, Any], "Config"], Any]
-"""(the whole TOML document, the core config) -> a family's typed config."""
+FamilyParser = Callable[[Document, "Config | None"], Any]
+"""(the document being read, the core config or None when the core sections are invalid)
+-> a family's typed config; problems go to the document (``Document.read``/``problem``)."""
 
 
-def load_config(
-    path: str | Path | None = None, families: Mapping[str, FamilyParser] | None = None
-) -> Config:
+class FamilySections(Protocol):
+    """What the loader needs of a :class:`~pipeline.family.Family`."""
+
+    name: str
+    sections: tuple[str, ...]
+    parse_config: FamilyParser
+
+
+def load_config(path: str | Path | None, families: Sequence[FamilySections]) -> Config:
     """Load and validate a TOML config; ``None`` loads the shipped default.
 
-    ``families`` maps a family name to its parser; every family's sections are parsed
-    here, so a bad value fails the load, not a later work unit.
-    ``pipeline.families.load_config`` passes every registered family."""
+    Every family's sections are parsed here, so a bad value fails the load (one
+    :class:`ConfigError` listing every problem), not a later work unit; a section no
+    family claims is an unknown section. ``pipeline.families.load_config`` passes every
+    registered family."""
+    cfg, doc = read_config(path, families)
+    doc.finish()
+    assert cfg is not None  # finish raised otherwise
+    return cfg
+
+
+def read_config(path: str | Path | None, families: Sequence[FamilySections]
+                ) -> tuple[Config | None, Document]:
+    """The config and its :class:`Document` (``Document.finish`` not yet called: the
+    caller raises the problems, or renders ``Document.resolved``). ConfigError when the
+    file cannot be read as TOML at all."""
     p = Path(path) if path is not None else DEFAULT_CONFIG_PATH
     try:
-        raw = tomllib.loads(p.read_text())
+        text = p.read_bytes().decode("utf-8")
+        raw = tomllib.loads(text)
     except FileNotFoundError as exc:
         raise ConfigError(f"config file not found: {p}") from exc
+    except OSError as exc:
+        raise ConfigError(f"config file {p} cannot be read: {exc.strerror or exc}") from exc
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"config file {p} is not a UTF-8 TOML file ({exc.reason} "
+                          f"at byte {exc.start})") from exc
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"config file {p} is not valid TOML: {exc}") from exc
-    return config_from_mapping(raw, str(p), families)
+    doc = Document(raw, str(p), text)
+    return _read(doc, families), doc
 
 
-def config_from_mapping(
-    raw: Mapping[str, Any], source: str, families: Mapping[str, FamilyParser] | None = None
-) -> Config:
+def config_from_mapping(raw: Mapping[str, Any], source: str,
+                        families: Sequence[FamilySections]) -> Config:
     """Validate an already parsed TOML document (see :func:`load_config`)."""
-    try:
-        core = _parse(dict(raw), source)
-    except (KeyError, TypeError, ValueError) as exc:
-        raise ConfigError(f"config file {source}: {exc!r}") from exc
+    doc = Document(raw, source)
+    cfg = _read(doc, families)
+    doc.finish()
+    assert cfg is not None
+    return cfg
+
+
+def _read(doc: Document, families: Sequence[FamilySections]) -> Config | None:
+    """The core sections, then every family's (each reports its problems to ``doc``);
+    then the keys nobody read (``doc.finish``, by the caller)."""
+    core = doc.read(Config)
+    if core is not None:
+        for i, leg in enumerate(core.fairway_legs):
+            if (leg.start_lat_deg, leg.start_lon_deg) == (leg.end_lat_deg, leg.end_lon_deg):
+                doc.problem(("fairway_legs", i, "end"), "equals start (a leg needs two points)")
+        core = replace(core, source=doc.source, sections=doc.raw)
     parsed = {}
-    for name, parse in (families or {}).items():
-        try:
-            parsed[name] = parse(raw, core)
-        except ConfigError:
-            raise
-        except (KeyError, TypeError, ValueError) as exc:
-            raise ConfigError(f"config file {source} ({name} family): {exc!r}") from exc
-    return replace(core, families=parsed)
-
-
-def _parse(raw: dict, source: str) -> Config:
-    region = RegionConfig(**raw["region"])
-    sites = tuple(
-        RadarSite(
-            site_id=s["site_id"],
-            lat_deg=float(s["lat_deg"]),
-            lon_deg=float(s["lon_deg"]),
-            height_m=float(s.get("height_m", 0.0)),
-            north_alignment_rad=math.radians(s.get("north_alignment_deg", 0.0)),
-            scan_period_s=float(s["scan_period_s"]),
-            max_range_m=float(s["max_range_m"]),
-            sigma_range_m=float(s["sigma_range_m"]),
-            sigma_azimuth_rad=math.radians(s["sigma_azimuth_deg"]),
-            sigma_speed_mps=float(s["sigma_speed_mps"]),
-            sigma_course_rad=math.radians(s["sigma_course_deg"]),
-        )
-        for s in raw["radar_sites"]
-    )
-    if len({s.site_id for s in sites}) != len(sites):
-        raise ValueError("radar site ids must be unique")
-    legs = tuple(
-        FairwayLeg(
-            leg_id=leg["leg_id"],
-            start_lat_deg=leg["start"][0],
-            start_lon_deg=leg["start"][1],
-            end_lat_deg=leg["end"][0],
-            end_lon_deg=leg["end"][1],
-        )
-        for leg in raw.get("fairway_legs", [])
-    )
-    sectors = tuple(
-        Sector(name=s["name"], polygon_lat_lon_deg=tuple((p[0], p[1]) for p in s["polygon"]))
-        for s in raw.get("sectors", [])
-    )
-    for s in sectors:
-        if len(s.polygon_lat_lon_deg) < 3:
-            raise ValueError(f"sector {s.name} needs at least 3 vertices")
-    return Config(
-        region=region,
-        radar_sites=sites,
-        ais=AisConfig(**raw.get("ais", {})),
-        validation=ValidationConfig(**raw.get("validation", {})),
-        fairway_legs=legs,
-        sectors=sectors,
-        warehouse_path=raw.get("warehouse", {}).get("path", "warehouse"),
-        execution=ExecutionConfig(**raw.get("execution", {})),
-        source=source,
-        sections=raw,
-    )
+    for f in families:
+        doc.claim(*f.sections)
+        parsed[f.name] = f.parse_config(doc, core)
+    return replace(core, families=parsed) if core is not None else None

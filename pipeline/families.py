@@ -14,12 +14,19 @@ from typing import Any
 from pipeline import config as _config
 from pipeline.airfield.stage import FAMILY as AIRFIELD
 from pipeline.config import Config
+from pipeline.configspec import Document
 from pipeline.family import Family
 from pipeline.gaps.stage import FAMILY as GAPS
 from pipeline.maritime.stage import FAMILY as MARITIME
 from pipeline.nav.stage import FAMILY as NAV
+from pipeline.reports import REPORTS_SECTION
+from pipeline.requirements import REQUIREMENTS_SECTION, ConfigSection
 
 FAMILIES: tuple[Family, ...] = (MARITIME, AIRFIELD, GAPS, NAV)
+
+# Sections read at load like a family's that belong to no family: what reports are
+# judged against ([requirements]) and the user's report folders ([reports]).
+SECTIONS: tuple[ConfigSection, ...] = (REQUIREMENTS_SECTION, REPORTS_SECTION)
 
 
 def family(name: str) -> Family:
@@ -30,16 +37,18 @@ def family(name: str) -> Family:
     raise KeyError(name)
 
 
-def _parsers() -> dict[str, Any]:
-    return {f.name: f.parse_config for f in FAMILIES}
-
-
 def load_config(path: str | Path | None = None) -> Config:
     """Load a TOML config (``None``: the shipped default) with every family's sections
     parsed and validated; :class:`~pipeline.config.ConfigError` on any problem."""
-    return _config.load_config(path, _parsers())
+    return _config.load_config(path, (*FAMILIES, *SECTIONS))
 
 
 def config_from_mapping(raw: Mapping[str, Any], source: str = "(in memory)") -> Config:
     """The same as :func:`load_config` for an already parsed TOML document."""
-    return _config.config_from_mapping(raw, source, _parsers())
+    return _config.config_from_mapping(raw, source, (*FAMILIES, *SECTIONS))
+
+
+def read_config(path: str | Path | None = None) -> tuple[Config | None, Document]:
+    """The config and the document it was read from, problems not yet raised (for
+    ``surveil config check``: ``Document.finish``, then ``Document.resolved``)."""
+    return _config.read_config(path, (*FAMILIES, *SECTIONS))

@@ -3,10 +3,13 @@
 A family (``pipeline.maritime``, ``pipeline.airfield``, ``pipeline.nav``,
 ``pipeline.gaps``) is one :class:`Family` value, listed in ``pipeline.families``:
 
-- ``sections`` and ``parse_config``: the TOML sections it owns and the function that
-  turns the document into the family's typed, validated config object (run when the
-  config file loads, for every command: a bad value is an exit-2 error at start, never
-  a failed unit);
+- ``sections`` and ``parse_config``: the TOML sections it owns and the function
+  ``parse_config(doc, core)`` that reads them from the
+  :class:`~pipeline.configspec.Document` into the family's typed config object
+  (``doc.read(SomeConfig, "section")``: types and ranges declared on the dataclass;
+  cross-field problems via ``doc.problem``). It runs when the config file loads, for
+  every command: a bad value is an exit-2 error at start, never a failed unit; ``core``
+  is None when the core sections themselves are invalid;
 - ``inputs(cfg)``: the tables its stage reads, each with the margins it needs around the
   window (:class:`TableInput`); the batch job reads exactly those;
 - ``stage(inputs, window, cfg)``: a pure function of those tables, the window and the
@@ -25,12 +28,12 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from functools import partial
 from typing import Any
 
 import polars as pl
 
 from pipeline.config import Config
+from pipeline.configspec import Document
 from pipeline.units import NS
 
 
@@ -75,21 +78,10 @@ class Family:
 
     name: str
     sections: tuple[str, ...]
-    parse_config: Callable[[Mapping[str, Any], Config], Any]
+    parse_config: Callable[[Document, Config | None], Any]
     inputs: Callable[[Config], tuple[TableInput, ...]]
     outputs: tuple[str, ...]
     stage: Stage
     unit_s: int | None = 3600
     join_units: Callable[[UnitParts], UnitParts] | None = None
 
-
-def _parse_section(name: str, parse: Callable[[Mapping[str, Any], Config], Any],
-                   raw: Mapping[str, Any], core: Config) -> Any:
-    return parse(raw.get(name, {}), core)
-
-
-def one_section(name: str, parse: Callable[[Mapping[str, Any], Config], Any]
-                ) -> Callable[[Mapping[str, Any], Config], Any]:
-    """``Family.parse_config`` of a family that owns one section: ``parse(raw[name], core)``
-    (an empty mapping when the file has no such section)."""
-    return partial(_parse_section, name, parse)

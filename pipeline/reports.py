@@ -1,26 +1,86 @@
-"""Report queries: load ``sql/<name>.sql`` and run it in DuckDB with bound parameters.
+"""Report queries: load ``<name>.sql`` from the shipped ``sql/`` folder or a user report
+folder (``[reports] dirs``), and run it in DuckDB with bound parameters.
 
-Every report takes the same three parameters, always bound, never pasted into SQL
-text: ``$start_ns`` and ``$end_ns`` (int64 ns UTC, half-open window) and ``$sector``
-(a sector name, or ``None`` for every sector).
+Every report takes the window and sector parameters, always bound, never pasted into SQL
+text: ``$start_ns`` and ``$end_ns`` (int64 ns UTC, half-open window) and ``$sector`` (a
+sector name, or ``None`` for every sector). Requirement figures come from the config's
+``[requirements]`` (``$ed87_manoeuvring_p95_m``, ...: :mod:`pipeline.requirements`). A
+report may declare more parameters in its header, each with a default
+(``$step_s (DOUBLE, default 20)``), that a caller may override.
+
+Header (every file, shipped or user's)::
+
+    -- name: <the file stem>
+    -- description: what the report answers (continuation lines start with "--  ")
+    -- grain: what one row is
+    -- params: $start_ns (BIGINT, inclusive), $end_ns (BIGINT, exclusive), $sector (VARCHAR)
 """
 
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import duckdb
 import pyarrow as pa
 
+from pipeline.configspec import Document, setting
+from pipeline.requirements import ConfigSection, RequirementsConfig
 from pipeline.resources import resource_path
 
-_HEADER = re.compile(r"^--\s*(\w+):\s*(.*)$")
+_HEADER = re.compile(r"^--\s*(\w[\w ]*?):\s*(.*)$")
+_PARAM = re.compile(r"\$(\w+)\s*(?:\(([^)]*)\))?")
+_COMMENT = re.compile(r"--[^\n]*")
+_NAME = re.compile(r"[A-Za-z0-9_]+")
+WINDOW_PARAMS = ("start_ns", "end_ns", "sector")
+REQUIRED_HEADER = ("name", "description", "params")
 
 
 class UnknownReportError(KeyError):
-    """No ``sql/<name>.sql`` exists."""
+    """No ``<name>.sql`` in the shipped or the user report folders."""
+
+
+class ReportError(ValueError):
+    """A report file is malformed, or a parameter is missing or of the wrong type."""
+
+
+@dataclass(frozen=True)
+class ReportParam:
+    """A ``$name`` of a report header: DuckDB type (when declared), default (text,
+    when declared) and the rest of its parenthesis."""
+
+    name: str
+    sql_type: str | None = None
+    default: str | None = None
+    doc: str = ""
+
+    def convert(self, value: Any) -> Any:
+        """A value given as text (command line) -> the declared type's Python value."""
+        if not isinstance(value, str):
+            return value
+        t = (self.sql_type or "").upper()
+        try:
+            if t in ("BIGINT", "INTEGER", "INT", "SMALLINT", "HUGEINT"):
+                return int(value)
+            if t in ("DOUBLE", "FLOAT", "REAL", "DECIMAL"):
+                return float(value)
+            if t == "BOOLEAN":
+                if value.lower() not in ("true", "false", "1", "0"):
+                    raise ValueError(value)
+                return value.lower() in ("true", "1")
+        except ValueError:
+            raise ReportError(f"parameter ${self.name} must be {t}, not {value!r}") from None
+        if t in ("VARCHAR", "TEXT", "STRING"):
+            return None if value.upper() == "NULL" else value
+        for conv in (int, float):  # no declared type: the narrowest that reads it
+            try:
+                return conv(value)
+            except ValueError:
+                pass
+        return value
 
 
 @dataclass(frozen=True)
@@ -29,53 +89,198 @@ class ReportSql:
     path: Path
     text: str
     header: dict[str, str]
+    params: tuple[ReportParam, ...] = ()
+    shipped: bool = True
+    used: frozenset[str] = field(default_factory=frozenset)
 
     @property
     def description(self) -> str:
         return self.header.get("description", "")
+
+    @property
+    def origin(self) -> str:
+        return "shipped" if self.shipped else str(self.path.parent)
+
+    def param(self, name: str) -> ReportParam | None:
+        return next((p for p in self.params if p.name == name), None)
+
+    def source_tables(self) -> list[str]:
+        """Tables named by the header's ``source table(s):`` line."""
+        text = self.header.get("source tables", self.header.get("source table", ""))
+        return [t.strip() for t in text.split("(")[0].split(",") if _NAME.fullmatch(t.strip())]
+
+
+def _folders(dirs: tuple[str, ...]) -> str | None:
+    return None if all(d.strip() for d in dirs) else "folder paths must not be empty"
+
+
+@dataclass(frozen=True)
+class _ReportsSection:
+    """``[reports]`` as written: ``dirs``, folder paths relative to the config file."""
+
+    dirs: tuple[str, ...] = setting([], check=_folders)
+
+
+@dataclass(frozen=True)
+class ReportsConfig:
+    """``[reports]``: user report folders (absolute), listed and run beside ``sql/``."""
+
+    dirs: tuple[Path, ...] = ()
+
+
+def parse_reports_section(doc: Document, core: Any = None) -> ReportsConfig | None:
+    """``[reports]`` (no folders when absent); each folder must exist."""
+    got = doc.read(_ReportsSection, "reports")
+    if got is None:
+        return None
+    base = Path(doc.source).parent if doc.source and not doc.source.startswith("(") \
+        else Path.cwd()
+    out = []
+    for i, d in enumerate(got.dirs):
+        p = Path(d).expanduser()
+        p = p if p.is_absolute() else base / p
+        if not p.is_dir():
+            doc.problem(("reports", "dirs", i), f"{p} is not a folder")
+        out.append(p.resolve())
+    return ReportsConfig(tuple(out))
+
+
+REPORTS_SECTION = ConfigSection("reports", ("reports",), parse_reports_section)
+
+
+def reports_config(cfg: Any) -> ReportsConfig:
+    """The ``[reports]`` of a loaded config (no user folders when loaded without)."""
+    got = (getattr(cfg, "families", {}) or {}).get("reports")
+    return got if isinstance(got, ReportsConfig) else ReportsConfig()
 
 
 def sql_dir() -> Path:
     return resource_path("sql")
 
 
-def list_reports() -> list[str]:
-    return sorted(p.stem for p in sql_dir().glob("*.sql"))
+def _files(dirs: Iterable[Path]) -> dict[str, tuple[Path, bool]]:
+    """Report name -> (file, shipped); a user report may not reuse a name."""
+    found: dict[str, tuple[Path, bool]] = {p.stem: (p, True) for p in sql_dir().glob("*.sql")}
+    for d in dirs:
+        for p in sorted(Path(d).glob("*.sql")):
+            if p.stem in found:
+                raise ReportError(f"report {p.stem!r} is defined twice: {found[p.stem][0]} "
+                                  f"and {p}; rename one")
+            found[p.stem] = (p, False)
+    return found
 
 
-def load_report(name: str) -> ReportSql:
-    """Read ``sql/<name>.sql`` and its ``-- key: value`` header lines."""
-    if not re.fullmatch(r"[A-Za-z0-9_]+", name or ""):
-        raise UnknownReportError(name)
-    path = sql_dir() / f"{name}.sql"
-    if not path.is_file():
-        raise UnknownReportError(name)
-    text = path.read_text()
+def list_reports(dirs: Sequence[Path] = ()) -> list[str]:
+    """Every report name, shipped and in ``dirs``, sorted."""
+    return sorted(_files(dirs))
+
+
+def parse_header(text: str) -> dict[str, str]:
+    """The ``-- key: value`` lines at the top of a report (continuations joined)."""
     header: dict[str, str] = {}
     last_key = None
     for line in text.splitlines():
         if not line.startswith("--"):
             break
         m = _HEADER.match(line)
-        if m:
-            last_key = m.group(1)
+        if m and not line.startswith("--  "):
+            last_key = m.group(1).strip()
             header[last_key] = m.group(2).strip()
         elif last_key:  # continuation line of the previous key
             header[last_key] += " " + line.lstrip("- ").strip()
-    return ReportSql(name=name, path=path, text=text, header=header)
+    return header
+
+
+def parse_params(text: str) -> tuple[ReportParam, ...]:
+    """``$name (TYPE, ..., default X)`` items of a ``params:`` header value. A type given
+    once for a run of names (``$a, $b (DOUBLE)``) applies to the whole run."""
+    out: list[ReportParam] = []
+    pending: list[str] = []
+    for m in _PARAM.finditer(text):
+        name, paren = m.group(1), m.group(2)
+        if paren is None:
+            pending.append(name)
+            continue
+        parts = [p.strip() for p in paren.split(",")]
+        sql_type = parts[0].upper() if parts and re.fullmatch(r"[A-Za-z]+", parts[0]) else None
+        default = next((p.split(None, 1)[1] for p in parts
+                        if p.lower().startswith("default ") and len(p.split(None, 1)) == 2),
+                       None)
+        for n in [*pending, name]:
+            out.append(ReportParam(n, sql_type, default if n == name else None, paren.strip()))
+        pending = []
+    out += [ReportParam(n) for n in pending]
+    return tuple(out)
+
+
+def load_report(name: str, dirs: Sequence[Path] = ()) -> ReportSql:
+    """Read report ``name`` (shipped ``sql/`` or a folder of ``dirs``) and its header."""
+    if not _NAME.fullmatch(name or ""):
+        raise UnknownReportError(name)
+    found = _files(dirs).get(name)
+    if found is None:
+        raise UnknownReportError(name)
+    path, shipped = found
+    text = path.read_text()
+    header = parse_header(text)
+    missing = [k for k in REQUIRED_HEADER if k not in header]
+    if missing:
+        raise ReportError(f"{path}: header lacks {', '.join('-- ' + k + ':' for k in missing)} "
+                          "(see sql/README.md)")
+    if header["name"] != name:
+        raise ReportError(f"{path}: header names {header['name']!r}, the file {name!r}")
+    body = _COMMENT.sub("", text)
+    return ReportSql(name=name, path=path, text=text, header=header,
+                     params=parse_params(header["params"]), shipped=shipped,
+                     used=frozenset(re.findall(r"\$(\w+)", body)))
+
+
+def bind_params(
+    report: ReportSql,
+    *,
+    start_ns: int,
+    end_ns: int,
+    sector: str | None,
+    requirements: RequirementsConfig | None = None,
+    params: Mapping[str, Any] | None = None,
+) -> dict[str, Any]:
+    """The values of every ``$name`` the report's SQL uses: the window and sector, the
+    requirement figures, the caller's ``params`` (text is converted to the declared
+    type), then the header's defaults. ReportError names any parameter left unbound."""
+    given = dict(params or {})
+    unknown = set(given) - {p.name for p in report.params} - set(WINDOW_PARAMS)
+    if unknown:
+        raise ReportError(f"report {report.name} has no parameter(s) "
+                          f"{', '.join('$' + u for u in sorted(unknown))}; it takes "
+                          + ", ".join("$" + p.name for p in report.params))
+    values: dict[str, Any] = {"start_ns": int(start_ns), "end_ns": int(end_ns), "sector": sector}
+    values.update((requirements or RequirementsConfig()).sql_params())
+    for p in report.params:
+        if p.name in given:
+            values[p.name] = p.convert(given[p.name])
+        elif p.default is not None and p.name not in values:
+            values[p.name] = p.convert(p.default)
+    missing = sorted(report.used - set(values))
+    if missing:
+        raise ReportError(f"report {report.name} needs {', '.join('$' + m for m in missing)} "
+                          "(declare a default in its header or pass --param NAME=VALUE)")
+    return {k: v for k, v in values.items() if k in report.used}
 
 
 def run_report(
     con: duckdb.DuckDBPyConnection,
-    name: str,
+    name: str | ReportSql,
     *,
     start_ns: int,
     end_ns: int,
     sector: str | None = None,
+    requirements: RequirementsConfig | None = None,
+    params: Mapping[str, Any] | None = None,
+    dirs: Sequence[Path] = (),
 ) -> pa.Table:
-    """Run report ``name`` on a connection whose views expose the warehouse tables."""
-    report = load_report(name)
-    params = {"start_ns": int(start_ns), "end_ns": int(end_ns), "sector": sector}
-    used = {p for p in params if f"${p}" in report.text}
-    bound = {k: v for k, v in params.items() if k in used}
+    """Run a report on a connection whose views expose the warehouse tables.
+    ``requirements``: the config's ``[requirements]`` (None: the shipped figures)."""
+    report = name if isinstance(name, ReportSql) else load_report(name, dirs)
+    bound = bind_params(report, start_ns=start_ns, end_ns=end_ns, sector=sector,
+                        requirements=requirements, params=params)
     return con.sql(report.text, params=bound).to_arrow_table()

@@ -166,3 +166,39 @@ def conform(name: str, data: pa.Table | pl.DataFrame) -> pa.Table:
     if out.num_rows and sort_by:
         out = out.sort_by([(c, "ascending") for c in sort_by])
     return out
+
+
+# Units are in the column names (STYLE: `range_m`, `sog_mps`, `time_ns`); the suffix says it.
+_UNIT_SUFFIXES: dict[str, str] = {
+    "ns": "ns (UTC, since 1970)",
+    "s": "s",
+    "m": "m",
+    "m2": "m^2",
+    "mps": "m/s",
+    "mps2": "m/s^2",
+    "rad": "rad",
+    "radps": "rad/s",
+    "deg": "deg",
+    "bytes": "bytes",
+    "per_h": "1/h",
+}
+
+
+def column_unit(name: str) -> str:
+    """The unit a column's name carries (``range_m`` -> ``m``), '' when none."""
+    if name.endswith("_per_h"):
+        return _UNIT_SUFFIXES["per_h"]
+    head, _, suffix = name.rpartition("_")
+    return _UNIT_SUFFIXES.get(suffix, "") if head else ""
+
+
+def column_doc(field: pa.Field) -> str:
+    """The meaning of a column as declared in schemas/ (``doc``)."""
+    return (field.metadata or {}).get(b"doc", b"").decode()
+
+
+def column_comment(field: pa.Field) -> str:
+    """``[unit] meaning``: the text of ``surveil schema`` and of the DuckDB column comments."""
+    unit = column_unit(field.name)
+    doc = column_doc(field)
+    return f"[{unit}] {doc}" if unit else doc

@@ -3,11 +3,13 @@
 --   apron taxiways, stands): 95th-percentile horizontal error of each channel's reports and
 --   of the fused tracks against the reference, probability of identification (fused, over
 --   cooperative targets), share of updates after a gap of 3-5 s and of more than 5 s, beside
---   the ED-87 requirements (95% <= 12 / 20 / 25 m; identification >= 0.999) and the
---   sensor-level 7.5 m (ED-116/117).
+--   the ED-87 requirements per area and the sensor level (ED-116/117), bound from the
+--   config's [requirements] (shipped: 95% <= 12 / 20 / 25 m, 7.5 m; P(ID) >= 0.999).
 -- grain: one row per (area, source); source = a channel's sensor id or 'fused'
 -- params: $start_ns (BIGINT, inclusive), $end_ns (BIGINT, exclusive),
---         $sector (VARCHAR, NULL = every sector)
+--         $sector (VARCHAR, NULL = every sector),
+--         $ed87_manoeuvring_p95_m, $ed87_apron_taxiway_p95_m, $ed87_stand_p95_m,
+--         $sensor_p95_m, $p_identification_min (DOUBLE, from [requirements])
 -- source tables: airfield_tracks, channel_health (written by `surveil batch`)
 WITH updates AS (   -- one row per update of a target by a source
     SELECT coalesce(area, '(outside areas)') AS area, channel AS source, track_id, time_ns,
@@ -29,7 +31,9 @@ gaps AS (
     FROM updates
 ),
 req AS (
-    SELECT * FROM (VALUES ('manoeuvring', 12.0), ('apron_taxiway', 20.0), ('stand', 25.0))
+    SELECT * FROM (VALUES ('manoeuvring', CAST($ed87_manoeuvring_p95_m AS DOUBLE)),
+                          ('apron_taxiway', CAST($ed87_apron_taxiway_p95_m AS DOUBLE)),
+                          ('stand', CAST($ed87_stand_p95_m AS DOUBLE)))
         AS r(area, ed87_p95_m)
 )
 SELECT
@@ -41,11 +45,14 @@ SELECT
     round(sqrt(avg(g.error_m * g.error_m)), 2)::DOUBLE                        AS rms_error_m,       -- RMS error, m
     any_value(r.ed87_p95_m)::DOUBLE                                           AS ed87_p95_req_m,    -- ED-87 95% requirement, m
     (quantile_cont(g.error_m, 0.95) <= any_value(r.ed87_p95_m))::BOOLEAN      AS meets_ed87,        -- p95 within it
-    7.5::DOUBLE                                                               AS sensor_p95_req_m,  -- ED-116/117 sensor level, m
-    (quantile_cont(g.error_m, 0.95) <= 7.5)::BOOLEAN                          AS meets_sensor_level,
+    CAST($sensor_p95_m AS DOUBLE)                                             AS sensor_p95_req_m,  -- ED-116/117 sensor level, m
+    (quantile_cont(g.error_m, 0.95) <= CAST($sensor_p95_m AS DOUBLE))::BOOLEAN AS meets_sensor_level,
     round(avg(CASE WHEN g.identity_correct THEN 1.0 ELSE 0.0 END)
           FILTER (WHERE g.cooperative), 5)::DOUBLE                            AS p_identification,  -- fused, cooperative targets
-    0.999::DOUBLE                                                             AS p_id_req,          -- ED-87
+    (count(*) FILTER (WHERE g.cooperative))::BIGINT                           AS id_samples,        -- updates behind p_identification
+    CAST($p_identification_min AS DOUBLE)                                     AS p_id_req,          -- ED-87
+    (avg(CASE WHEN g.identity_correct THEN 1.0 ELSE 0.0 END) FILTER (WHERE g.cooperative)
+        >= CAST($p_identification_min AS DOUBLE))::BOOLEAN                    AS meets_p_id,        -- NULL: no cooperative target
     round(avg(CASE WHEN g.gap_s >= 3 AND g.gap_s <= 5 THEN 1.0 ELSE 0.0 END)
           FILTER (WHERE g.gap_s IS NOT NULL), 5)::DOUBLE                      AS gap_3_5s_share,    -- updates after a 3-5 s gap
     round(avg(CASE WHEN g.gap_s > 5 THEN 1.0 ELSE 0.0 END)

@@ -17,12 +17,12 @@ from dataclasses import dataclass
 import polars as pl
 
 from pipeline.airfield.calibrate import calibrate, stored_models
-from pipeline.airfield.config import AirfieldConfig, parse_airfield_section
+from pipeline.airfield.config import AirfieldConfig, parse_airfield
 from pipeline.airfield.frames import config_sensor_id, sensor_rows, to_common_frame
 from pipeline.airfield.fusion import fuse_airfield
 from pipeline.airfield.score import score
 from pipeline.config import Config
-from pipeline.family import Family, Inputs, Outputs, TableInput, Window, one_section
+from pipeline.family import Family, Inputs, Outputs, TableInput, Window
 
 log = logging.getLogger(__name__)
 
@@ -105,11 +105,10 @@ def stage(tables: Inputs, window: Window, cfg: Config) -> Outputs:
     return {k: v for k, v in result.items() if v.height}
 
 
-
 FAMILY = Family(
     name="airfield",
     sections=("airfield",),
-    parse_config=one_section("airfield", parse_airfield_section),
+    parse_config=parse_airfield,
     inputs=inputs,
     outputs=OUTPUTS,
     stage=stage,

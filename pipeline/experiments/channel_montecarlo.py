@@ -72,18 +72,18 @@ def mc_faults(cfg: Config) -> tuple[ChannelFault, ...]:
     sizes of the default config's schedule)."""
     r1, r2 = (s.site_id for s in cfg.radar_sites[:2])
     kinds = [
-        ChannelFault("radar_range_bias", 0, 0, site_id=r2, value=80.0),
+        ChannelFault("radar_range_bias", 0, 0, site_id=r2, range_bias_m=80.0),
         ChannelFault("ais_offset", 0, 0, north_m=250.0),
-        ChannelFault("radar_azimuth_bias", 0, 0, site_id=r1, value=math.radians(1.0)),
+        ChannelFault("radar_azimuth_bias", 0, 0, site_id=r1, azimuth_bias_rad=math.radians(1.0)),
         ChannelFault("ais_stuck", 0, 0),
         ChannelFault("radar_outage", 0, 0, site_id=r1),
         ChannelFault("ais_mmsi_swap", 0, 0),
-        ChannelFault("radar_time_offset", 0, 0, site_id=r2, value=5.0),
+        ChannelFault("radar_time_offset", 0, 0, site_id=r2, time_offset_s=5.0),
         ChannelFault("ais_spoof", 0, 0, mmsi=SPOOF_MMSI, start_lat_deg=46.392,
                      start_lon_deg=30.870, course_rad=math.radians(90.0), speed_mps=6.0),
         ChannelFault("radar_blank", 0, 0, site_id=r2, azimuth_from_rad=math.radians(240.0),
                      azimuth_to_rad=math.radians(285.0)),
-        ChannelFault("radar_noise", 0, 0, site_id=r1, value=4.0),
+        ChannelFault("radar_noise", 0, 0, site_id=r1, factor=4.0),
     ]
     return tuple(replace(f, start_s=FIRST_S + i * (FAULT_S + GAP_S), duration_s=FAULT_S)
                  for i, f in enumerate(kinds))

@@ -1,58 +1,66 @@
 """The gaps family's configuration: the ``[gaps]`` section (distributed maritime
-observation paper; degrees in the file, radians here)."""
+observation paper; degrees in the file, radians here). Each value's file key, default
+and valid range are declared beside it (:func:`pipeline.configspec.setting`)."""
 
 from __future__ import annotations
 
-import math
-from collections.abc import Mapping
-from dataclasses import dataclass
-from typing import Any
+import itertools
+from dataclasses import dataclass, replace
 
-import numpy as np
-
-from pipeline.config import Config, ConfigError
+from pipeline.config import Config
+from pipeline.configspec import Document, count, polygon, positive, probability, setting
 from pipeline.filters import particle as pf
 
 
 @dataclass(frozen=True)
 class NamedPolygon:
-    name: str
-    polygon_lat_lon_deg: tuple[tuple[float, float], ...]
+    """A polygon of ``[[gaps.admissible]]``, ``[[gaps.islands]]`` or ``[[gaps.zones]]``;
+    an unnamed one is called ``<table>-<n>`` (n from 1)."""
+
+    name: str = setting("", unique=True, file_only=True)
+    polygon_lat_lon_deg: tuple[tuple[float, float], ...] = polygon()
+
+
+def _increasing(offsets: tuple[float, ...]) -> str | None:
+    ok = all(b > a for a, b in itertools.pairwise(offsets))
+    return None if ok else "must be increasing"
 
 
 @dataclass(frozen=True)
 class GapsConfig:
     """The ``[gaps]`` section of the config (angles in degrees there, radians here)."""
 
-    gap_threshold_s: float = 600.0
-    forecast_offsets_s: tuple[float, ...] = (300.0, 600.0, 1200.0, 1800.0, 2700.0, 3600.0)
-    max_horizon_s: float = 3600.0
-    forecast_at_gap_end: bool = True
-    particles: int = 2000
-    step_s: float = 60.0
-    lead_in_s: float = 600.0
-    max_lead_in_obs: int = 10
-    course_noise_rad_per_sqrt_s: float = math.radians(0.25)
-    speed_noise_mps_per_sqrt_s: float = 0.01
-    turn_rate_per_s: float = 2.0 / 3600.0
-    turn_sigma_rad: float = math.radians(45.0)
-    manoeuvre_noise_factor: float = 5.0
-    max_speed_mps: float = 15.0
-    sigma_cog_rad: float = math.radians(3.0)
-    course_min_speed_mps: float = 1.0
-    manoeuvre_rate_rad_per_s: float = math.radians(0.2)
-    region_probability: float = 0.9
-    ess_fraction: float = 0.5
-    replenish_rounds: int = 4
-    regularise_below: float = 0.1
-    min_ess_fraction: float = 0.05
-    constrain: bool = True
-    constraint_mode: str = "redraw"
-    redraw_tries: int = 10
-    batch_gaps: int = 32
-    admissible: tuple[NamedPolygon, ...] = ()
-    islands: tuple[NamedPolygon, ...] = ()
-    zones: tuple[NamedPolygon, ...] = ()
+    gap_threshold_s: float = positive(600.0)
+    forecast_offsets_s: tuple[float, ...] = positive(
+        [300.0, 600.0, 1200.0, 1800.0, 2700.0, 3600.0], min_len=1, check=_increasing)
+    max_horizon_s: float = positive(3600.0)
+    forecast_at_gap_end: bool = setting(True)
+    particles: int = setting(2000, ge=100)
+    step_s: float = positive(60.0)
+    lead_in_s: float = positive(600.0)
+    max_lead_in_obs: int = count(10)
+    course_noise_rad_per_sqrt_s: float = positive(0.25, unit="deg")
+    speed_noise_mps_per_sqrt_s: float = positive(0.01)
+    turn_rate_per_s: float = setting(2.0, key="turns_per_hour", ge=0.0,
+                                     convert=lambda per_hour: per_hour / 3600.0)
+    turn_sigma_rad: float = positive(45.0, unit="deg")
+    manoeuvre_noise_factor: float = setting(5.0, ge=1.0)
+    max_speed_mps: float = positive(15.0)
+    sigma_cog_rad: float = positive(3.0, unit="deg")
+    course_min_speed_mps: float = setting(1.0, ge=0.0)
+    manoeuvre_rate_rad_per_s: float = positive(0.2, unit="deg")
+    region_probability: float = probability(0.9)
+    ess_fraction: float = setting(0.5, gt=0.0, le=1.0)
+    replenish_rounds: int = setting(4, ge=0)
+    regularise_below: float = setting(0.1, ge=0.0, le=1.0)
+    min_ess_fraction: float = setting(0.05, ge=0.0, lt=1.0)
+    constrain: bool = setting(True)
+    constraint_mode: str = setting("redraw", choices=("redraw", "weight"))
+    redraw_tries: int = setting(10, ge=0)
+    batch_gaps: int = count(32)
+    admissible: tuple[NamedPolygon, ...] = setting([])
+    islands: tuple[NamedPolygon, ...] = setting([])
+    zones: tuple[NamedPolygon, ...] = setting([])
 
     @property
     def lookback_s(self) -> float:
@@ -71,80 +79,21 @@ class GapsConfig:
         )
 
 
-def _polygons(raw: Any, what: str) -> tuple[NamedPolygon, ...]:
-    out = []
-    for i, p in enumerate(raw or []):
-        pts = tuple((float(a), float(b)) for a, b in p["polygon"])
-        if len(pts) < 3:
-            raise ConfigError(f"[gaps] {what} #{i + 1} needs at least 3 vertices")
-        out.append(NamedPolygon(str(p.get("name", f"{what}-{i + 1}")), pts))
-    if len({p.name for p in out}) != len(out):
-        raise ConfigError(f"[gaps] {what} names must be unique")
-    return tuple(out)
-
-
 def gaps_config(cfg: Config) -> GapsConfig:
     """The gaps family's config, parsed when ``cfg`` was loaded."""
     return cfg.family("gaps")
 
 
-def parse_gaps(raw: Mapping[str, Any], core: Config | None = None) -> GapsConfig:
-    """Parse the ``[gaps]`` section (an absent section gives the defaults and no
-    geometry: no constraint, no zones). Raises ConfigError on bad values."""
-    known = {"admissible", "islands", "zones"}
-    simple = {k: v for k, v in raw.items() if k not in known}
-    deg = {
-        "course_noise_deg_per_sqrt_s": "course_noise_rad_per_sqrt_s",
-        "sigma_cog_deg": "sigma_cog_rad",
-        "manoeuvre_rate_deg_per_s": "manoeuvre_rate_rad_per_s",
-        "turn_sigma_deg": "turn_sigma_rad",
-    }
-    kw: dict[str, Any] = {}
-    fields = GapsConfig.__dataclass_fields__
-    for key, value in simple.items():
-        if key in deg:
-            kw[deg[key]] = math.radians(float(value))
-        elif key == "forecast_offsets_s":
-            kw[key] = tuple(float(v) for v in value)
-        elif key == "turns_per_hour":
-            kw["turn_rate_per_s"] = float(value) / 3600.0
-        elif key in fields:
-            kw[key] = type(getattr(GapsConfig, key))(value)
-        else:
-            raise ConfigError(f"[gaps] unknown key {key!r}")
-    g = GapsConfig(
-        **kw,
-        admissible=_polygons(raw.get("admissible"), "admissible"),
-        islands=_polygons(raw.get("islands"), "islands"),
-        zones=_polygons(raw.get("zones"), "zones"),
-    )
-    _validate(g)
-    return g
-
-
-def _validate(g: GapsConfig) -> None:
-    offsets = np.asarray(g.forecast_offsets_s)
-    if offsets.size == 0 or np.any(offsets <= 0) or np.any(np.diff(offsets) <= 0):
-        raise ConfigError("[gaps] forecast_offsets_s must be positive and increasing")
-    if g.max_horizon_s < offsets[-1]:
-        raise ConfigError("[gaps] max_horizon_s must be >= the last forecast offset")
-    positive = (
-        "gap_threshold_s",
-        "step_s",
-        "lead_in_s",
-        "max_speed_mps",
-        "course_noise_rad_per_sqrt_s",
-        "speed_noise_mps_per_sqrt_s",
-        "sigma_cog_rad",
-    )
-    for name in positive:
-        if not getattr(g, name) > 0:
-            raise ConfigError(f"[gaps] {name} must be positive")
-    if g.particles < 100 or g.max_lead_in_obs < 1 or g.batch_gaps < 1:
-        raise ConfigError("[gaps] particles >= 100, max_lead_in_obs >= 1, batch_gaps >= 1")
-    if not 0.0 < g.region_probability < 1.0 or not 0.0 < g.ess_fraction <= 1.0:
-        raise ConfigError("[gaps] region_probability in (0, 1), ess_fraction in (0, 1]")
-    if g.constraint_mode not in ("redraw", "weight") or g.redraw_tries < 0:
-        raise ConfigError("[gaps] constraint_mode is 'redraw' or 'weight', redraw_tries >= 0")
-    if not 0.0 <= g.min_ess_fraction < 1.0 or not 0.0 <= g.regularise_below <= 1.0:
-        raise ConfigError("[gaps] min_ess_fraction in [0, 1), regularise_below in [0, 1]")
+def parse_gaps(doc: Document, core: Config | None = None) -> GapsConfig | None:
+    """The ``[gaps]`` section (an absent section gives the defaults and no geometry: no
+    constraint, no zones); the forecast horizon must cover the last offset."""
+    g = doc.read(GapsConfig, "gaps")
+    if g is None:
+        return None
+    if g.max_horizon_s < g.forecast_offsets_s[-1]:
+        doc.problem(("gaps", "max_horizon_s"),
+                    f"must be >= the last forecast offset ({g.forecast_offsets_s[-1]:g} s)")
+    named = {k: tuple(p if p.name else replace(p, name=f"{k}-{i + 1}")
+                      for i, p in enumerate(getattr(g, k)))
+             for k in ("admissible", "islands", "zones")}
+    return replace(g, **named)

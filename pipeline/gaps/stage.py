@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from pipeline.config import Config
-from pipeline.family import Family, Inputs, Outputs, TableInput, Window, one_section
+from pipeline.family import Family, Inputs, Outputs, TableInput, Window
 from pipeline.gaps.config import gaps_config, parse_gaps
 from pipeline.gaps.forecast import forecast_gaps
 from pipeline.units import NS
@@ -70,11 +70,10 @@ def stage(tables: Inputs, window: Window, cfg: Config) -> Outputs:
     return {"gap_forecasts": out}
 
 
-
 FAMILY = Family(
     name="gaps",
     sections=("gaps",),
-    parse_config=one_section("gaps", parse_gaps),
+    parse_config=parse_gaps,
     inputs=inputs,
     outputs=OUTPUTS,
     stage=stage,

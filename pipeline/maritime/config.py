@@ -3,17 +3,25 @@
 schedule ``[[channel_faults]]`` (the geography it shares with the other families,
 radar sites, AIS settings, legs and sectors, is in the core :class:`~pipeline.config.Config`).
 
-Degrees and seconds in the file; radians and seconds here.
+Degrees and seconds in the file; radians and seconds here. Each value's file key,
+default and valid range are declared beside it (:func:`pipeline.configspec.setting`).
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field
-from typing import Any
+from dataclasses import dataclass, replace
 
 from pipeline.config import Config
+from pipeline.configspec import (
+    Document,
+    count,
+    latitude,
+    longitude,
+    positive,
+    probability,
+    setting,
+)
 
 SECTIONS = (
     "sync", "association", "siap", "radar_bias", "fairway", "channel_integrity", "channel_faults",
@@ -25,46 +33,46 @@ class SyncConfig:
     """Two-step synchronisation (multi-radar paper eq. 7-13): sigma of the extrapolation
     interval (eq. 12, s) and the period of the synchronised epochs (s)."""
 
-    sigma_dt_s: float = 0.1
-    epoch_period_s: float = 4.0
+    sigma_dt_s: float = positive(0.1)
+    epoch_period_s: float = positive(4.0)
 
 
 @dataclass(frozen=True)
 class AssociationConfig:
     """Track-to-track gates (multi-radar paper) and the track timeout."""
 
-    gate_probability: float = 0.999
-    max_course_difference_rad: float = math.radians(30.0)
-    max_speed_difference_mps: float = 2.5
-    course_gate_min_speed_mps: float = 1.0
-    track_timeout_s: float = 30.0
+    gate_probability: float = probability(0.999)
+    max_course_difference_rad: float = setting(30.0, unit="deg", gt=0.0, le=180.0)
+    max_speed_difference_mps: float = positive(2.5)
+    course_gate_min_speed_mps: float = setting(1.0, ge=0.0)
+    track_timeout_s: float = positive(30.0)
 
 
 @dataclass(frozen=True)
 class SiteBias:
     """Registration bias of one site, reported - true: range (m), azimuth (rad), time (s)."""
 
-    range_bias_m: float = 0.0
-    azimuth_bias_rad: float = 0.0
-    time_offset_s: float = 0.0
+    range_bias_m: float = setting(0.0, ge=-1e4, le=1e4)
+    azimuth_bias_rad: float = setting(0.0, unit="deg", ge=-180.0, le=180.0)
+    time_offset_s: float = setting(0.0, ge=-3600.0, le=3600.0)
 
 
 @dataclass(frozen=True)
 class RadarBiasConfig:
     """``[radar_bias]``: corrections applied in batch (when ``apply``), biases injected
-    by the simulator, and the estimator's settings."""
+    by the simulator (``{site_id: SiteBias}``), and the estimator's settings."""
 
-    apply: bool = False
-    correction: Mapping[str, SiteBias] = field(default_factory=dict)
-    simulate: Mapping[str, SiteBias] = field(default_factory=dict)
-    max_ais_gap_s: float = 40.0
-    prior_range_bias_m: float = 100.0
-    prior_azimuth_bias_rad: float = math.radians(1.0)
-    gate_probability: float = 0.999
-    min_track_share: float = 0.8
-    min_reports_per_track: int = 10
-    outlier_sigma: float = 3.5
-    confidence: float = 0.95
+    apply: bool = setting(False)
+    correction: Mapping[str, SiteBias] = setting({}, factory=dict)
+    simulate: Mapping[str, SiteBias] = setting({}, factory=dict)
+    max_ais_gap_s: float = positive(40.0)
+    prior_range_bias_m: float = positive(100.0)
+    prior_azimuth_bias_rad: float = setting(1.0, unit="deg", gt=0.0, le=180.0)
+    gate_probability: float = probability(0.999)
+    min_track_share: float = setting(0.8, gt=0.0, le=1.0)
+    min_reports_per_track: int = count(10)
+    outlier_sigma: float = positive(3.5)
+    confidence: float = probability(0.95)
 
 
 @dataclass(frozen=True)
@@ -72,9 +80,15 @@ class SiapConfig:
     """``[siap]`` section: track-to-truth gate probability (chi-square, 2 dof), largest
     association distance (m), and the window pairing two changes into a swap (s)."""
 
-    gate_probability: float = 0.999
-    max_distance_m: float = 500.0
-    swap_window_s: float = 60.0
+    gate_probability: float = probability(0.999)
+    max_distance_m: float = positive(500.0)
+    swap_window_s: float = positive(60.0)
+
+
+def _name_or_empty(v: str) -> str | None:
+    """A radar site / sector name, or "" for none (its existence is checked by
+    :func:`parse_maritime`)."""
+    return None if v == v.strip() else "no blanks around a name"
 
 
 RADAR_FAULT_KINDS = (
@@ -83,19 +97,6 @@ RADAR_FAULT_KINDS = (
 )
 AIS_FAULT_KINDS = ("ais_offset", "ais_stuck", "ais_mmsi_swap", "ais_spoof")
 FAULT_KINDS = RADAR_FAULT_KINDS + AIS_FAULT_KINDS
-# TOML keys each kind takes besides kind, start_s, duration_s
-_FAULT_KEYS: dict[str, tuple[str, ...]] = {
-    "radar_outage": ("site_id",),
-    "radar_blank": ("site_id", "azimuth_from_deg", "azimuth_to_deg"),
-    "radar_range_bias": ("site_id", "bias_m"),
-    "radar_azimuth_bias": ("site_id", "bias_deg"),
-    "radar_time_offset": ("site_id", "offset_s"),
-    "radar_noise": ("site_id", "factor"),
-    "ais_offset": ("vessel_id", "sector", "east_m", "north_m"),
-    "ais_stuck": ("vessel_id", "sector"),
-    "ais_mmsi_swap": ("vessel_id", "other_vessel_id", "sector"),
-    "ais_spoof": ("mmsi", "start", "course_deg", "speed_mps"),
-}
 
 
 @dataclass(frozen=True)
@@ -103,36 +104,40 @@ class ChannelFault:
     """One fault the ``channel`` simulator injects (``[[channel_faults]]``), from
     ``start_s`` for ``duration_s`` (s from the scenario start). Radar faults name a
     ``site_id``: ``radar_outage`` (the site publishes no scans), ``radar_blank`` (no
-    detections in the azimuths [azimuth_from_rad, azimuth_to_rad), clockwise: the
-    tracker coasts, then drops its tracks there), ``radar_range_bias`` (``value`` m added
-    to ranges), ``radar_azimuth_bias`` (``value`` rad added to azimuths and courses),
-    ``radar_time_offset`` (``value`` s added to report times), ``radar_noise`` (range,
-    azimuth, course and speed noise x ``value``; the reported sigmas unchanged). AIS
-    faults name a vessel (``vessel_id``; None: the simulator picks, with the run's seed, a
-    Class A vessel in the scene for the whole fault, in ``sector`` when given):
+    detections in the azimuths [azimuth_from_deg, azimuth_to_deg), clockwise: the
+    tracker coasts, then drops its tracks there), ``radar_range_bias`` (``bias_m`` added
+    to ranges), ``radar_azimuth_bias`` (``bias_deg`` added to azimuths and courses),
+    ``radar_time_offset`` (``offset_s`` added to report times), ``radar_noise`` (range,
+    azimuth, course and speed noise x ``factor``; the reported sigmas unchanged). AIS
+    faults name a vessel (``vessel_id``, 1-based; 0 or absent: the simulator picks, with
+    the run's seed, a Class A vessel in the scene for the whole fault, in ``sector`` when
+    given):
     ``ais_offset`` (positions moved ``east_m``, ``north_m``: an antenna/GNSS fault),
     ``ais_stuck`` (position, SOG and COG frozen at the fault start), ``ais_mmsi_swap``
     (the vessel and ``other_vessel_id`` transmit each other's MMSI), ``ais_spoof`` (a
-    transponder that is on no ship, ``mmsi``, sails a straight line from ``start_lat_deg``,
-    ``start_lon_deg`` at ``course_rad``, ``speed_mps``)."""
+    transponder on no ship, ``mmsi``, sails a straight line from ``start`` = [lat, lon]
+    at ``course_deg``, ``speed_mps``)."""
 
-    kind: str
-    start_s: float
-    duration_s: float
-    site_id: str | None = None
-    value: float = 0.0
-    azimuth_from_rad: float = 0.0
-    azimuth_to_rad: float = 0.0
-    vessel_id: int | None = None
-    other_vessel_id: int | None = None
-    sector: str | None = None
-    east_m: float = 0.0
-    north_m: float = 0.0
-    mmsi: int = 0
-    start_lat_deg: float = 0.0
-    start_lon_deg: float = 0.0
-    course_rad: float = 0.0
-    speed_mps: float = 0.0
+    kind: str = setting(choices=FAULT_KINDS)
+    start_s: float = setting(ge=0.0)
+    duration_s: float = positive()
+    site_id: str = setting("", check=_name_or_empty)
+    range_bias_m: float = setting(0.0, key="bias_m", ge=-1e4, le=1e4)
+    azimuth_bias_rad: float = setting(0.0, key="bias_deg", unit="deg", ge=-180.0, le=180.0)
+    time_offset_s: float = setting(0.0, key="offset_s", ge=-3600.0, le=3600.0)
+    factor: float = setting(1.0, ge=1.0, le=1000.0)
+    azimuth_from_rad: float = setting(0.0, unit="deg", ge=0.0, le=360.0)
+    azimuth_to_rad: float = setting(0.0, unit="deg", ge=0.0, le=360.0)
+    vessel_id: int = setting(0, ge=0)  # 0: chosen by the simulator
+    other_vessel_id: int = setting(0, ge=0)
+    sector: str = setting("", check=_name_or_empty)  # "": anywhere
+    east_m: float = setting(0.0, ge=-1e5, le=1e5)
+    north_m: float = setting(0.0, ge=-1e5, le=1e5)
+    mmsi: int = setting(0, ge=0, le=999_999_999)
+    start_lat_deg: float = latitude(0.0, key=("start", 0))
+    start_lon_deg: float = longitude(0.0, key=("start", 1))
+    course_rad: float = setting(0.0, unit="deg", ge=-360.0, le=360.0)
+    speed_mps: float = setting(0.0, ge=0.0, le=50.0)
 
     @property
     def end_s(self) -> float:
@@ -142,6 +147,17 @@ class ChannelFault:
     def sensor_kind(self) -> str:
         return "radar" if self.kind in RADAR_FAULT_KINDS else "ais"
 
+    @property
+    def value(self) -> float:
+        """The size of a radar fault (range bias m, azimuth bias rad, time offset s,
+        noise factor; 0 for the others)."""
+        return {
+            "radar_range_bias": self.range_bias_m,
+            "radar_azimuth_bias": self.azimuth_bias_rad,
+            "radar_time_offset": self.time_offset_s,
+            "radar_noise": self.factor,
+        }.get(self.kind, 0.0)
+
 
 @dataclass(frozen=True)
 class ChannelIntegrityConfig:
@@ -150,9 +166,9 @@ class ChannelIntegrityConfig:
 
     - ``radar_q``, ``ais_q``: false-alarm probability of one radar decision (a radar in a
       sector at an epoch) and of one AIS report (eq. 22). A radar excluded by a false
-      alarm takes its information out of the fused picture of a whole sector for
-      ``readmit_run`` epochs; a transponder only its reports out of the identification
-      vote: the radars' q is the smaller;
+      alarm takes its information out of the fused picture for ``readmit_run`` epochs; a
+      transponder only its reports out of the identification vote: the radars' q is the
+      smaller;
     - ``readmit_run``: consecutive passing checks that readmit an excluded channel;
     - ``exclusion``: false records every check but fuses and identifies with every channel;
     - ``ais_sigma_position_m``: AIS position sigma the test assumes (the transponder's
@@ -170,31 +186,33 @@ class ChannelIntegrityConfig:
     - ``scan_gap_factor``: a site whose last scan ended more than this many scan periods
       ago is in outage (missing scans)."""
 
-    radar_q: float = 0.001
-    ais_q: float = 0.01
-    readmit_run: int = 5
-    exclusion: bool = True
-    ais_sigma_position_m: float = 3.0
-    ais_max_age_s: float = 10.0
-    ais_warmup_reports: int = 2
-    ais_jump_m: float = 150.0
-    outlier_q: float = 1e-4
-    coverage_min_targets: int = 2
-    coverage_miss_share: float = 0.5
-    scan_gap_factor: float = 1.5
+    radar_q: float = probability(0.001)
+    ais_q: float = probability(0.01)
+    readmit_run: int = count(5)
+    exclusion: bool = setting(True)
+    ais_sigma_position_m: float = positive(3.0)
+    ais_max_age_s: float = positive(10.0)
+    ais_warmup_reports: int = setting(2, ge=0)
+    ais_jump_m: float = positive(150.0)
+    outlier_q: float = probability(1e-4)
+    coverage_min_targets: int = count(2)
+    coverage_miss_share: float = probability(0.5)
+    scan_gap_factor: float = setting(1.5, gt=1.0)
 
 
 @dataclass(frozen=True)
 class MaritimeConfig:
-    """Everything the maritime stage reads beyond the core config."""
+    """Everything the maritime stage reads beyond the core config (one field per
+    section; ``max_cross_track_m`` from ``[fairway]``)."""
 
-    sync: SyncConfig = field(default_factory=SyncConfig)
-    association: AssociationConfig = field(default_factory=AssociationConfig)
-    siap: SiapConfig = field(default_factory=SiapConfig)
-    radar_bias: RadarBiasConfig = field(default_factory=RadarBiasConfig)
-    max_cross_track_m: float = 2000.0
-    integrity: ChannelIntegrityConfig = field(default_factory=ChannelIntegrityConfig)
-    faults: tuple[ChannelFault, ...] = ()
+    sync: SyncConfig = setting({}, factory=SyncConfig)
+    association: AssociationConfig = setting({}, factory=AssociationConfig)
+    siap: SiapConfig = setting({}, factory=SiapConfig)
+    radar_bias: RadarBiasConfig = setting({}, factory=RadarBiasConfig)
+    max_cross_track_m: float = positive(2000.0, key=("fairway", "max_cross_track_m"))
+    integrity: ChannelIntegrityConfig = setting({}, key="channel_integrity",
+                                                factory=ChannelIntegrityConfig)
+    faults: tuple[ChannelFault, ...] = setting([], key="channel_faults")
 
 
 def maritime_config(cfg: Config) -> MaritimeConfig:
@@ -207,22 +225,16 @@ def channel_faults(cfg: Config) -> tuple[ChannelFault, ...]:
     return maritime_config(cfg).faults
 
 
-def without_faults(cfg: Config) -> Config:
-    """``cfg`` with an empty ``[[channel_faults]]`` schedule (the fault-free scenario)."""
-    from dataclasses import replace
-
-    fam = dict(cfg.families)
-    fam["maritime"] = replace(maritime_config(cfg), faults=())
-    return replace(cfg, families=fam)
-
-
 def with_faults(cfg: Config, faults: tuple[ChannelFault, ...]) -> Config:
     """``cfg`` with ``faults`` as the channel scenario's schedule."""
-    from dataclasses import replace
-
     fam = dict(cfg.families)
     fam["maritime"] = replace(maritime_config(cfg), faults=tuple(faults))
     return replace(cfg, families=fam)
+
+
+def without_faults(cfg: Config) -> Config:
+    """``cfg`` with an empty ``[[channel_faults]]`` schedule (the fault-free scenario)."""
+    return with_faults(cfg, ())
 
 
 def radar_bias_config(cfg: Config) -> RadarBiasConfig:
@@ -233,127 +245,25 @@ def siap_config(cfg: Config) -> SiapConfig:
     return maritime_config(cfg).siap
 
 
-def parse_maritime(raw: Mapping[str, Any], core: Config) -> MaritimeConfig:
-    """Parse the maritime sections of the whole TOML document ``raw``."""
-    a = raw.get("association", {})
-    assoc = AssociationConfig(
-        gate_probability=a.get("gate_probability", 0.999),
-        max_course_difference_rad=math.radians(a.get("max_course_difference_deg", 30.0)),
-        max_speed_difference_mps=a.get("max_speed_difference_mps", 2.5),
-        course_gate_min_speed_mps=a.get("course_gate_min_speed_mps", 1.0),
-        track_timeout_s=a.get("track_timeout_s", 30.0),
-    )
-    s = raw.get("siap", {})
-    siap = SiapConfig(
-        gate_probability=float(s.get("gate_probability", 0.999)),
-        max_distance_m=float(s.get("max_distance_m", 500.0)),
-        swap_window_s=float(s.get("swap_window_s", 60.0)),
-    )
-    return MaritimeConfig(
-        sync=SyncConfig(**raw.get("sync", {})),
-        association=assoc,
-        siap=siap,
-        radar_bias=_radar_bias(raw.get("radar_bias", {})),
-        max_cross_track_m=raw.get("fairway", {}).get("max_cross_track_m", 2000.0),
-        integrity=_integrity(raw.get("channel_integrity", {})),
-        faults=tuple(_fault(f, core) for f in raw.get("channel_faults", [])),
-    )
-
-
-def _integrity(raw: Mapping[str, Any]) -> ChannelIntegrityConfig:
-    """``[channel_integrity]`` (unknown keys are errors)."""
-    d = ChannelIntegrityConfig()
-    unknown = set(raw) - set(d.__dataclass_fields__)
-    if unknown:
-        raise ValueError(f"[channel_integrity]: unknown keys {sorted(unknown)}")
-    out = ChannelIntegrityConfig(**{
-        k: type(getattr(d, k))(v) for k, v in raw.items()
-    })
-    if not all(0.0 < v < 1.0 for v in (out.radar_q, out.ais_q, out.outlier_q)):
-        raise ValueError("[channel_integrity]: radar_q, ais_q and outlier_q must be in (0, 1)")
-    if out.readmit_run < 1 or out.ais_warmup_reports < 0 or out.coverage_min_targets < 1:
-        raise ValueError("[channel_integrity]: readmit_run and coverage_min_targets >= 1, "
-                         "ais_warmup_reports >= 0")
-    return out
-
-
-def _fault(raw: Mapping[str, Any], core: Config) -> ChannelFault:
-    """One ``[[channel_faults]]`` entry (degrees in the file, radians here)."""
-    kind = raw.get("kind")
-    if kind not in _FAULT_KEYS:
-        raise ValueError(f"[[channel_faults]]: kind must be one of {FAULT_KINDS}, got {kind!r}")
-    allowed = {"kind", "start_s", "duration_s", *_FAULT_KEYS[kind]}
-    unknown = set(raw) - allowed
-    if unknown:
-        raise ValueError(f"[[channel_faults]] {kind}: unknown keys {sorted(unknown)}")
-    start, duration = float(raw["start_s"]), float(raw["duration_s"])
-    if start < 0.0 or duration <= 0.0:
-        raise ValueError(f"[[channel_faults]] {kind}: start_s >= 0 and duration_s > 0")
-    site = raw.get("site_id")
-    if kind in RADAR_FAULT_KINDS and site not in {s.site_id for s in core.radar_sites}:
-        raise ValueError(f"[[channel_faults]] {kind}: site_id {site!r} is not a radar site")
-    sector = raw.get("sector")
-    if sector is not None and sector not in {s.name for s in core.sectors}:
-        raise ValueError(f"[[channel_faults]] {kind}: sector {sector!r} is not a sector")
-    value = {
-        "radar_range_bias": float(raw.get("bias_m", 0.0)),
-        "radar_azimuth_bias": math.radians(float(raw.get("bias_deg", 0.0))),
-        "radar_time_offset": float(raw.get("offset_s", 0.0)),
-        "radar_noise": float(raw.get("factor", 1.0)),
-    }.get(kind, 0.0)
-    if kind == "radar_noise" and value < 1.0:
-        raise ValueError("[[channel_faults]] radar_noise: factor >= 1")
-    start_ll = raw.get("start", [0.0, 0.0])
-    if kind == "ais_spoof" and ("start" not in raw or "mmsi" not in raw):
-        raise ValueError("[[channel_faults]] ais_spoof: needs mmsi and start = [lat, lon]")
-    vid, other = raw.get("vessel_id"), raw.get("other_vessel_id")
-    return ChannelFault(
-        kind=kind,
-        start_s=start,
-        duration_s=duration,
-        site_id=site,
-        value=value,
-        azimuth_from_rad=math.radians(float(raw.get("azimuth_from_deg", 0.0))),
-        azimuth_to_rad=math.radians(float(raw.get("azimuth_to_deg", 0.0))),
-        vessel_id=None if vid is None else int(vid),
-        other_vessel_id=None if other is None else int(other),
-        sector=sector,
-        east_m=float(raw.get("east_m", 0.0)),
-        north_m=float(raw.get("north_m", 0.0)),
-        mmsi=int(raw.get("mmsi", 0)),
-        start_lat_deg=float(start_ll[0]),
-        start_lon_deg=float(start_ll[1]),
-        course_rad=math.radians(float(raw.get("course_deg", 0.0))),
-        speed_mps=float(raw.get("speed_mps", 0.0)),
-    )
-
-
-def _site_biases(raw: Mapping) -> dict[str, SiteBias]:
-    return {
-        site: SiteBias(
-            range_bias_m=float(v.get("range_bias_m", 0.0)),
-            azimuth_bias_rad=math.radians(float(v.get("azimuth_bias_deg", 0.0))),
-            time_offset_s=float(v.get("time_offset_s", 0.0)),
-        )
-        for site, v in raw.items()
-    }
-
-
-def _radar_bias(raw: Mapping[str, Any]) -> RadarBiasConfig:
-    """``[radar_bias]`` (degrees in the file, radians here; defaults when absent)."""
-    d = RadarBiasConfig()
-    return RadarBiasConfig(
-        apply=bool(raw.get("apply", False)),
-        correction=_site_biases(raw.get("correction", {})),
-        simulate=_site_biases(raw.get("simulate", {})),
-        max_ais_gap_s=float(raw.get("max_ais_gap_s", d.max_ais_gap_s)),
-        prior_range_bias_m=float(raw.get("prior_range_bias_m", d.prior_range_bias_m)),
-        prior_azimuth_bias_rad=math.radians(
-            float(raw.get("prior_azimuth_bias_deg", math.degrees(d.prior_azimuth_bias_rad)))
-        ),
-        gate_probability=float(raw.get("gate_probability", d.gate_probability)),
-        min_track_share=float(raw.get("min_track_share", d.min_track_share)),
-        min_reports_per_track=int(raw.get("min_reports_per_track", d.min_reports_per_track)),
-        outlier_sigma=float(raw.get("outlier_sigma", d.outlier_sigma)),
-        confidence=float(raw.get("confidence", d.confidence)),
-    )
+def parse_maritime(doc: Document, core: Config | None) -> MaritimeConfig | None:
+    """The maritime sections of the document; a bias for a site that is not a radar
+    site is a problem."""
+    m = doc.read(MaritimeConfig)
+    if m is not None and core is not None:
+        sites = {s.site_id for s in core.radar_sites}
+        for part in ("correction", "simulate"):
+            for site in getattr(m.radar_bias, part):
+                if site not in sites:
+                    doc.problem(("radar_bias", part, site),
+                                f"no radar site {site!r} (sites: {', '.join(sorted(sites))})")
+        sectors = {s.name for s in core.sectors}
+        for i, f in enumerate(m.faults):
+            if f.sensor_kind == "radar" and f.site_id not in sites:
+                doc.problem(("channel_faults", i, "site_id"),
+                            f"{f.kind} needs a radar site (sites: {', '.join(sorted(sites))})")
+            if f.sector and f.sector not in sectors:
+                doc.problem(("channel_faults", i, "sector"), f"no sector {f.sector!r}")
+            if f.kind == "ais_spoof" and (f.mmsi == 0 or not doc.has("channel_faults", i,
+                                                                      "start")):
+                doc.problem(("channel_faults", i), "ais_spoof needs mmsi and start = [lat, lon]")
+    return m

@@ -11,7 +11,7 @@ and ``nav_outages`` (outages starting in the window). Deterministic: no randomne
 from __future__ import annotations
 
 from pipeline.config import Config
-from pipeline.family import Family, Inputs, Outputs, TableInput, Window, one_section
+from pipeline.family import Family, Inputs, Outputs, TableInput, Window
 from pipeline.nav.config import ownship_config, parse_ownship
 from pipeline.nav.solution import nav_window
 
@@ -46,11 +46,10 @@ def stage(tables: Inputs, window: Window, cfg: Config) -> Outputs:
         start_ns=window.start_ns, end_ns=window.end_ns, cfg=cfg, oc=ownship_config(cfg))
 
 
-
 FAMILY = Family(
     name="nav",
     sections=("ownship",),
-    parse_config=one_section("ownship", parse_ownship),
+    parse_config=parse_ownship,
     inputs=inputs,
     outputs=OUTPUTS,
     stage=stage,

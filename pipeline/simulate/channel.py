@@ -797,12 +797,12 @@ def _ais_fault_vessels(
         if f.sensor_kind == "radar" or f.kind == "ais_spoof":
             hit.append(None), other.append(None)
             continue
-        a = f.vessel_id - 1 if f.vessel_id is not None else pick_vessel(
+        a = f.vessel_id - 1 if f.vessel_id else pick_vessel(
             f, class_a, present, in_sector, seed, k)
         b = None
         if f.kind == "ais_mmsi_swap" and a is not None:
-            b = f.other_vessel_id - 1 if f.other_vessel_id is not None else pick_vessel(
-                replace(f, sector=None), class_a, present, in_sector, seed, 1000 + k,
+            b = f.other_vessel_id - 1 if f.other_vessel_id else pick_vessel(
+                replace(f, sector=""), class_a, present, in_sector, seed, 1000 + k,
                 exclude=(a,))
             if b is None:
                 a = None

@@ -151,7 +151,7 @@ def pick_vessel(
     ok = [
         v for v in candidates
         if v not in exclude and present(v, f.start_s, f.end_s)
-        and (f.sector is None or in_sector(v, f.start_s, f.sector))
+        and (not f.sector or in_sector(v, f.start_s, f.sector))
     ]
     if not ok:
         return None

@@ -8,7 +8,13 @@ glob. delta-rs keeps the ``date`` partition only in the path (``date=YYYY-MM-DD/
 view casts it (and every other column) explicitly to the canonical type.
 
 ``<warehouse>/surveil.duckdb`` holds these views for analysts. It is updated in a temporary
-copy and swapped in with ``os.replace``; the pipeline never keeps it open. The copy is
+copy and swapped in with ``os.replace``; the pipeline never keeps it open. There, each
+table is two views: ``snapshot.<table>`` over the snapshot's files (rewritten after every
+commit that changed the table), and ``main.<table>`` (``SELECT * FROM snapshot.<table>``)
+carrying the table's doc as its comment and every column's ``[unit] meaning`` from
+``schemas/`` as a column comment (``duckdb_columns()``, ``FROM describe_table('x')``):
+writing ~550 comments costs ~0.5 s, so they sit on views that change only when the
+schemas' docs do. The copy is
 attached to one in-memory DuckDB instance per process (:func:`warm_up` creates it in the
 background: building DuckDB's function catalog costs ~40 ms per instance, and a job
 would otherwise pay it at its very end, after the last write). Each view carries
@@ -20,6 +26,7 @@ three or four of ~30 tables); a missing or unreadable file is built from scratch
 from __future__ import annotations
 
 import contextlib
+import functools
 import hashlib
 import os
 import re
@@ -32,10 +39,12 @@ from pathlib import Path
 import duckdb
 import pyarrow as pa
 
-from pipeline.tables import spec, table_specs
+from pipeline.tables import column_comment, spec, table_specs
 from pipeline.warehouse.delta import sql_literal, table_files
 
 VIEWS_FILE = "surveil.duckdb"
+SNAPSHOT_SCHEMA = "snapshot"  # views over each table's current files, in surveil.duckdb
+DESCRIBE_MACRO = "describe_table"  # FROM describe_table('radar_tracks'): columns, types, comments
 _ATTACHED = "views_file"  # the name the temporary copy is attached under
 
 _engine: duckdb.DuckDBPyConnection | None = None
@@ -73,7 +82,7 @@ def _select_list(schema: pa.Schema, *, null: bool) -> str:
     return ", ".join(cols)
 
 
-def view_sql(name: str, files: list[str]) -> str:
+def view_sql(name: str, files: list[str], schema: str | None = None) -> str:
     """``CREATE OR REPLACE VIEW`` statement of table ``name`` over ``files``.
 
     With no files the view is typed and empty (``... WHERE false``), and DuckDB (2.0 on)
@@ -85,15 +94,16 @@ def view_sql(name: str, files: list[str]) -> str:
     bind parameters in a view definition).
     """
     s = spec(name).schema
+    qualified = f"{_ident(schema)}.{_ident(name)}" if schema else _ident(name)
     if not files:
         body = f"SELECT {_select_list(s, null=True)} WHERE false"
-        return f"CREATE OR REPLACE VIEW {_ident(name)}{_DEFER_BINDING} AS {body}"
+        return f"CREATE OR REPLACE VIEW {qualified}{_DEFER_BINDING} AS {body}"
     file_list = ", ".join(sql_literal(f) for f in files)
     body = (
         f"SELECT {_select_list(s, null=False)} FROM read_parquet([{file_list}], "
         "hive_partitioning=true, union_by_name=true)"
     )
-    return f"CREATE OR REPLACE VIEW {_ident(name)} AS {body}"
+    return f"CREATE OR REPLACE VIEW {qualified} AS {body}"
 
 
 def _defer_binding_clause(version: str) -> str:
@@ -113,6 +123,37 @@ def view_statements(warehouse: Path, names: Iterable[str] | None = None) -> dict
     return {name: view_sql(name, table_files(warehouse, name)) for name in selected}
 
 
+def doc_view_statements(name: str) -> list[str]:
+    """``main.<name>`` over ``snapshot.<name>``, with the table's doc as the view comment
+    and ``[unit] meaning`` as each column's comment."""
+    t = spec(name)
+    view = f"main.{_ident(name)}"
+    out = [
+        f"CREATE OR REPLACE VIEW {view}{_DEFER_BINDING} AS "
+        f"SELECT * FROM {_ident(SNAPSHOT_SCHEMA)}.{_ident(name)}",
+        f"COMMENT ON VIEW {view} IS {sql_literal(t.doc)}",
+    ]
+    out += [f"COMMENT ON COLUMN {view}.{_ident(f.name)} IS {sql_literal(column_comment(f))}"
+            for f in t.schema]
+    return out
+
+
+_DESCRIBE_SQL = (
+    f"CREATE OR REPLACE MACRO main.{DESCRIBE_MACRO}(t) AS TABLE "
+    "SELECT column_name, data_type, comment FROM duckdb_columns() "
+    "WHERE database_name = current_database() AND schema_name = 'main' AND table_name = t "
+    "ORDER BY column_index"
+)
+
+
+@functools.cache
+def _docs_digest() -> str:
+    """Digest of every ``main`` view statement and the describe macro: a change of the
+    schemas' docs rewrites them all."""
+    text = "\n".join([_DESCRIBE_SQL, *(s for n in table_specs() for s in doc_view_statements(n))])
+    return _digest(text)
+
+
 def register_tables(
     con: duckdb.DuckDBPyConnection, warehouse: Path, names: Iterable[str] | None = None
 ) -> list[str]:
@@ -124,15 +165,56 @@ def register_tables(
     return list(statements)
 
 
-def warm_up() -> None:
+def warm_up(warehouse: Path | None = None) -> None:
     """Create the DuckDB instance :func:`rebuild_views_file` works through, in a daemon
-    thread (DuckDB does it without the GIL), so that a job's decoding hides its cost."""
-    threading.Thread(target=_warm, name="duckdb-warm-up", daemon=True).start()
+    thread (DuckDB does it without the GIL), so that a job's decoding hides its cost.
+    Given a ``warehouse`` without a views file yet, also the documented views a new file
+    copies (~1 s of CPU: only then is it worth spending while the job works)."""
+    new_file = warehouse is not None and not (Path(warehouse) / VIEWS_FILE).exists()
+    threading.Thread(target=_warm, args=(new_file,), name="duckdb-warm-up",
+                     daemon=True).start()
 
 
-def _warm() -> None:
+def _warm(with_template: bool = False) -> None:
     with _engine_lock:
-        _engine_locked()
+        con = _engine_locked()
+        if with_template:
+            _docs_template_locked(con)
+
+
+_TEMPLATE = "views_template"  # in-memory database: the documented views of a new file
+_template_digest: str | None = None
+
+
+def _docs_template_locked(con: duckdb.DuckDBPyConnection) -> str:
+    """Build (once per process) the in-memory database holding what every views file
+    shares: the ``snapshot`` schema with typed empty views, the ``main`` views with their
+    ~550 comments and the describe macro. Writing those comments one by one costs ~1 s
+    here; a new file copies them in ~25 ms (``COPY FROM DATABASE``), and
+    :func:`warm_up` builds this while the job decodes. Returns the docs digest."""
+    global _template_digest
+    if _template_digest is None:
+        digest = _docs_digest()
+        con.execute(f"ATTACH ':memory:' AS {_TEMPLATE}")
+        try:
+            con.execute(f"USE {_TEMPLATE}")
+            script = [f"CREATE SCHEMA {_ident(SNAPSHOT_SCHEMA)}"]
+            for name in table_specs():
+                empty = view_sql(name, [], SNAPSHOT_SCHEMA)
+                script.append(empty)  # digest as in a file: a table without files stays
+                script.append(f"COMMENT ON VIEW {_ident(SNAPSHOT_SCHEMA)}.{_ident(name)} "
+                              f"IS {sql_literal(_digest(empty))}")
+                script += doc_view_statements(name)
+            script.append(_DESCRIBE_SQL)
+            script.append(f"COMMENT ON MACRO TABLE main.{DESCRIBE_MACRO} IS {sql_literal(digest)}")
+            con.execute(";\n".join(["BEGIN", *script, "COMMIT"]))
+        except BaseException:
+            con.execute("USE memory")
+            con.execute(f"DETACH DATABASE IF EXISTS {_TEMPLATE}")
+            raise
+        con.execute("USE memory")
+        _template_digest = digest
+    return _template_digest
 
 
 def _engine_locked() -> duckdb.DuckDBPyConnection:
@@ -156,25 +238,49 @@ def rebuild_views_file(warehouse: Path) -> Path:
     warehouse = Path(warehouse)
     warehouse.mkdir(parents=True, exist_ok=True)
     target = warehouse / VIEWS_FILE
-    statements = view_statements(warehouse)
+    statements = {name: view_sql(name, table_files(warehouse, name), SNAPSHOT_SCHEMA)
+                  for name in table_specs()}
     tmp = warehouse / f".{VIEWS_FILE}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}"
     try:
         with _engine_lock:
             con = _engine_locked()
             copied = _attach_copy_or_new(con, target, tmp)
             try:
-                written = _view_digests(con) if copied else {}  # (the query costs ~10 ms)
+                docs_digest = _docs_digest()
+                if not copied:  # a new file: the documented views from the template
+                    _docs_template_locked(con)
+                    con.execute(f"COPY FROM DATABASE {_TEMPLATE} TO {_ATTACHED} (SCHEMA)")
+                written = _view_digests(con)  # (the query costs ~10 ms)
+                main = _main_comments(con)
+                docs_changed = _macro_comment(con) != docs_digest
                 digests = {name: _digest(sql) for name, sql in statements.items()}
                 changed = [n for n in statements if written.get(n) != digests[n]]
-                stale = [n for n in written if n not in statements]  # a table no longer defined
-                if not changed and not stale and target.exists():
+                # a table no longer defined: its views (and those of older releases, which
+                # kept the digest as the comment of the view in main)
+                stale = [n for n in written if n not in statements]
+                stale += [n for n, c in main.items()
+                          if c is not None and n not in statements and n not in stale]
+                main_changed = [n for n in statements
+                                if docs_changed or main.get(n) != spec(n).doc]
+                if copied and not changed and not stale and not main_changed:
                     return target
-                script = [f"DROP VIEW IF EXISTS {_ident(name)}" for name in stale]
+                script = [f"CREATE SCHEMA IF NOT EXISTS {_ident(SNAPSHOT_SCHEMA)}"]
+                for name in stale:
+                    script.append(f"DROP VIEW IF EXISTS main.{_ident(name)}")
+                    script.append(
+                        f"DROP VIEW IF EXISTS {_ident(SNAPSHOT_SCHEMA)}.{_ident(name)}")
                 for name in changed:
                     script.append(statements[name])
                     script.append(
-                        f"COMMENT ON VIEW {_ident(name)} IS {sql_literal(digests[name])}"
+                        f"COMMENT ON VIEW {_ident(SNAPSHOT_SCHEMA)}.{_ident(name)} "
+                        f"IS {sql_literal(digests[name])}"
                     )
+                for name in main_changed:
+                    script += doc_view_statements(name)
+                if docs_changed:
+                    script.append(_DESCRIBE_SQL)
+                    script.append(f"COMMENT ON MACRO TABLE main.{DESCRIBE_MACRO} "
+                                  f"IS {sql_literal(docs_digest)}")
                 # one call, one transaction: ~20% less than a commit per statement (30 views)
                 con.execute(";\n".join(["BEGIN", *script, "COMMIT"]))
                 con.execute(f"CHECKPOINT {_ATTACHED}")
@@ -217,13 +323,33 @@ def _detach(con: duckdb.DuckDBPyConnection) -> None:
 
 
 def _view_digests(con: duckdb.DuckDBPyConnection) -> dict[str, str]:
-    """View name -> the digest its comment holds (views written by this module)."""
+    """Snapshot view name -> the digest its comment holds (views written by this module)."""
     rows = con.execute(
         "SELECT view_name, comment FROM duckdb_views() WHERE NOT internal "
-        "AND comment IS NOT NULL AND database_name = ?",
-        [_ATTACHED],
+        "AND comment IS NOT NULL AND database_name = ? AND schema_name = ?",
+        [_ATTACHED, SNAPSHOT_SCHEMA],
     ).fetchall()
     return {name: comment for name, comment in rows}
+
+
+def _main_comments(con: duckdb.DuckDBPyConnection) -> dict[str, str | None]:
+    """View name in ``main`` -> its comment (a table's doc; None: an analyst's view)."""
+    rows = con.execute(
+        "SELECT view_name, comment FROM duckdb_views() WHERE NOT internal "
+        "AND database_name = ? AND schema_name = 'main'",
+        [_ATTACHED],
+    ).fetchall()
+    return dict(rows)
+
+
+def _macro_comment(con: duckdb.DuckDBPyConnection) -> str | None:
+    """The docs digest the describe macro's comment holds (None: no macro yet)."""
+    rows = con.execute(
+        "SELECT comment FROM duckdb_functions() WHERE function_name = ? "
+        "AND database_name = ? AND schema_name = 'main'",
+        [DESCRIBE_MACRO, _ATTACHED],
+    ).fetchall()
+    return rows[0][0] if rows else None
 
 
 def _remove_db_files(db: Path) -> None:

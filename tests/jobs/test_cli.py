@@ -59,3 +59,59 @@ def test_report_formats(e2e):
                       "--sector", "inner_channel", "--format", fmt)
         assert res.returncode == 0, res.stderr
         assert "inner_channel" in res.stdout
+
+
+WINDOW = ("--from", "2026-01-15T00:50:00Z", "--to", "2026-01-15T01:10:00Z")
+
+
+def test_global_options_after_the_subcommand_and_unknown_sector(e2e):
+    res = surveil("report", "accuracy_by_sector", "--warehouse", str(e2e.warehouse),
+                  "--sector", "nowhere")
+    assert res.returncode == 2 and "approach_sw" in res.stderr and "runway" in res.stderr
+    res = surveil("report", "accuracy_by_sector", "--warehouse", str(e2e.warehouse), *WINDOW)
+    assert res.returncode == 0 and "inner_channel" in res.stdout
+    res = surveil("batch", *WINDOW, "--config", "/no/such.toml")
+    assert res.returncode == 2 and "not found" in res.stderr
+
+
+def test_empty_report_says_why(e2e):
+    res = surveil("--warehouse", str(e2e.warehouse), "report", "surface_accuracy_by_area",
+                  *WINDOW)
+    assert res.returncode == 0
+    assert "airfield_obs" in res.stderr and "surveil simulate --scenario airfield" in res.stderr
+
+
+def test_sql_and_schema(e2e):
+    res = surveil("--warehouse", str(e2e.warehouse), "sql",
+                  "SELECT count(*) AS n FROM system_tracks", "--format", "json")
+    assert res.returncode == 0 and '"n"' in res.stdout
+    res = surveil("--warehouse", str(e2e.warehouse), "sql", "SELECT * FROM no_such_table")
+    assert res.returncode == 2 and "no_such_table" in res.stderr
+    res = subprocess.run([sys.executable, "-m", "jobs.cli", "--warehouse", str(e2e.warehouse),
+                          "sql"], input="SELECT 40 + 2 AS answer;\n.quit\n", text=True,
+                         capture_output=True, cwd=REPO, check=False)
+    assert res.returncode == 0 and "42" in res.stdout
+    res = surveil("schema", "radar_tracks", "--format", "csv")
+    assert res.returncode == 0
+    assert '"range_m","double","no","m","slant range from the site, m"' in res.stdout
+    res = surveil("schema")
+    assert res.returncode == 0 and "cross_track_by_leg" in res.stdout
+
+
+def test_shell_completion_offers_report_names():
+    import os
+
+    env = {**os.environ, "_SURVEIL_COMPLETE": "bash_complete", "COMP_WORDS": "surveil report acc",
+           "COMP_CWORD": "2"}
+    code = "from jobs.cli import cli; cli(prog_name='surveil')"
+    res = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
+                         cwd=REPO, check=False)
+    assert "accuracy_by_sector" in res.stdout and "accuracy_over_time" in res.stdout
+
+
+def test_scenario_choices_are_the_registered_scenarios():
+    from jobs.cli import SCENARIO_NAMES, simulate
+    from pipeline.simulate.scenarios import SCENARIOS
+
+    choice = next(p for p in simulate.params if p.name == "scenario").type
+    assert sorted(choice.choices) == sorted(SCENARIOS) == sorted(SCENARIO_NAMES)

@@ -207,7 +207,7 @@ def test_default_schedule_in_the_channel_scenario(cfg):
     the whole maritime stage: each flagged, its channel excluded, the rest quiet."""
     base = load_config()
     faults = (
-        ChannelFault("radar_range_bias", 200.0, 120.0, site_id="R2", value=80.0),
+        ChannelFault("radar_range_bias", 200.0, 120.0, site_id="R2", range_bias_m=80.0),
         ChannelFault("ais_offset", 400.0, 120.0, sector="inner_channel", north_m=250.0),
         ChannelFault("ais_spoof", 600.0, 120.0, mmsi=272999001, start_lat_deg=46.392,
                      start_lon_deg=30.870, course_rad=math.radians(90.0), speed_mps=6.0),

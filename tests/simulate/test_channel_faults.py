@@ -56,7 +56,7 @@ def test_default_schedule_parses_every_kind(cfg):
 @pytest.mark.parametrize("entry, message", [
     ({"kind": "radar_range_bias", "site_id": "R9", "start_s": 0, "duration_s": 1}, "site_id"),
     ({"kind": "radar_range_bias", "site_id": "R1", "start_s": 0, "duration_s": 1, "bias": 5},
-     "unknown keys"),
+     "unknown key"),
     ({"kind": "ais_offset", "sector": "nowhere", "start_s": 0, "duration_s": 1}, "sector"),
     ({"kind": "meteor", "start_s": 0, "duration_s": 1}, "kind"),
     ({"kind": "ais_spoof", "start_s": 0, "duration_s": 1}, "mmsi"),
@@ -75,13 +75,13 @@ def test_no_schedule_is_the_fault_free_scenario(cfg, clean):
     assert again.fault_truth.height == 0
 
 
-@pytest.mark.parametrize("kind, column, value", [
-    ("radar_range_bias", "range_m", 80.0),
-    ("radar_azimuth_bias", "azimuth_rad", math.radians(1.0)),
-    ("radar_time_offset", "time_ns", 5.0),
+@pytest.mark.parametrize("kind, column, field, value", [
+    ("radar_range_bias", "range_m", "range_bias_m", 80.0),
+    ("radar_azimuth_bias", "azimuth_rad", "azimuth_bias_rad", math.radians(1.0)),
+    ("radar_time_offset", "time_ns", "time_offset_s", 5.0),
 ])
-def test_biases_add_exactly_their_value_during_the_fault(cfg, clean, kind, column, value):
-    f = ChannelFault(kind, 120.0, 90.0, site_id="R2", value=value)
+def test_biases_add_exactly_their_value_during_the_fault(cfg, clean, kind, column, field, value):
+    f = ChannelFault(kind, 120.0, 90.0, site_id="R2", **{field: value})
     sc = run(cfg, f)
     key = ["site_id", "track_id", "log_time_ns"]
     j = sc.radar_reports.join(clean.radar_reports, on=key, suffix="_clean")
@@ -102,7 +102,7 @@ def test_biases_add_exactly_their_value_during_the_fault(cfg, clean, kind, colum
 
 
 def test_noise_scales_the_errors(cfg, clean):
-    f = ChannelFault("radar_noise", 120.0, 90.0, site_id="R1", value=4.0)
+    f = ChannelFault("radar_noise", 120.0, 90.0, site_id="R1", factor=4.0)
     j = run(cfg, f).radar_reports.join(clean.radar_reports, on=["site_id", "track_id",
                                                                   "log_time_ns"])
     on = j.filter((pl.col("site_id") == "R1") & window(f) & (pl.col("status") != "coasting"))
@@ -136,7 +136,7 @@ def test_blank_sector_only_coasts(cfg, clean):
 
 def test_ais_faults(cfg, clean):
     faults = (
-        ChannelFault("ais_offset", 120.0, 90.0, vessel_id=None, east_m=0.0, north_m=250.0),
+        ChannelFault("ais_offset", 120.0, 90.0, east_m=0.0, north_m=250.0),
         ChannelFault("ais_stuck", 120.0, 90.0),
         ChannelFault("ais_mmsi_swap", 120.0, 90.0),
         ChannelFault("ais_spoof", 120.0, 90.0, mmsi=272999001, start_lat_deg=46.392,

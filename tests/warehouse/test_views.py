@@ -76,9 +76,10 @@ def test_rebuild_views_file_swaps_in_new_views(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == [VIEWS_FILE, "tables"]
 
 
-def _view_sql(db: Path) -> dict[str, str]:
+def _view_sql(db: Path, schema: str = "main") -> dict[str, str]:
     with duckdb.connect(str(db), read_only=True) as con:
-        rows = con.execute("SELECT view_name, sql FROM duckdb_views() WHERE NOT internal")
+        rows = con.execute("SELECT view_name, sql FROM duckdb_views() WHERE NOT internal "
+                           "AND schema_name = ?", [schema])
         return dict(rows.fetchall())
 
 
@@ -86,11 +87,12 @@ def test_views_update_equals_a_build_from_scratch(tmp_path):
     target = rebuild_views_file(tmp_path)
     replace_window(tmp_path, "truth", truth_rows(hours(0, 1)), start_ns=T0, end_ns=T0 + DAY)
     rebuild_views_file(tmp_path)  # updates the truth view only
-    updated = _view_sql(target)
+    updated = {s: _view_sql(target, s) for s in ("main", "snapshot")}
     target.unlink()
     rebuild_views_file(tmp_path)  # from scratch
-    assert updated == _view_sql(target)
-    assert "read_parquet" in updated["truth"] and "read_parquet" not in updated["ais_reports"]
+    assert updated == {s: _view_sql(target, s) for s in ("main", "snapshot")}
+    snapshot = updated["snapshot"]
+    assert "read_parquet" in snapshot["truth"] and "read_parquet" not in snapshot["ais_reports"]
 
 
 def test_views_unchanged_tables_leave_the_file_alone(tmp_path):
@@ -134,3 +136,25 @@ def test_empty_views_bind_when_queried_and_views_over_files_when_created(tmp_pat
     missing = str(tmp_path / "gone.parquet")
     with pytest.raises(duckdb.IOException, match=r"gone\.parquet"):
         con.execute(view_sql("truth", [missing]))
+
+
+def test_views_file_documents_every_column_with_its_unit(tmp_path):
+    """`main.<table>` carries schemas/' docs as comments (duckdb_columns(), the
+    describe_table macro); an update that changes only files keeps them."""
+    target = rebuild_views_file(tmp_path)
+    replace_window(tmp_path, "truth", truth_rows(hours(0, 1)), start_ns=T0, end_ns=T0 + DAY)
+    rebuild_views_file(tmp_path)
+    with duckdb.connect(str(target), read_only=True) as con:
+        comments = dict(con.execute(
+            "SELECT column_name, comment FROM duckdb_columns() "
+            "WHERE schema_name = 'main' AND table_name = 'truth'").fetchall())
+        assert comments["lat_deg"] == "[deg] WGS-84 latitude, deg"
+        assert comments["speed_mps"].startswith("[m/s] ")
+        assert comments["time_ns"].startswith("[ns (UTC, since 1970)] ")
+        described = con.execute("FROM describe_table('radar_tracks')").fetchall()
+        assert [r[0] for r in described] == schema("radar_tracks").names
+        assert described[3] == ("range_m", "DOUBLE", "[m] slant range from the site, m")
+        table_doc = con.execute("SELECT comment FROM duckdb_views() "
+                                "WHERE schema_name = 'main' AND view_name = 'truth'").fetchone()
+        assert table_doc[0].startswith("Simulated ground truth")
+        assert con.execute("SELECT count(*) FROM truth").fetchone()[0] == 60

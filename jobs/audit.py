@@ -1,0 +1,69 @@
+"""`surveil audit`: the HTML audit of one window (and a PDF of it through headless
+Chromium when asked)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from jobs.report import open_warehouse
+from pipeline.audit.browser import BrowserError, find_chromium, print_pdf
+from pipeline.audit.data import AuditData, collect
+from pipeline.audit.page import render
+from pipeline.config import Config
+from pipeline.requirements import FAIL, NOT_ENOUGH, PASS
+
+
+@dataclass(frozen=True)
+class AuditResult:
+    html: Path
+    pdf: Path | None
+    data: AuditData
+    pdf_skipped: str = ""
+
+    def render(self) -> str:
+        v = self.data.verdicts
+        counts = ", ".join(f"{sum(x.status == s for x in v)} {s}" for s in (PASS, FAIL,
+                                                                              NOT_ENOUGH))
+        lines = [f"audit: {self.html}", f"requirements: {counts}"]
+        lines += [f"  FAIL {x.requirement} [{x.scope}]: {x.value} {x.unit}, required "
+                  f"{x.comparison} {x.limit:g} {x.unit} ({x.samples} samples)"
+                  for x in v if x.status == FAIL]
+        if self.pdf:
+            lines.append(f"pdf: {self.pdf}")
+        if self.pdf_skipped:
+            lines.append(f"pdf not written: {self.pdf_skipped}")
+        return "\n".join(lines)
+
+
+def audit_name(start_ns: int, end_ns: int, sector: str | None) -> str:
+    from jobs.common import iso
+
+    stem = f"audit_{iso(start_ns)}_{iso(end_ns)}".replace(":", "").replace("-", "")
+    return stem + (f"_{sector}" if sector else "") + ".html"
+
+
+def run_audit(cfg: Config, warehouse: Path, out_dir: Path, *, start_ns: int, end_ns: int,
+              sector: str | None = None, pdf: bool = False) -> AuditResult:
+    """Write ``<out_dir>/audit_<from>_<to>[_<sector>].html`` (and ``.pdf``)."""
+    con = open_warehouse(warehouse)
+    try:
+        data = collect(con, cfg, warehouse, start_ns=start_ns, end_ns=end_ns, sector=sector)
+    finally:
+        con.close()
+    out_dir.mkdir(parents=True, exist_ok=True)
+    html_path = out_dir / audit_name(start_ns, end_ns, sector)
+    tmp = html_path.with_suffix(".html.tmp")
+    tmp.write_text(render(data), encoding="utf-8")
+    tmp.replace(html_path)
+    pdf_path, skipped = None, ""
+    if pdf:
+        if find_chromium() is None:
+            skipped = "no Chromium found (apt-get install chromium, or set SURVEIL_CHROMIUM)"
+        else:
+            try:
+                pdf_path = html_path.with_suffix(".pdf")
+                print_pdf(html_path, pdf_path)
+            except BrowserError as exc:
+                pdf_path, skipped = None, str(exc)
+    return AuditResult(html_path, pdf_path, data, skipped)

@@ -1,0 +1,351 @@
+"""The config file is validated when it loads, for every command: types, ranges, unknown
+and missing keys and sections, each problem with its key path and line, all at once
+(pipeline/configspec.py); ``surveil config check`` prints it resolved."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import pickle
+import subprocess
+import sys
+import typing
+from pathlib import Path
+
+import pytest
+
+from jobs.cli import main
+from pipeline.config import AisConfig, Config, ConfigError
+from pipeline.configspec import Document, locate_line, render_path, setting
+from pipeline.families import FAMILIES, load_config
+from pipeline.maritime.config import AssociationConfig
+from pipeline.resources import resource_path
+
+SHIPPED = resource_path("config") / "surveil.toml"
+TEXT = SHIPPED.read_text(encoding="utf-8")
+GOLDEN = Path(__file__).parent / "data" / "shipped_config.repr"
+REPO = Path(__file__).resolve().parents[1]
+
+
+def surveil(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str],
+            *args: str) -> tuple[int, str, str]:
+    """Run the console entry point (``jobs.cli:main``) in-process: (exit code, out, err)."""
+    monkeypatch.setattr(sys, "argv", ["surveil", *args])
+    try:
+        main()
+        code = 0
+    except SystemExit as exc:
+        code = exc.code if isinstance(exc.code, int) else 1
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def edited(tmp_path: Path, old: str, new: str, count: int = 1) -> tuple[Path, str]:
+    """The shipped config with ``old`` replaced by ``new`` (the first ``count`` times)."""
+    assert old in TEXT, old
+    text = TEXT.replace(old, new, count)
+    path = tmp_path / "surveil.toml"
+    path.write_text(text, encoding="utf-8")
+    return path, text
+
+
+def line_of(text: str, needle: str, nth: int = 1) -> int:
+    """1-based line of the ``nth`` line starting with ``needle``."""
+    hits = [i + 1 for i, line in enumerate(text.splitlines()) if line.startswith(needle)]
+    return hits[nth - 1]
+
+
+# --- the shipped config parses to exactly the objects it gave before ----------------------
+
+
+def _reprs(cfg: Config) -> str:
+    """The core config and the sensor families' configs (the sections no family owns,
+    [requirements] and [reports], came later: tests/sql/test_requirements_and_params.py)."""
+    from pipeline.families import FAMILIES
+
+    families = {name: v for name, v in cfg.families.items() if name in {f.name for f in FAMILIES}}
+    return (repr(cfg).replace(repr(cfg.source), "'<source>'") + "\n" + repr(families) + "\n")
+
+
+def test_shipped_config_parses_to_the_same_objects_as_before():
+    """tests/data/shipped_config.repr was recorded from the hand-written parsers (9392eae)."""
+    assert _reprs(load_config()) == GOLDEN.read_text()
+
+
+def test_config_dataclasses_stay_frozen_picklable_and_keyword_constructible():
+    cfg = load_config()
+    again = pickle.loads(pickle.dumps(cfg))
+    assert again == cfg and _reprs(again) == _reprs(cfg)
+    a = AssociationConfig()
+    assert a.max_course_difference_rad == math.radians(30.0)
+    assert dataclasses.replace(a, gate_probability=0.99).gate_probability == 0.99
+    assert AisConfig(max_report_age_s=5.0).max_report_age_s == 5.0
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        a.gate_probability = 0.5  # type: ignore[misc]
+
+
+def _declared(cls: type, seen: set[type]) -> list[tuple[str, object, typing.Any]]:
+    """(class.field, spec, type) of every file value reachable from ``cls``."""
+    if cls in seen:
+        return []
+    seen.add(cls)
+    out = []
+    hints = typing.get_type_hints(cls)
+    for f in dataclasses.fields(cls):
+        spec = f.metadata.get("setting")
+        if spec is None:
+            continue
+        tp = hints[f.name]
+        inner = [a for a in typing.get_args(tp) if a is not Ellipsis]
+        nested = [t for t in (tp, *inner) if dataclasses.is_dataclass(t)]
+        if nested:
+            out += _declared(nested[0], seen)
+        else:
+            out.append((f"{cls.__name__}.{f.name}", spec, tp))
+    return out
+
+
+def test_every_value_declares_its_valid_range():
+    """Numbers: a bound; strings: choices or a check (non-empty); the rest: a check or
+    a converter that validates (the AR models)."""
+    import pipeline.airfield.config as a
+    import pipeline.gaps.config as g
+    import pipeline.maritime.config as m
+    import pipeline.nav.config as n
+
+    classes = (Config, m.MaritimeConfig, a.AirfieldConfig, g.GapsConfig, n.NavSettings,
+               n.OwnshipScenarioConfig, n._FilterKeys, n._GyroKeys, n._RollKeys)
+    seen: set[type] = set()
+    values = [v for c in classes for v in _declared(c, seen)]
+    assert len(values) > 150
+    loose = []
+    for where, spec, tp in values:
+        bounded = any(b is not None for b in (spec.gt, spec.ge, spec.lt, spec.le))
+        if tp is bool:
+            continue
+        if tp in (int, float) or "float" in str(tp):
+            ok = bounded or spec.check is not None
+        elif tp is str:
+            ok = spec.choices is not None or spec.check is not None or spec.unique
+        else:
+            ok = spec.check is not None or spec.convert is not None
+        if not ok:
+            loose.append(where)
+    assert loose == []
+
+
+def test_resolved_config_loads_back_to_the_same_config(tmp_path):
+    from jobs.config_check import resolved_config
+
+    text = resolved_config(None)
+    path = tmp_path / "resolved.toml"
+    path.write_text(text, encoding="utf-8")
+    assert _reprs(load_config(path)) == _reprs(load_config())
+    assert "max_course_difference_deg = 30.0\n" in text  # file units
+    assert "min_track_share = 0.8  # default\n" in text  # not in the shipped file
+
+
+# --- each defect, through the real CLI -------------------------------------------------------
+
+CASES = {  # name: (old, new, nth line starting with, expected message after "line N: ")
+    "wrong type in [execution]": (
+        "max_workers = 2", 'max_workers = "two"', ("max_workers", 1),
+        "[execution].max_workers: expected an integer, got 'two'"),
+    "string in [sync]": (
+        "sigma_dt_s = 0.1", 'sigma_dt_s = "0.1"', ("sigma_dt_s", 1),
+        "[sync].sigma_dt_s: expected a number, got '0.1'"),
+    "unknown key": (
+        "epoch_period_s = 4.0", "epoch_period = 4.0", ("epoch_period", 1),
+        "[sync] unknown key 'epoch_period'; did you mean 'epoch_period_s'?"),
+    "gate probability out of (0, 1)": (
+        "gate_probability = 0.999        #", "gate_probability = 1.5        #",
+        ("gate_probability", 1), "[association].gate_probability: must be in (0, 1), got 1.5"),
+    "negative speed limit": (
+        "max_speed_mps = 40.0", "max_speed_mps = -5", ("max_speed_mps = -5", 1),
+        "[validation].max_speed_mps: must be > 0, got -5"),
+    "unknown section": (
+        "[siap]", "[siapp]", ("[siapp]", 1), "unknown section [siapp]; did you mean [siap]?"),
+    "radar site sigma": (
+        "sigma_range_m = 15.0\nsigma_azimuth_deg = 0.45\nsigma_speed_mps = 0.25\n"
+        "sigma_course_deg = 2.0\n\n[sync]",
+        "sigma_range_m = 0\nsigma_azimuth_deg = 0.45\nsigma_speed_mps = 0.25\n"
+        "sigma_course_deg = 2.0\n\n[sync]",
+        ("sigma_range_m", 2), "[radar_sites][1].sigma_range_m: must be > 0, got 0"),
+    "airfield sensor pd": (
+        "pd = 0.98", "pd = 1.5", ("pd = 1.5", 1),
+        "[airfield.sensors][1].pd: must be in (0, 1], got 1.5"),
+    "duplicate site id": (
+        'site_id = "R2"', 'site_id = "R1"', ("site_id", 2),
+        "[radar_sites][1].site_id: duplicate 'R1' (also [radar_sites][0])"),
+    "latitude": (
+        "origin_lat_deg = 46.40", "origin_lat_deg = 146.40", ("origin_lat_deg", 1),
+        "[region].origin_lat_deg: must be in [-90, 90], got 146.4"),
+    "polygon with two vertices": (
+        "polygon = [[46.255766, 30.640617], [46.256049, 30.848123], [46.453965, 30.847935], "
+        "[46.453680, 30.639678]]",
+        "polygon = [[46.255766, 30.640617], [46.256049, 30.848123]]", ("polygon", 1),
+        "[sectors][0].polygon: a polygon needs at least 3 [lat_deg, lon_deg] vertices, got 2"),
+    "unknown airfield table": (
+        "[airfield.filter]", "[airfield.filtre]", ("[airfield.filtre]", 1),
+        "unknown section [airfield.filtre]; did you mean [airfield.filter]?"),
+    "fault on an unknown sensor": (
+        'sensor_id = "VASN1"\nstart_s', 'sensor_id = "VASN2"\nstart_s', ('sensor_id = "VASN2"', 1),
+        "[airfield.faults][2].sensor_id: no sensor 'VASN2' (sensors: SMR1, MLAT1, VASN1)"),
+    "gaps particles": (
+        "particles = 2000 ", "particles = 2000.5 ", ("particles", 1),
+        "[gaps].particles: expected an integer, got 2000.5"),
+    "ownship step": (
+        "filter_step_s = 1.0", "filter_step_s = -1.0", ("filter_step_s", 1),
+        "[ownship].filter_step_s: must be > 0, got -1"),
+}
+
+
+@pytest.mark.parametrize("case", CASES, ids=list(CASES))
+def test_bad_value_is_exit_2_naming_key_path_and_line(case, tmp_path, monkeypatch, capsys):
+    old, new, (needle, nth), message = CASES[case]
+    path, text = edited(tmp_path, old, new)
+    for args in (("--config", str(path), "--warehouse", str(tmp_path / "wh"), "batch",
+                  "--from", "2026-01-15T00:00:00Z", "--to", "2026-01-15T00:01:00Z"),
+                 ("config", "check", str(path))):
+        code, out, err = surveil(monkeypatch, capsys, *args)
+        assert code == 2, (args, out, err)
+        assert err == f"error: {path} line {line_of(text, needle, nth)}: {message}\n"
+        assert not (tmp_path / "wh").exists()
+
+
+def test_every_problem_is_reported_at_once(tmp_path, monkeypatch, capsys):
+    text = TEXT
+    for old, new, *_ in CASES.values():
+        if old in text and "[siap]" not in old:  # (one unknown section is enough)
+            text = text.replace(old, new, 1)
+    path = tmp_path / "many.toml"
+    path.write_text(text, encoding="utf-8")
+    code, _, err = surveil(monkeypatch, capsys, "--config", str(path), "report", "--list")
+    assert code == 2
+    lines = err.removeprefix("error: ").splitlines()
+    found = {line.split(": ", 1)[1] for line in lines}
+    # the fault's sensor is only checked once the sensors themselves parse (pd = 1.5 here)
+    expected = {m for k, (*_, m) in CASES.items() if k not in ("unknown section",
+                                                                "fault on an unknown sensor")}
+    assert expected <= found, expected - found
+    numbers = [int(line.split(" line ")[1].split(":")[0]) for line in lines]
+    assert numbers == sorted(numbers)  # in file order
+
+
+@pytest.mark.parametrize("section", ["[region]", "[[radar_sites]]"])
+def test_missing_required_section(section, tmp_path, monkeypatch, capsys):
+    start = TEXT.index(section)
+    end = TEXT.index("[sync]") if section == "[[radar_sites]]" else TEXT.index("# Each radar")
+    path = tmp_path / "surveil.toml"
+    path.write_text(TEXT[:start] + TEXT[end:], encoding="utf-8")
+    code, _, err = surveil(monkeypatch, capsys, "--config", str(path), "report", "--list")
+    assert (code, err) == (2, f"error: {path}: missing required section {section}\n")
+
+
+def test_missing_required_key_names_the_table(tmp_path, monkeypatch, capsys):
+    path, text = edited(tmp_path, "origin_lon_deg = 30.90\n", "")
+    code, _, err = surveil(monkeypatch, capsys, "--config", str(path), "report", "--list")
+    assert code == 2
+    assert err == (f"error: {path} line {line_of(text, '[region]')}: [region] missing "
+                   "required key 'origin_lon_deg'\n")
+
+
+def test_binary_file_is_not_a_utf8_toml_file(tmp_path, monkeypatch, capsys):
+    path = tmp_path / "surveil.toml"
+    path.write_bytes(bytes(range(256)) * 4)
+    code, _, err = surveil(monkeypatch, capsys, "--config", str(path), "report", "--list")
+    assert code == 2
+    assert err.startswith(f"error: config file {path} is not a UTF-8 TOML file")
+
+
+@pytest.mark.parametrize("args", [("report",), ("report", "--list"),
+                                  ("report", "accuracy_by_sector", "--format", "csv")])
+def test_report_validates_the_config_too(args, tmp_path, monkeypatch, capsys):
+    path, _ = edited(tmp_path, "max_speed_mps = 40.0", "max_speed_mps = -5")
+    code, out, err = surveil(monkeypatch, capsys, "--config", str(path),
+                             "--warehouse", str(tmp_path), *args)
+    assert code == 2 and out == ""
+    assert "[validation].max_speed_mps: must be > 0, got -5" in err
+
+
+def test_config_check_prints_the_resolved_config(tmp_path, monkeypatch, capsys):
+    path = tmp_path / "small.toml"
+    path.write_text(TEXT[:TEXT.index("[sync]")], encoding="utf-8")  # region + radar sites
+    code, out, err = surveil(monkeypatch, capsys, "config", "check", str(path))
+    assert (code, err) == (0, "")
+    assert out.startswith(f"# {path}: ok.")
+    for line in ("[region]\nname = \"demo-estuary\"\n", "[sync]\nsigma_dt_s = 0.1  # default\n",
+                 "max_course_difference_deg = 30.0  # default\n",
+                 "[gaps]\ngap_threshold_s = 600.0  # default\n", "[ownship.scenario]\n"):
+        assert line in out
+    assert "[airfield]" not in out  # no section: the airfield family writes nothing
+    # --config is what `config check` checks when no FILE is given
+    code, out2, _ = surveil(monkeypatch, capsys, "--config", str(path), "config", "check")
+    assert (code, out2) == (0, out)
+
+
+def test_installed_command_exits_2_instead_of_aborting(tmp_path):
+    """Was a traceback and a C++ terminate (exit 134) in the process pool."""
+    path, text = edited(tmp_path, "max_workers = 2", 'max_workers = "two"')
+    exe = Path(sys.executable).with_name("surveil")
+    cmd = [str(exe)] if exe.exists() else [sys.executable, "-m", "jobs.cli"]
+    res = subprocess.run([*cmd, "--config", str(path), "--warehouse", str(tmp_path / "wh"),
+                          "batch", "--from", "2026-01-15T00:00:00Z", "--to",
+                          "2026-01-15T00:01:00Z"], capture_output=True, text=True, cwd=REPO,
+                         check=False)
+    assert res.returncode == 2, res.stderr
+    assert res.stderr == (f"error: {path} line {line_of(text, 'max_workers')}: "
+                          "[execution].max_workers: expected an integer, got 'two'\n")
+
+
+# --- the reader's pieces ---------------------------------------------------------------------
+
+
+def test_render_path():
+    assert render_path(("airfield", "sensors", 1, "pd")) == "[airfield.sensors][1].pd"
+    assert render_path(("radar_sites", 2, "sigma_range_m")) == "[radar_sites][2].sigma_range_m"
+    assert render_path(("execution", "max_workers")) == "[execution].max_workers"
+    assert render_path(("airfield", "filter"), table=True) == "[airfield.filter]"
+    assert render_path(("fairway_legs", 0, "start", 1)) == "[fairway_legs][0].start[1]"
+
+
+def test_locate_line():
+    text = ("# c\ntop = 1\n[a]\nx = 1\n[[b]]\ny = 1\n[[b]]\nz = 2\ny = 3\n"
+            "[a.c]\n'q' = { r = 1 }\n")
+    assert locate_line(text, ("top",)) == 2
+    assert locate_line(text, ("a", "x")) == 4
+    assert locate_line(text, ("a", "nope")) == 3
+    assert locate_line(text, ("b", 1, "y")) == 9
+    assert locate_line(text, ("b", 0, "y")) == 6
+    assert locate_line(text, ("b",)) == 5
+    assert locate_line(text, ("a", "c", "q", "r")) == 11
+    assert locate_line(text, ("zzz", "k")) is None
+
+
+def test_declared_conversions_and_ranges_in_memory():
+    @dataclasses.dataclass(frozen=True)
+    class Demo:
+        heading_rad: float = setting(90.0, unit="deg", ge=0.0, lt=360.0)
+        n: int = setting(3, ge=1)
+        pair: tuple[float, float] = setting([1.0, 2.0], ge=0.0)
+
+    assert Demo() == Demo(math.radians(90.0), 3, (1.0, 2.0))
+    doc = Document({"demo": {"heading_deg": 180, "pair": [0.5, 4.0]}}, "mem")
+    assert doc.read(Demo, "demo") == Demo(math.pi, 3, (0.5, 4.0))
+    doc.finish()
+    doc = Document({"demo": {"heading_deg": 360.0, "n": 0, "pair": [1.0, -1.0], "x": 1}}, "mem")
+    assert doc.read(Demo, "demo") is None
+    with pytest.raises(ConfigError) as exc:
+        doc.finish()
+    assert str(exc.value).splitlines() == [
+        "mem: [demo].heading_deg: must be in [0, 360), got 360",
+        "mem: [demo].n: must be >= 1, got 0",
+        "mem: [demo].pair: element [1] must be >= 0, got -1",
+        "mem: [demo] unknown key 'x'",
+    ]
+
+
+def test_families_claim_their_sections():
+    claimed = [s for f in FAMILIES for s in f.sections]
+    assert len(claimed) == len(set(claimed))
+    assert {"sync", "airfield", "gaps", "ownship"} <= set(claimed)
