@@ -177,6 +177,9 @@ class ChannelIntegrityConfig:
       report number ``ais_warmup_reports + 1`` on (a new ship's radar track needs ~3 scans);
     - ``ais_jump_m``: a report this far from the transponder's previous one dead-reckoned
       with its SOG/COG is a jump (another ship sends the MMSI, a position fault);
+    - ``ais_sigma_sog_mps``, ``ais_sigma_cog_deg``, ``ais_max_gap_s``: the transponder's
+      kinematic self-test (each report against the previous one, at most this old, moved
+      on by their SOG and COG): a stuck position;
     - ``outlier_q``: a radar's per-track NIS above chi2_2(1 - outlier_q) marks the track an
       outlier; outliers fewer than half of the channel's tracks in a sector are left out of
       its test (an AIS fault of one ship, not the radar);
@@ -194,6 +197,9 @@ class ChannelIntegrityConfig:
     ais_max_age_s: float = positive(10.0)
     ais_warmup_reports: int = setting(2, ge=0)
     ais_jump_m: float = positive(150.0)
+    ais_sigma_sog_mps: float = positive(0.1)
+    ais_sigma_cog_rad: float = positive(1.0, unit="deg")
+    ais_max_gap_s: float = positive(60.0)
     outlier_q: float = probability(1e-4)
     coverage_min_targets: int = count(2)
     coverage_miss_share: float = probability(0.5)

@@ -101,7 +101,7 @@ HEALTH_COLUMNS = (
     "time_ns", "channel", "sensor_kind", "sector", "check", "targets", "nis", "dof", "d1",
     "d2", "q", "bias_stat", "bias_d2", "eta", "excluded", "range_bias_m", "azimuth_bias_rad",
     "time_offset_s", "offset_east_m", "offset_north_m", "innovation_m", "expected", "missed",
-    "outliers", "scan_gap_s", "mmsi", "system_track_id",
+    "outliers", "scan_gap_s", "kinematic_nis", "mmsi", "system_track_id",
 )  # fmt: skip
 
 
@@ -173,6 +173,7 @@ class _Ais:
     rep_groups: np.ndarray  # (n, C) radar group (site, sector of the report) per site
     rep_round: np.ndarray  # rank of the report among its transponder's at its epoch
     rep_jump: np.ndarray  # farther than ais_jump_m from its previous report dead-reckoned
+    rep_self: np.ndarray  # NIS against the previous report moved on (NaN: none)
     var: np.ndarray  # (3,) AIS position covariance xx, yy, xy, m^2
     rep_cand: np.ndarray  # (n, NEAREST) slots nearest to the report (every radar row), -1
     rep_cand_d2: np.ndarray  # (n, NEAREST) their squared Mahalanobis distances
@@ -327,7 +328,7 @@ def _ais_arrays(
                       pl.Series("y_enu_m", np.atleast_1d(y)))
         .unique(["mmsi", "time_ns"], keep="last")
         .sort("mmsi", "time_ns")
-        .with_columns(_jump(ic.ais_jump_m).alias("jump"))
+        .with_columns(*_kinematics(ic))
     )
     k = np.searchsorted(epochs, rep["time_ns"].to_numpy(), side="left")  # next epoch
     keep = k < epochs.size
@@ -361,6 +362,7 @@ def _ais_arrays(
         rep_groups=np.arange(C)[None, :] * (geo.G + 1) + rsector[:, None],
         rep_round=rep.select(rnd)["_r"].to_numpy(),
         rep_jump=rep["jump"].to_numpy(),
+        rep_self=rep["self_xi"].fill_null(np.nan).to_numpy(),
         mmsi_near=_sums(np.searchsorted(mmsi, rep["mmsi"].to_numpy()), geo.near(rxy),
                         mmsi.size) > 0,
         var=np.array([var, var, 0.0]),
@@ -371,18 +373,33 @@ def _ais_arrays(
     )
 
 
-def _jump(limit_m: float) -> pl.Expr:
-    """A report farther than ``limit_m`` from the transponder's previous report moved on by
-    that report's SOG and COG (multi-radar paper eq. 9): the stream jumped (an MMSI now
-    sent by another ship, a position fault), as opposed to the radar tracks changing."""
+def _kinematics(ic: ChannelIntegrityConfig) -> tuple[pl.Expr, pl.Expr]:
+    """The transponder against itself: each report against the previous one moved on by
+    the two reports' SOG and COG along the chord of the arc they describe (mean course,
+    length mean SOG x dt x sinc(half the course change): exact for a steady turn),
+
+    .. math:: \\xi_{self} = \\frac{|p_k - p_{k-1} - c_k|^2}{2\\sigma_p^2
+              + \\tfrac12(\\sigma_V \\Delta t)^2 + \\tfrac12(\\bar V \\Delta t \\sigma_C)^2}
+
+    (per axis, isotropic; 2 dof; null when the previous report is more than
+    ``ais_max_gap_s`` old or a SOG/COG is missing): a stuck position (SOG says it moves,
+    it does not), and ``jump``: the report farther than ``ais_jump_m`` from there (an MMSI
+    now sent by another ship, a position fault) as opposed to the radar tracks changing."""
     prev = {c: pl.col(c).shift(1).over("mmsi") for c in
             ("time_ns", "x_enu_m", "y_enu_m", "sog_mps", "cog_rad")}
     dt = (pl.col("time_ns") - prev["time_ns"]) / NS
-    sog = prev["sog_mps"].fill_null(0.0)
-    cog = prev["cog_rad"].fill_null(0.0)
-    ex = pl.col("x_enu_m") - prev["x_enu_m"] - sog * dt * cog.sin()
-    ey = pl.col("y_enu_m") - prev["y_enu_m"] - sog * dt * cog.cos()
-    return ((ex * ex + ey * ey).sqrt() > limit_m).fill_null(False)
+    half = ((pl.col("cog_rad") - prev["cog_rad"] + np.pi) % (2 * np.pi) - np.pi) / 2.0
+    course = prev["cog_rad"] + half
+    speed = (pl.col("sog_mps") + prev["sog_mps"]) / 2.0
+    sinc = pl.when(half.abs() > 1e-9).then(half.sin() / half).otherwise(1.0)
+    chord = speed * dt * sinc
+    ex = pl.col("x_enu_m") - prev["x_enu_m"] - chord * course.sin()
+    ey = pl.col("y_enu_m") - prev["y_enu_m"] - chord * course.cos()
+    var = (2.0 * ic.ais_sigma_position_m**2 + 0.5 * (ic.ais_sigma_sog_mps * dt) ** 2
+           + 0.5 * (speed * dt * ic.ais_sigma_cog_rad) ** 2)
+    xi = pl.when(dt <= ic.ais_max_gap_s).then((ex * ex + ey * ey) / var)
+    jump = ((ex * ex + ey * ey).sqrt() > ic.ais_jump_m).fill_null(False)
+    return xi.alias("self_xi"), jump.alias("jump")
 
 
 def _nearest_slots(xy: np.ndarray, k: np.ndarray, rad: _Radar, var: float
@@ -436,7 +453,8 @@ class _Tables:
         self.nis_d1 = np.r_[np.nan, stats.chi2.ppf(q / 4.0, 2 * n)]  # sum test, q/2 in all
         self.nis_d2 = np.r_[np.nan, stats.chi2.ppf(1.0 - q / 4.0, 2 * n)]
         self.bias_d2 = float(stats.chi2.ppf(1.0 - q / 2.0, 3))
-        self.ais_d1, self.ais_d2 = chi2_thresholds(ic.ais_q, 2)
+        self.ais_d1, self.ais_d2 = chi2_thresholds(ic.ais_q / 2.0, 2)  # q/2 each: radar
+        self.self_d2 = float(stats.chi2.ppf(1.0 - ic.ais_q / 2.0, 2))  # and kinematics
         self.outlier = float(stats.chi2.ppf(1.0 - ic.outlier_q, 2))
 
 
@@ -486,7 +504,8 @@ class _AisOut:
     """Per AIS report results (``decided`` marks decisions)."""
 
     decided: np.ndarray
-    kind: np.ndarray  # 0 ais, 1 ais_unmatched
+    kind: np.ndarray  # 0 ais, 1 ais_unmatched, 2 ais_kinematics
+    self_xi: np.ndarray
     xi: np.ndarray
     eta: np.ndarray
     excluded: np.ndarray
@@ -555,6 +574,7 @@ def check_channels(
                    *(np.zeros((K, n_groups), np.int64) for _ in range(3)))
     n_rep = ais.rep_m.size
     ao = _AisOut(np.zeros(n_rep, bool), np.zeros(n_rep, np.int8), np.full(n_rep, np.nan),
+                 np.full(n_rep, np.nan),
                  np.zeros(n_rep, bool), np.zeros(n_rep, bool), np.full((n_rep, 2), np.nan),
                  np.full(n_rep, -1, np.int64))
     used = np.ones(assoc.height, bool)
@@ -870,19 +890,28 @@ def _ais_epoch(
         alone = (st.ais_ref[mj] < 0) & covered & (st.ais_nrep[mj] > ic.ais_warmup_reports)
         if alone.any():
             _unmatched(pic, ais, j, alone, xi, r)
-        decided = (test | alone) & covered & ~ais.rep_lead[j]
-        flag = decided & (eta(np.where(decided, xi, 1.0), thr.ais_d1, thr.ais_d2) == 1)
-        passed = decided & (xi < thr.ais_d2)
+        # and the transponder against itself (a stuck position, a jump)
+        radar_dec = (test | alone) & covered
+        self_xi = ais.rep_self[j]
+        self_dec = np.isfinite(self_xi)
+        decided = (radar_dec | self_dec) & ~ais.rep_lead[j]
+        radar_flag = radar_dec & (eta(np.where(radar_dec, xi, 1.0), thr.ais_d1, thr.ais_d2) == 1)
+        self_flag = self_dec & (np.nan_to_num(self_xi) >= thr.self_d2)
+        flag = decided & (radar_flag | self_flag)
+        radar_pass = radar_dec & (xi < thr.ais_d2)
+        passed = decided & (~radar_dec | radar_pass) & ~self_flag
         if ic.exclusion and decided.any():
             md = mj[decided]
             st.ais_excl[md], st.ais_run[md] = step_exclusion(
                 st.ais_excl[md], st.ais_run[md], ~passed[decided], passed[decided],
                 np.ones(md.size, bool), ic.readmit_run)
-        failed = decided & test & ~passed
+        failed = decided & test & ~radar_pass
         st.ais_jumped[mj[passed]] = False
         if failed.any() or (st.ais_alt_n[mj] > 0).any():
-            _reacquire(st, mj, failed, alt, passed, ic.readmit_run)
-        ao.decided[j], ao.kind[j], ao.xi[j], ao.eta[j] = decided, alone, xi, flag
+            _reacquire(st, mj, failed, alt, decided & radar_pass, ic.readmit_run)
+        kind = np.where(radar_flag | (radar_dec & ~self_flag), alone.astype(np.int8), 2)
+        ao.decided[j], ao.kind[j], ao.xi[j], ao.eta[j] = decided, kind, xi, flag
+        ao.self_xi[j] = self_xi
         ao.excluded[j], ao.r[j], ao.track[j] = st.ais_excl[mj], r, st.ais_ref[mj]
 
 
@@ -954,7 +983,7 @@ def _extrapolated(pic: _Picture, pos: np.ndarray, dt: np.ndarray
 # --- output ------------------------------------------------------------------------------
 
 _CHECKS_RADAR = np.array(["nis", "bias", "coverage", "scan", "site"], dtype=object)
-_CHECKS_AIS = np.array(["ais", "ais_unmatched"], dtype=object)
+_CHECKS_AIS = np.array(["ais", "ais_unmatched", "ais_kinematics"], dtype=object)
 
 
 def _health_frame(
@@ -1013,6 +1042,7 @@ def _health_frame(
         "offset_east_m": r[:, 0],
         "offset_north_m": r[:, 1],
         "innovation_m": np.hypot(r[:, 0], r[:, 1]),
+        "kinematic_nis": ao.self_xi[d],
         "mmsi": mm.astype(np.int64),
         "system_track_id": pl.Series(np.where(ao.track[d] >= 0, ao.track[d], 0)).set(
             pl.Series(ao.track[d] < 0), None),
@@ -1038,5 +1068,6 @@ _SCHEMA: dict[str, pl.DataType] = {
     "time_offset_s": pl.Float64(), "offset_east_m": pl.Float64(),
     "offset_north_m": pl.Float64(), "innovation_m": pl.Float64(), "expected": pl.Int32(),
     "missed": pl.Int32(), "outliers": pl.Int32(), "scan_gap_s": pl.Float64(),
+    "kinematic_nis": pl.Float64(),
     "mmsi": pl.Int64(), "system_track_id": pl.Int64(),
 }  # fmt: skip
