@@ -41,6 +41,7 @@ from pipeline.decode.ais import decode_ais_sentences
 from pipeline.decode.nmea import decode_nmea_sentences
 from pipeline.executors import make_executor
 from pipeline.family import Window
+from pipeline.filters.integrity import chi2_thresholds
 from pipeline.maritime.config import ChannelFault, maritime_config, with_faults, without_faults
 from pipeline.maritime.stage import stage as maritime_stage
 from pipeline.nav.config import ownship_config
@@ -221,8 +222,10 @@ def _gnss_seed(unit: McUnit) -> tuple[pl.DataFrame, pl.DataFrame]:
     """The ownship scenario with one outage and one position jump, and without them,
     through the nav stage: per fault row and the fault-free false alarms."""
     oc = ownship_config(unit.cfg)
-    faulty = replace(oc.scenario, outages_s=(GNSS_OUTAGE,), jumps=(GNSS_JUMP,))
-    clean = replace(oc.scenario, outages_s=(), jumps=())
+    # the scenario's single-fix outliers are faults too: none here, so that the fault-free
+    # run measures false alarms and the faulty one these two faults only
+    faulty = replace(oc.scenario, outages_s=(GNSS_OUTAGE,), jumps=(GNSS_JUMP,), outlier_count=0)
+    clean = replace(oc.scenario, outages_s=(), jumps=(), outlier_count=0)
     sol_f, truth = _nav_run(unit, faulty)
     sol_c, _ = _nav_run(unit, clean)
     rows = []
@@ -242,10 +245,17 @@ def _gnss_seed(unit: McUnit) -> tuple[pl.DataFrame, pl.DataFrame]:
             "flagged_share_during": float((during["gnss_eta"] == 1).mean()),
             "fused_rms_on_m": _nav_rms(sol_f, t0, t1), "clean_fused_rms_m": _nav_rms(sol_c, t0, t1),
         })
-    fa = sol_c.filter(pl.col("gnss_eta").is_not_null() & (pl.col("mode") == "main")).select(
-        pl.lit("gnss").alias("sensor_kind"), pl.len().alias("decisions"),
-        (pl.col("gnss_eta") == 1).sum().alias("flagged"), pl.col("gnss_q").mean().alias("q"))
-    return pl.DataFrame(rows), fa
+    # fault-free: the position test (at gnss_q) and the filter's 3-sigma gate apart
+    d1, d2 = chi2_thresholds(oc.nav.gnss_q, 2)
+    pos = sol_c.filter(pl.col("gnss_nis").is_not_null()).select(
+        pl.lit("gnss_position").alias("sensor_kind"), pl.len().alias("decisions"),
+        ((pl.col("gnss_nis") <= d1) | (pl.col("gnss_nis") >= d2)).sum().alias("flagged"),
+        pl.lit(oc.nav.gnss_q).alias("q"))
+    gate = sol_c.filter(pl.col("gate").is_not_null()).select(
+        pl.lit("gnss_gate").alias("sensor_kind"), pl.len().alias("decisions"),
+        (pl.col("gate") == "reject").sum().alias("flagged"),
+        pl.lit(math.erfc(oc.model.settings.gate_n_sigma / math.sqrt(2.0))).alias("q"))
+    return pl.DataFrame(rows), pl.concat([pos, gate], how="vertical_relaxed")
 
 
 def _nav_rms(sol: pl.DataFrame, t0: int, t1: int) -> float:
