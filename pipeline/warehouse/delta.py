@@ -218,10 +218,17 @@ def replace_source_file(
 
 def table_files(warehouse: Path, name: str) -> list[str]:
     """Absolute paths of the Parquet files of the current snapshot (empty if no table)."""
+    return table_snapshot(warehouse, name)[0]
+
+
+def table_snapshot(warehouse: Path, name: str) -> tuple[list[str], frozenset[str]]:
+    """``(files, column names)`` of the current snapshot (``([], {})`` if no table): a
+    table written before its canonical schema gained a column lacks it."""
     if not table_exists(warehouse, name):
-        return []
-    uris = DeltaTable(str(table_path(warehouse, name))).file_uris()
-    return [u.removeprefix("file://") for u in uris]
+        return [], frozenset()
+    t = DeltaTable(str(table_path(warehouse, name)))
+    files = [u.removeprefix("file://") for u in t.file_uris()]
+    return files, frozenset(f.name for f in t.schema().fields)
 
 
 def empty_table(name: str) -> pa.Table:
