@@ -11,7 +11,7 @@ NATIVE := pipeline/decode/_json_columns.c pipeline/decode/_pow5_128.h pipeline/i
 $(BIN)/surveil: pyproject.toml $(NATIVE)
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
-	$(BIN)/pip install --quiet -e '.[dev]'
+	$(BIN)/pip install --quiet -e '.[dev,asterix]'
 	touch $(BIN)/surveil
 
 setup: $(BIN)/surveil

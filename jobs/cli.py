@@ -216,12 +216,13 @@ def simulate(st: _State, scenario, duration, seed, start, out) -> None:
 @click.option("--base-time", default="1970-01-01T00:00:00Z", show_default=True,
               help="for files without any date: base of synthetic log times (no time at "
               "all) or the day of time-of-day-only logs (ISO 8601 or ns)")
-def import_command(paths, out_dir, base_time) -> None:
+@click.pass_obj
+def import_command(st: _State, paths, out_dir, base_time) -> None:
     """Wrap legacy captures (NMEA 0183 text, AIS CSV, raw ASTERIX, pcap) into MCAP with
     honest log times (channel metadata "log_time_source"), so `ingest` reads MCAP only."""
     from jobs.import_legacy import run_import
 
-    summary = run_import(paths, out_dir, base_time_ns=parse_time_ns(base_time))
+    summary = run_import(paths, out_dir, base_time_ns=parse_time_ns(base_time), cfg=st.cfg)
     click.echo(summary.render())
     sys.exit(summary.exit_code)
 

@@ -19,7 +19,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from jobs.common import UsageError
+from pipeline.config import Config
+from pipeline.convert.config import import_options
 from pipeline.convert.legacy import ImportedFile, detect_format, import_file, output_path
+from pipeline.units import describe_time, time_in_range
 
 
 @dataclass
@@ -71,13 +74,15 @@ def expand_inputs(paths: Sequence[Path | str]) -> tuple[list[Path], list[Path]]:
             ok = [q for q in found if detect_format(q) != "unknown"]
             if not ok:
                 raise UsageError(
-                    f"no importable files (NMEA text, AIS CSV, ASTERIX, pcap) under directory: {p}"
+                    "no importable files (NMEA text, AIS CSV, ASTERIX, pcap, ROS 1 bag) under "
+                    f"directory: {p}"
                 )
             files += ok
             skipped += [q for q in found if q not in ok]
         elif detect_format(p) == "unknown":
             raise UsageError(
-                f"not an importable file (NMEA 0183 text, AIS CSV, raw ASTERIX or pcap/pcapng): {p}"
+                "not an importable file (NMEA 0183 text, AIS CSV, ASTERIX raw / framed / "
+                f"pcap, ROS 1 bag): {p}"
             )
         else:
             files.append(p)
@@ -94,9 +99,19 @@ def expand_inputs(paths: Sequence[Path | str]) -> tuple[list[Path], list[Path]]:
 
 
 def run_import(
-    paths: Sequence[Path | str], out_dir: Path | str, *, base_time_ns: int = 0
+    paths: Sequence[Path | str],
+    out_dir: Path | str,
+    *,
+    base_time_ns: int = 0,
+    cfg: Config | None = None,
 ) -> ImportSummary:
-    """Wrap every input into ``out_dir`` (created); see the module docstring."""
+    """Wrap every input into ``out_dir`` (created); see the module docstring. ``cfg``:
+    its ``[import.csv]`` / ``[asterix]`` sections (defaults without one)."""
+    options = import_options(cfg)
+    if not time_in_range(base_time_ns):
+        raise UsageError(
+            f"--base-time {describe_time(base_time_ns)} is outside 1970-01-01 .. 2262-04-11 UTC"
+        )
     files, skipped = expand_inputs(paths)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -105,7 +120,9 @@ def run_import(
         if output_path(f, out).resolve() == f:
             raise UsageError(f"output would overwrite the input: {f}")
         try:
-            summary.imported.append(import_file(f, out, base_time_ns=base_time_ns))
+            summary.imported.append(
+                import_file(f, out, base_time_ns=base_time_ns, options=options)
+            )
         except ValueError as exc:  # damaged or unrecognised content found while wrapping
             summary.failed.append((str(f), str(exc)))
     return summary

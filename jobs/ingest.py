@@ -18,8 +18,10 @@ between leaves a ledger without the new hash, so the next run redoes the file.
 ``<warehouse>/surveil.duckdb`` is rebuilt once at the end.
 
 Ledger: a file whose size and SHA-256 match its ledger row (status ok/partial) is skipped
-without any commit, unless ``force``. Status: ``ok``; ``partial`` (chunks lost, file cut
-off); ``quarantined`` (not MCAP, or nothing readable: one rejects row says why).
+without any commit, unless ``force``, or unless an optional decoder was missing when it was
+read (error "decoder not installed": it may be installed now). Status: ``ok``;
+``partial`` (chunks lost, file cut off, channels whose decoder is not installed);
+``quarantined`` (not MCAP, or nothing readable: one rejects row says why).
 
 Time window ``[start_ns, end_ns)``: rows are kept when the table's time column is inside
 (``time_ns``; ``log_time_ns`` for rejects) and the replace predicate is source_file AND
@@ -52,6 +54,7 @@ import pyarrow.compute as pc
 
 from jobs.common import UsageError, keep_freed_memory
 from pipeline.config import Config, ValidationConfig
+from pipeline.convert.config import import_options
 from pipeline.decode.registry import RAW_TABLES, FileDecoder, make_rejects
 from pipeline.executors import Executor, UnitResult, make_executor
 from pipeline.io.mcap_index import mcap_index_rows
@@ -73,6 +76,7 @@ keep_freed_memory()
 WINDOW_READ_MARGIN_NS = 60 * 10**9
 FILE_LEVEL_CODES = frozenset({"not_mcap", "corrupt_chunk", "truncated", "unknown_schema"})
 _MAGIC_SAMPLE = 64  # bytes of a not-MCAP file kept in its rejects row
+MISSING_DECODER = "decoder not installed"
 
 
 class IngestUsageError(UsageError):
@@ -90,6 +94,7 @@ class IngestUnit:
     start_ns: int | None = None
     end_ns: int | None = None
     force: bool = False
+    asterix_editions: tuple[tuple[int, str], ...] = ()  # config [asterix] editions
 
     @property
     def windowed(self) -> bool:
@@ -167,7 +172,10 @@ class IngestSummary:
         lines.append("rows:    " + _fmt(self.rows))
         lines.append("rejects: " + (_fmt(self.rejects) or "none"))
         if self.not_stored:
-            lines.append("AIS messages not stored (by type): " + _fmt(self.not_stored))
+            lines.append("valid, not stored (by type): " + _fmt(self.not_stored))
+        if self.rejects.get("decoder_missing"):
+            lines.append("WARNING: ASTERIX channels not decoded: the ASTERIX decoder is not "
+                         "installed; pip install 'surveil-pipeline[asterix]'")  # fmt: skip
         for path, err in self.failed[:10]:
             lines.append(f"FAILED {path}: {err}")
         if len(self.failed) > 10:
@@ -224,6 +232,7 @@ def ingest_file(unit: IngestUnit) -> FileManifest:
             prior is not None
             and prior["status"] in ("ok", "partial")
             and prior["size_bytes"] == size
+            and MISSING_DECODER not in (prior["error"] or "")  # a decoder may be there now
         ):
             sha = file_fingerprint(path)[1]
             if sha == prior["sha256"]:
@@ -243,7 +252,8 @@ def _decode_and_stage(
 ) -> FileManifest:
     lo, hi = _read_window(unit)
     scan = read_mcap_batches(path, start_ns=lo, end_ns=hi)
-    decoder = FileDecoder(source_file=unit.path, validation=unit.validation)
+    decoder = FileDecoder(source_file=unit.path, validation=unit.validation,
+                          asterix_editions=dict(unit.asterix_editions))  # fmt: skip
     stager = TableStager(_stage_folder(unit))
     reasons: Counter = Counter()
 
@@ -271,17 +281,23 @@ def _decode_and_stage(
     status = scan.status
     index = None
     if not unit.windowed:
-        index = mcap_index_rows(unit.path, size, scan.summary, scan.channels, status)
+        index = mcap_index_rows(unit.path, size, scan.summary, scan.channels, status,
+                                decoder.not_stored_by_channel)  # fmt: skip
+    file_status, error = status.status, status.error
+    if decoder.missing_decoders:  # partly read: exit 1, and read again once installed
+        missing = f"{MISSING_DECODER}: {', '.join(sorted(decoder.missing_decoders))}"
+        file_status = "partial" if file_status == "ok" else file_status
+        error = missing if error is None else f"{error}; {missing}"
     return FileManifest(
         source_file=unit.path,
         size_bytes=size,
         sha256=sha if isinstance(sha, str) else sha.result(),
-        status=status.status,
-        error=status.error,
+        status=file_status,
+        error=error,
         message_count=status.messages_read,
         rows={n: stager.rows.get(n, 0) for n in (*RAW_TABLES, *stager.rows)},
         rejects_by_reason=dict(reasons),
-        not_stored={f"ais_type_{k}": v for k, v in sorted(decoder.not_stored.items())},
+        not_stored=dict(sorted(decoder.not_stored.items())),
         start_time_ns=status.start_time_ns,
         end_time_ns=status.end_time_ns,
         staged=by_table,
@@ -381,6 +397,7 @@ def commit_file(
             rejects_count=m.rows.get("rejects", 0),
             start_time_ns=m.start_time_ns,
             end_time_ns=m.end_time_ns,
+            not_stored=m.not_stored,
         )
         write_entry(warehouse, entry)
 
@@ -413,8 +430,12 @@ def run_ingest(
     warehouse = Path(warehouse).resolve()
     staging = warehouse / "_staging" / f"ingest-{os.getpid()}-{time.time_ns()}"
     ex = _executor(executor, cfg, len(files))
+    editions = tuple(sorted(import_options(cfg).asterix_editions.items()))
     units = [
-        IngestUnit(str(f), str(warehouse), str(staging), cfg.validation, start_ns, end_ns, force)
+        IngestUnit(
+            str(f), str(warehouse), str(staging), cfg.validation, start_ns, end_ns, force,
+            editions,
+        )
         for f in files
     ]
     summary = IngestSummary(files_total=len(units))

@@ -351,7 +351,8 @@ class Document:
             if not isinstance(raw, Mapping):
                 self.problem(at, f"expected a table, got {_show(raw)}")
                 return _BAD
-            self._shown.setdefault(at, {})
+            if dataclasses.is_dataclass(args[1]):  # a table of tables: shown as tables;
+                self._shown.setdefault(at, {})  # a table of values shows inline (its field)
             items = {}
             for k, v in raw.items():
                 self._seen.add((*at, k))

@@ -15,6 +15,7 @@ from pipeline import config as _config
 from pipeline.airfield.stage import FAMILY as AIRFIELD
 from pipeline.config import Config
 from pipeline.configspec import Document
+from pipeline.convert.config import IMPORT_SECTION
 from pipeline.family import Family
 from pipeline.gaps.stage import FAMILY as GAPS
 from pipeline.maritime.stage import FAMILY as MARITIME
@@ -25,8 +26,9 @@ from pipeline.requirements import REQUIREMENTS_SECTION, ConfigSection
 FAMILIES: tuple[Family, ...] = (MARITIME, AIRFIELD, GAPS, NAV)
 
 # Sections read at load like a family's that belong to no family: what reports are
-# judged against ([requirements]) and the user's report folders ([reports]).
-SECTIONS: tuple[ConfigSection, ...] = (REQUIREMENTS_SECTION, REPORTS_SECTION)
+# judged against ([requirements]), the user's report folders ([reports]), and what
+# `surveil import` / ASTERIX decoding take from the file ([import.csv], [asterix]).
+SECTIONS: tuple[ConfigSection, ...] = (REQUIREMENTS_SECTION, REPORTS_SECTION, IMPORT_SECTION)
 
 
 def family(name: str) -> Family:

@@ -14,6 +14,32 @@ MS_NS = 1_000_000
 US_NS = 1_000
 """Nanoseconds per microsecond."""
 
+TIME_MIN_NS = 0
+TIME_MAX_NS = 2**63 - 1
+"""The representable times: int64 ns since the epoch (the warehouse's ``*_ns`` columns)
+that an MCAP log time (uint64) also holds, 1970-01-01T00:00:00Z to
+2262-04-11T23:47:16.854775807Z. A time outside (a two-digit ZDA year, a corrupt tag
+block, a record header from another clock) is rejected with a reason, never wrapped."""
+TIME_MAX_DAYS = TIME_MAX_NS // (86_400 * NS)
+"""Whole days since 1970-01-01 inside the representable range (2262-04-10 is the last)."""
+
+
+def time_in_range(t_ns: int) -> bool:
+    """``TIME_MIN_NS <= t_ns <= TIME_MAX_NS`` (exact: Python ints, no wrap-around)."""
+    return TIME_MIN_NS <= t_ns <= TIME_MAX_NS
+
+
+def describe_time(t_ns: int) -> str:
+    """``t_ns`` as ISO 8601 UTC when a calendar can show it, else the number of ns."""
+    import datetime as dt
+
+    try:
+        epoch = dt.datetime(1970, 1, 1, tzinfo=dt.UTC)
+        return (epoch + dt.timedelta(microseconds=t_ns // 1000)).isoformat()
+    except OverflowError:
+        return f"{t_ns} ns"
+
+
 NM_M = 1852.0
 """Metres per international nautical mile."""
 KNOT_MPS = NM_M / 3600.0

@@ -36,18 +36,31 @@ do not frame as an ASTERIX data block, or the file looks like text).
 
 from __future__ import annotations
 
-import os
 import struct
-import tempfile
 from collections import Counter
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from datetime import UTC, date, datetime
 from pathlib import Path
 
-from mcap.writer import CompressionType, Writer
-
-from pipeline.decode.asterix import EXTRACTORS, parse_block, split_blocks
+from pipeline.convert.asterix_framing import (
+    blocks_fill,
+    detect_framing,
+    oradis_time,
+    oradis_time_unit,
+    walk,
+    walk_hdlc,
+)
+from pipeline.convert.output import Message, write_converted
+from pipeline.decode.asterix import (
+    EXTRACTORS,
+    INSTALL_HINT,
+    candidate_editions,
+    decoder_available,
+    extract_block,
+    split_blocks,
+)
+from pipeline.io.mcap_write import ChannelSpec
 from pipeline.units import NS
 
 DAY_NS = 86_400 * NS
@@ -75,49 +88,93 @@ class _Messages:
     """Messages per channel topic, in capture order, plus channel metadata."""
 
     topics: dict[str, dict[str, str]] = field(default_factory=dict)
-    rows: list[tuple[str, int, bytes]] = field(default_factory=list)
+    rows: list[Message] = field(default_factory=list)
     skipped: Counter = field(default_factory=Counter)
 
-    def add(self, topic: str, meta: dict[str, str], t: int, payload: bytes) -> None:
+    def add(
+        self, topic: str, meta: dict[str, str], t: int, payload: bytes,
+        reject: tuple[str, str] | None = None,
+    ) -> None:  # fmt: skip
         """One message per data block of ``payload``; a tail that does not frame is kept
-        as one message of its own (the decoder rejects it)."""
+        as one message of its own (the decoder rejects it). ``reject``: why the payload
+        cannot be a message (it then goes to the rejects channel whole)."""
         self.topics.setdefault(topic, meta)
+        if reject is not None:
+            self.rows.append(Message(topic, t, payload, reject))
+            return
         blocks, rest = split_blocks(payload)
-        self.rows.extend((topic, t, b) for b in blocks)
+        self.rows.extend(Message(topic, t, b) for b in blocks)
         if rest:
-            self.rows.append((topic, t, rest))
+            self.rows.append(Message(topic, t, rest))
+
+
+@dataclass(frozen=True)
+class WrappedAsterix:
+    """One wrapped file: output path, input format, messages per topic, log-time source
+    per topic."""
+
+    output: Path
+    kind: str
+    messages: dict[str, int]
+    log_time_source: dict[str, str]
 
 
 def wrap_asterix_file(path: Path, out_dir: Path, *, day: date | None = None) -> Path:
-    """Wrap a raw ASTERIX file or a pcap/pcapng capture into ``out_dir/<name>.mcap``.
+    """Wrap an ASTERIX recording into ``out_dir/<name>.mcap`` (:func:`wrap_asterix`)."""
+    return wrap_asterix(path, out_dir, day=day).output
 
-    ``day``: UTC date of a raw recording (raw files carry only time of day); ignored for
-    captures, which carry their own timestamps. Raises ``ValueError`` when the file is
-    neither a capture nor raw ASTERIX, or holds nothing to write.
+
+def wrap_asterix(
+    path: Path,
+    out_dir: Path,
+    *,
+    day: date | None = None,
+    editions: Mapping[int, str] | None = None,
+) -> WrappedAsterix:
+    """Wrap a raw ASTERIX file, a framed recording (GPS, FINAL, IOSS, HDLC, ORADIS) or a
+    pcap/pcapng capture into ``out_dir/<name>.mcap``.
+
+    ``day``: UTC date of a recording whose records carry only the time of day (raw and
+    framed files); ignored for captures, which carry their own timestamps. ``editions``:
+    the config's ``[asterix] editions``, written to every channel's metadata
+    (``asterix_editions``) for ingest. Raises ``ValueError`` when the file is none of
+    these, or holds nothing to write.
     """
     path = Path(path)
     data = path.read_bytes()
     head = data[:4]
+    capture = head in PCAP_MAGICS or head == PCAPNG_SHB
+    if not capture:
+        _check_binary(data, path)
+    framing = None if capture else detect_framing(data)
     if head in PCAP_MAGICS or head == PCAPNG_SHB:
         msgs = _from_capture(data, path)
         kind = "pcapng" if head == PCAPNG_SHB else "pcap"
+    elif framing is not None:
+        msgs = _from_framed(data, framing, day or date(1970, 1, 1), path)
+        kind = framing
     else:
         _check_raw(data, path)
-        msgs = _from_raw(data, day or date(1970, 1, 1))
+        msgs = _from_raw(data, day or date(1970, 1, 1), path)
         kind = "raw"
     if not msgs.rows:
         raise ValueError(f"{path}: {kind} file holds no UDP payload to wrap as ASTERIX")
     out = Path(out_dir) / f"{path.name}.mcap"
     meta = {"source": path.name, "input_format": kind, "messages": str(len(msgs.rows))}
     meta |= {f"packets_skipped_{k}": str(v) for k, v in sorted(msgs.skipped.items())}
-    _write_mcap(out, msgs, meta)
-    return out
+    if editions:
+        text = ",".join(f"{c:03d}={e}" for c, e in sorted(editions.items()))
+        for m in msgs.topics.values():
+            m["asterix_editions"] = text
+    counts = _write_mcap(out, msgs, meta)
+    sources = {t: m.get("log_time_source", "") for t, m in msgs.topics.items()}
+    return WrappedAsterix(out, kind, counts, sources)
 
 
 # -- raw ---------------------------------------------------------------------------------
 
 
-def _check_raw(data: bytes, path: Path) -> None:
+def _check_binary(data: bytes, path: Path) -> None:
     if not data:
         raise ValueError(f"{path}: empty file, neither pcap/pcapng nor raw ASTERIX")
     sample = data[:64]
@@ -126,6 +183,9 @@ def _check_raw(data: bytes, path: Path) -> None:
             f"{path}: looks like a text file, neither pcap/pcapng nor raw ASTERIX "
             "(NMEA text logs are imported by the NMEA importer)"
         )
+
+
+def _check_raw(data: bytes, path: Path) -> None:
     blocks, _rest = split_blocks(data)
     if not blocks:
         n = int.from_bytes(data[1:3], "big") if len(data) >= 3 else None
@@ -136,39 +196,120 @@ def _check_raw(data: bytes, path: Path) -> None:
 
 
 def block_time_of_day(block: bytes) -> float | None:
-    """Time of day (s) of the first timed record of a supported-category block."""
-    extract = EXTRACTORS.get(block[0])
-    if extract is None:
+    """Time of day (s) of the first timed record of a supported-category block (needs
+    the ``asterix`` extra: ``None`` without it)."""
+    if not decoder_available():
         return None
-    records = parse_block(block)
-    if isinstance(records, str):
+    if block[0] not in EXTRACTORS:
         return None
-    for rec in records:
-        tod = extract(rec).get("tod_s")
-        if tod is not None and 0 <= tod < 86_400:
-            return float(tod)
+    for ed in candidate_editions(block[0], {}, {}) or [None]:
+        rows = extract_block(block, ed)
+        if isinstance(rows, tuple):
+            continue
+        for row in rows:
+            tod = row.get("tod_s")
+            if tod is not None and 0 <= tod < 86_400:
+                return float(tod)
+        return None
     return None
 
 
-def _from_raw(data: bytes, day: date) -> _Messages:
+def _need_decoder(path: Path, kind: str) -> None:
+    if not decoder_available():
+        raise ValueError(
+            f"{path}: {kind} ASTERIX carries no time outside its records, and reading their "
+            f"time of day needs the ASTERIX decoder: {INSTALL_HINT}"
+        )
+
+
+class _DayClock:
+    """Times of day -> log times on ``day``: one day added at each backward jump of more
+    than 12 h (midnight crossed); before the first time of day: noon of ``day``."""
+
+    def __init__(self, day: date):
+        self.offset = _day_ns(day)
+        self.t = self.offset + DAY_NS // 2
+        self.prev: float | None = None
+
+    def at(self, tod: float | None) -> int:
+        if tod is not None:
+            if self.prev is not None and tod < self.prev - 43_200:
+                self.offset += DAY_NS
+            self.prev = tod
+            self.t = self.offset + round(tod * NS)
+        return self.t
+
+
+def _day_ns(day: date) -> int:
+    return int(datetime(day.year, day.month, day.day, tzinfo=UTC).timestamp()) * NS
+
+
+def _from_raw(data: bytes, day: date, path: Path) -> _Messages:
     """Blocks of a raw file with log times from their time of day (module docstring)."""
-    day_ns = int(datetime(day.year, day.month, day.day, tzinfo=UTC).timestamp()) * NS
+    _need_decoder(path, "raw")
     meta = {"log_time_source": "asterix_time_of_day", "log_date": day.isoformat()}
     msgs = _Messages()
     blocks, rest = split_blocks(data)
-    t, offset, prev_tod = day_ns + DAY_NS // 2, day_ns, None
+    clock = _DayClock(day)
     # per block: the time of day comes from the decoded records of each block
     for block in blocks:
-        tod = block_time_of_day(block)
-        if tod is not None:
-            if prev_tod is not None and tod < prev_tod - 43_200:
-                offset += DAY_NS
-            prev_tod = tod
-            t = offset + round(tod * NS)
-        msgs.add(RAW_TOPIC, meta, t, block)
+        msgs.add(RAW_TOPIC, meta, clock.at(block_time_of_day(block)), block)
     if rest:
-        msgs.add(RAW_TOPIC, meta, t, rest)
+        msgs.add(RAW_TOPIC, meta, clock.t, rest)
     return msgs
+
+
+def _from_framed(data: bytes, framing: str, day: date, path: Path) -> _Messages:
+    """Records of a framed recording (:mod:`pipeline.convert.asterix_framing`), log time
+    from the record headers (time of day on ``day``, midnight rollover handled; ORADIS:
+    its calibrated unit; HDLC: the records' own time of day)."""
+    topic = f"/asterix/{framing}"
+    msgs = _Messages()
+    if framing == "hdlc":
+        _need_decoder(path, "HDLC-framed")
+        records, tails = walk_hdlc(data)
+    else:
+        records, tail = walk(data, framing)
+        tails = [tail] if tail is not None else []
+    meta = {"log_date": day.isoformat()}
+    tods: list[float | None] = [r.tod_s for r in records]
+    abs_ns: list[int | None] = [None] * len(records)
+    if framing in ("gps", "final", "ioss_seq"):
+        meta["log_time_source"] = f"{framing}_header:time_of_day"
+    elif framing == "hdlc":
+        meta["log_time_source"] = "asterix_time_of_day"
+        tods = [_content_tod(r.content) for r in records]
+    else:  # oradis: calibrate the header time's unit against the records
+        own = [_content_tod(r.content) for r in records] if decoder_available() else []
+        unit = oradis_time_unit([r.raw_time or 0 for r in records],
+                                own or [None] * len(records))  # fmt: skip
+        if unit is None:
+            _need_decoder(path, "ORADIS (header time of no known unit)")
+            meta["log_time_source"] = "asterix_time_of_day"
+            tods = own
+        else:
+            meta["log_time_source"] = f"oradis_header:{unit}"
+            pairs = [oradis_time(r.raw_time or 0, unit) for r in records]
+            tods = [p[0] for p in pairs]
+            abs_ns = [p[1] for p in pairs]
+    clock = _DayClock(day)
+    # per record: each header carries its own time
+    for r, tod, t_abs in zip(records, tods, abs_ns, strict=True):
+        t = t_abs if t_abs is not None else clock.at(tod)
+        msgs.add(topic, meta, t, r.content)
+    for tail in tails:
+        msgs.add(topic, meta, clock.t, tail.data, ("undecodable", tail.reason))
+    return msgs
+
+
+def _content_tod(content: bytes) -> float | None:
+    """Time of day of the first timed record among the blocks of ``content``."""
+    blocks, _ = split_blocks(content)
+    for b in blocks:
+        tod = block_time_of_day(b)
+        if tod is not None:
+            return tod
+    return None
 
 
 # -- captures ----------------------------------------------------------------------------
@@ -192,8 +333,19 @@ def _from_capture(data: bytes, path: Path) -> _Messages:
             "log_time_source": "pcap",
             "src_ip": src, "src_port": str(sport), "dst_ip": dst, "dst_port": str(dport),
         }  # fmt: skip
-        msgs.add(topic, meta, pkt.time_ns, payload)
+        for content in _oradis_unwrapped(payload):
+            msgs.add(topic, meta, pkt.time_ns, content)
     return msgs
+
+
+def _oradis_unwrapped(payload: bytes) -> list[bytes]:
+    """The ASTERIX content of a UDP payload: itself, or, when it is a run of ORADIS
+    packets (CroatiaControl's ``--oradispcap``: 6-octet header before the blocks), their
+    contents (the capture time stays the log time)."""
+    if blocks_fill(payload) or not payload:
+        return [payload]
+    records, tail = walk(payload, "oradis")
+    return [r.content for r in records] if records and tail is None else [payload]
 
 
 def _pcap_packets(data: bytes, skipped: Counter) -> Iterator[Packet]:
@@ -331,28 +483,12 @@ def _ipv6(b: bytes) -> str:
     return str(ipaddress.IPv6Address(b))
 
 
-# -- writing -----------------------------------------------------------------------------
+# -- writing ----------------------------------------------------------------------------
 
 
-def _write_mcap(out: Path, msgs: _Messages, meta: dict[str, str]) -> None:
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            writer = Writer(f, compression=CompressionType.ZSTD)
-            writer.start(profile="", library=MCAP_LIBRARY)
-            ids = {
-                topic: writer.register_channel(topic, "asterix", 0, metadata=m)
-                for topic, m in sorted(msgs.topics.items())
-            }
-            writer.add_metadata("surveil.import", meta)
-            seq: Counter = Counter()
-            for topic, t, payload in msgs.rows:
-                writer.add_message(ids[topic], t, payload, t, seq[topic])
-                seq[topic] += 1
-            writer.finish()
-        os.replace(tmp, out)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+def _write_mcap(out: Path, msgs: _Messages, meta: dict[str, str]) -> dict[str, int]:
+    channels = [
+        ChannelSpec(topic, "asterix", metadata=m) for topic, m in sorted(msgs.topics.items())
+    ]
+    return write_converted(out, channels, msgs.rows, metadata={"surveil.import": meta},
+                    library=MCAP_LIBRARY)  # fmt: skip

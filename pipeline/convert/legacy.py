@@ -31,34 +31,40 @@ metadata ``platform_id`` (the file name without its extension), ``source_file`` 
 
 The first available source in that order is used for the whole file.
 
-**AIS CSV tables** (Stone Soup ``Time,MMSI,Latitude_degrees,...``; NOAA MarineCadastre
-``MMSI,BaseDateTime,LAT,...``; Danish Maritime Authority aisdk ``# Timestamp,Type of
-mobile,MMSI,...``): one JSON message per row on ``/ais/csv`` (schema
-``surveil.AisReport``, ``schemas/ais_report.schema.json``), log time = the row's time
-(``log_time_source`` ``csv:<column>``, UTC; DMA dates are dd/mm/yyyy). Source units and
-not-available codes are kept; empty-meaning text cells (``''``, ``' '``, ``Unknown``,
-``Undefined``) become null.
+**AIS CSV tables** of other tools (a header with an MMSI column; columns placed by
+header name, :mod:`pipeline.convert.ais_csv`): one JSON message per row on ``/ais/csv``
+(schema ``surveil.AisReport``, ``schemas/ais_report.schema.json``), log time = the row's
+time (``log_time_source`` ``csv:<column>``, UTC). Source units and not-available codes
+are kept; empty-meaning text cells (``''``, ``' '``, ``Unknown``, ``Undefined``) become
+null.
 
-**ASTERIX** raw files and pcap/pcapng captures:
-:func:`pipeline.convert.asterix.wrap_asterix_file`.
+**ASTERIX** raw files, framed recordings (GPS, FINAL, IOSS, HDLC, ORADIS) and pcap/pcapng
+captures: :func:`pipeline.convert.asterix.wrap_asterix`. **ROS 1 bags**:
+:func:`pipeline.convert.rosbag.wrap_ros1_bag`.
+
+Every converter writes through :func:`pipeline.convert.output.write_converted`: a piece
+whose log time is outside 1970 .. 2262 (or that carries a reason) goes to the
+``/import/rejects`` channel and becomes a ``rejects`` row at ingest, never a traceback.
 """
 
 from __future__ import annotations
 
-import os
+import json
 import re
-import tempfile
 from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import polars as pl
-from mcap.writer import CompressionType, Writer
 
-from pipeline.io.mcap_write import MCAP_LIBRARY, MCAP_PROFILE
+from pipeline.convert.ais_csv import CsvOptions, looks_like_ais_csv, read_ais_csv
+from pipeline.convert.asterix_framing import ASTERIX_CATEGORIES, detect_framing
+from pipeline.convert.config import ImportOptions
+from pipeline.convert.output import Message, write_converted
+from pipeline.io.mcap_write import ChannelSpec
 from pipeline.resources import resource_path
-from pipeline.units import NS
+from pipeline.units import NS, TIME_MAX_NS, describe_time, time_in_range
 
 DAY_NS = 86_400 * NS
 SYNTHETIC_STEP_NS = 1_000_000
@@ -67,11 +73,11 @@ AIS_SCHEMA_NAME = "surveil.AisReport"
 _SAMPLE = 65_536
 PCAP_MAGICS = (b"\xa1\xb2\xc3\xd4", b"\xd4\xc3\xb2\xa1", b"\xa1\xb2\x3c\x4d",
                b"\x4d\x3c\xb2\xa1", b"\x0a\x0d\x0d\x0a")  # fmt: skip
-ASTERIX_CATEGORIES = frozenset(
-    {1, 2, 4, 8, 9, 10, 11, 15, 16, 17, 18, 19, 20, 21, 23, 25, 30, 31, 32, 34, 48, 62, 63,
-     65, 150, 205, 238, 239, 240, 247, 252}
-)  # fmt: skip
-_NMEA_LINE = re.compile(rb"(^|[\s\\,;\]])[$!][A-Z][A-Z0-9]{2,5},", re.MULTILINE)
+# an NMEA 0183 address: any 2-character talker (letters or digits: NMEA 2000 gateways write
+# "$04HDM", "$24HDG") + a 3-letter formatter, or a proprietary "$P" + maker + sentence
+_NMEA_LINE = re.compile(
+    rb"(^|[\s\\,;\]])[$!](?:[A-Z0-9]{2}[A-Z]{3}|P[A-Z0-9]{3,})[,*]", re.MULTILINE
+)
 LEADING_TS = (
     r"^\s*\[?(\d{13}|\d{9,10}(?:\.\d+)?|\d{4}-\d{2}-\d{2}[T ]\d{2}:\d{2}:\d{2}(?:\.\d+)?"
     r"(?:Z|[+-]\d{2}:?\d{2})?)\]?[\s,;]*"
@@ -104,29 +110,23 @@ def _looks_text(sample: bytes) -> bool:
     return bool(control.mean() < 0.05)
 
 
-def _csv_flavor(first_line: str) -> str | None:
-    cols = [c.strip().lstrip("#").strip().lower() for c in first_line.split(",")]
-    if cols[:4] == ["time", "mmsi", "latitude_degrees", "longitude_degrees"]:
-        return "stonesoup"
-    if cols[:4] == ["mmsi", "basedatetime", "lat", "lon"]:
-        return "marinecadastre"
-    if cols[:3] == ["timestamp", "type of mobile", "mmsi"]:
-        return "dma_aisdk"
-    return None
-
-
 def detect_format(path: Path) -> str:
-    """``nmea_text`` | ``ais_csv`` | ``asterix`` (raw blocks, pcap, pcapng) | ``unknown``."""
+    """``nmea_text`` | ``ais_csv`` | ``asterix`` (raw blocks, framed recordings, pcap,
+    pcapng) | ``ros1_bag`` | ``unknown``."""
     with open(path, "rb") as f:
         sample = f.read(_SAMPLE)
     size = path.stat().st_size
     if sample[:4] in PCAP_MAGICS:
         return "asterix"
+    if sample.startswith(b"#ROSBAG V2.0\n"):
+        return "ros1_bag"
     if _looks_text(sample):
-        first = sample.lstrip().split(b"\n", 1)[0].decode("latin-1")
-        if _csv_flavor(first):
+        first = re.split(rb"\r\n|\n|\r", sample.lstrip(), maxsplit=1)[0].decode("latin-1")
+        if looks_like_ais_csv(first):
             return "ais_csv"
         return "nmea_text" if _NMEA_LINE.search(sample) else "unknown"
+    if detect_framing(sample) is not None:  # GPS, FINAL, IOSS, HDLC, ORADIS recordings
+        return "asterix"
     if len(sample) >= 3 and sample[0] in ASTERIX_CATEGORIES:
         length = int.from_bytes(sample[1:3], "big")
         if 3 <= length <= size:
@@ -134,23 +134,39 @@ def detect_format(path: Path) -> str:
     return "unknown"
 
 
-def import_file(path: Path, out_dir: Path, *, base_time_ns: int = 0) -> ImportedFile:
+def import_file(
+    path: Path, out_dir: Path, *, base_time_ns: int = 0, options: ImportOptions | None = None
+) -> ImportedFile:
     """Wrap one file (see module docstring); raises ``ValueError`` when it is not an
-    importable format."""
+    importable format, or ``base_time_ns`` is not a representable time. ``options``: the
+    config's ``[import.csv]`` / ``[asterix]`` (:mod:`pipeline.convert.config`)."""
+    options = options or ImportOptions()
+    if not time_in_range(base_time_ns):
+        raise ValueError(f"base time {describe_time(base_time_ns)} is outside 1970-01-01 .. "
+                         "2262-04-11 UTC")  # fmt: skip
     path = Path(path)
     kind = detect_format(path)
     if kind == "nmea_text":
         return wrap_nmea_text(path, out_dir, base_time_ns=base_time_ns)
     if kind == "ais_csv":
-        return wrap_ais_csv(path, out_dir)
+        return wrap_ais_csv(path, out_dir, options=options.csv)
     if kind == "asterix":
-        from pipeline.convert.asterix import wrap_asterix_file
+        from datetime import UTC, datetime
 
-        out = wrap_asterix_file(path, Path(out_dir))
-        return ImportedFile(str(path), str(out), "asterix", {}, {})
+        from pipeline.convert.asterix import wrap_asterix
+
+        day = datetime.fromtimestamp(base_time_ns // NS, tz=UTC).date()
+        w = wrap_asterix(path, Path(out_dir), day=day, editions=options.asterix_editions)
+        return ImportedFile(
+            str(path), str(w.output), f"asterix:{w.kind}", w.messages, w.log_time_source
+        )
+    if kind == "ros1_bag":
+        from pipeline.convert.rosbag import wrap_ros1_bag
+
+        return wrap_ros1_bag(path, Path(out_dir))
     raise ValueError(
-        f"{path}: not an importable file (neither NMEA 0183 text, a known AIS CSV, raw "
-        "ASTERIX nor a pcap/pcapng capture)"
+        f"{path}: not an importable file (neither NMEA 0183 text, an AIS CSV, ASTERIX "
+        "(raw, framed or pcap/pcapng) nor a ROS 1 bag)"
     )
 
 
@@ -186,21 +202,29 @@ def _lines(data: bytes) -> pl.DataFrame:
 
 
 def _leading_ts_ns(ts: pl.Expr) -> pl.Expr:
-    """Leading timestamp text -> int64 ns (epoch s / ms / ISO 8601)."""
+    """Leading timestamp text -> int64 ns (epoch s / ms / ISO 8601); null when absent or
+    outside the representable range (checked BEFORE the multiplication to ns: polars
+    int64 arithmetic wraps around silently)."""
     digits = ts.str.contains(r"^\d+(\.\d+)?$")
     int_part = ts.str.extract(r"^(\d+)", 1).cast(pl.Int64, strict=False)
     frac = ts.str.extract(r"\.(\d+)$", 1).str.slice(0, 9).str.pad_end(9, "0")
     frac_ns = frac.cast(pl.Int64, strict=False).fill_null(0)
-    epoch = (
-        pl.when(ts.str.contains(r"^\d{13}$"))
-        .then(int_part * 1_000_000)
-        .otherwise(int_part * NS + frac_ns)
+    is_ms = ts.str.contains(r"^\d{13}$")
+    limit = pl.when(is_ms).then(TIME_MAX_NS // 1_000_000).otherwise(TIME_MAX_NS // NS - 1)
+    epoch = pl.when(int_part <= limit).then(
+        pl.when(is_ms).then(int_part * 1_000_000).otherwise(int_part * NS + frac_ns)
     )
     iso = ts.str.replace(" ", "T").str.replace("Z$", "+00:00")
     iso = iso.str.replace(r"([+-]\d\d)(\d\d)$", "$1:$2")
     iso = pl.when(iso.str.contains(r"[+-]\d\d:\d\d$")).then(iso).otherwise(iso + "+00:00")
-    dt = iso.str.to_datetime(format="%Y-%m-%dT%H:%M:%S%.f%:z", time_unit="ns", strict=False)
-    return pl.when(digits).then(epoch).otherwise(dt.dt.epoch("ns"))
+    # microseconds first: datetime[ns] covers 1677..2262 only and wraps outside
+    us = iso.str.to_datetime(format="%Y-%m-%dT%H:%M:%S%.f%:z", time_unit="us", strict=False)
+    us = us.dt.epoch("us")
+    ns = pl.when((us >= 0) & (us <= TIME_MAX_NS // 1000)).then(us * 1000)
+    ns = ns + iso.str.extract(r"\.\d{6}(\d{1,3})", 1).str.pad_end(3, "0").cast(
+        pl.Int64, strict=False
+    ).fill_null(0)
+    return pl.when(digits).then(epoch).otherwise(ns)
 
 
 def _split_content(lines: pl.DataFrame) -> pl.DataFrame:
@@ -208,12 +232,18 @@ def _split_content(lines: pl.DataFrame) -> pl.DataFrame:
     c = lines.filter(pl.col("kind") == "content")
     ts = pl.col("text").str.extract(LEADING_TS + r"(?:[$!\\])", 1)
     prefix = pl.col("text").str.extract(r"(" + LEADING_TS + r")(?:[$!\\])", 1)
-    c = c.with_columns(ts=ts, prefix=prefix).with_columns(
-        lead_ns=_leading_ts_ns(pl.col("ts")),
-        payload=pl.when(pl.col("prefix").is_not_null())
-        .then(pl.col("text").str.slice(pl.col("prefix").str.len_chars()))
-        .otherwise(pl.col("text"))
-        .str.strip_chars(),
+    c = (
+        c.with_columns(ts=ts, prefix=prefix)
+        .with_columns(
+            lead_ns=_leading_ts_ns(pl.col("ts")),
+        )
+        .with_columns(
+            lead_bad=pl.col("ts").is_not_null() & pl.col("lead_ns").is_null(),
+            payload=pl.when(pl.col("prefix").is_not_null())
+            .then(pl.col("text").str.slice(pl.col("prefix").str.len_chars()))
+            .otherwise(pl.col("text"))
+            .str.strip_chars(),
+        )
     )
     return c.with_row_index("msg").with_columns(pl.col("msg").cast(pl.Int64))
 
@@ -321,8 +351,23 @@ def wrap_nmea_text(path: Path, out_dir: Path, *, base_time_ns: int = 0) -> Impor
         "header": header,
     }
     payloads = [t.encode("latin-1") for t in content["payload"].to_list()]  # MCAP: bytes
+    rejects: list[tuple[str, str] | None] = [None] * content.height
+    if source == "leading_timestamp":  # a line whose own time cannot be represented
+        for i, ts in zip(
+            np.flatnonzero(content["lead_bad"].to_numpy()).tolist(),
+            content.filter(pl.col("lead_bad"))["ts"].to_list(),
+            strict=True,
+        ):
+            rejects[i] = ("out_of_range", f"leading timestamp {ts!r} is not a time in "
+                          "1970-01-01 .. 2262-04-11 UTC")  # fmt: skip
+    messages = [
+        Message(str(tp), int(t), p, r)
+        for tp, t, p, r in zip(topics.tolist(), times.tolist(), payloads, rejects, strict=True)
+    ]
     out = output_path(path, out_dir)
-    counts = _write_text_mcap(out, topics, times, payloads, channel_meta, file_meta)
+    names = [t for t in (NAV_TOPIC, AIS_TOPIC) if (topics == t).any()]
+    channels = [ChannelSpec(t, "nmea0183", metadata=channel_meta) for t in names]
+    counts = write_converted(out, channels, messages, metadata={"surveil.import": file_meta})
     return ImportedFile(
         str(path), str(out), "nmea_text", counts, dict.fromkeys(counts, source), skipped
     )
@@ -337,196 +382,41 @@ def _header(lines: pl.DataFrame) -> str:
 
 # -- AIS CSV -----------------------------------------------------------------------------
 
-_NULL_TEXT = ["", "unknown", "undefined", "unknown value", "n/a", "na"]
-DMA_NAV_STATUS = {
-    "under way using engine": 0, "at anchor": 1, "not under command": 2,
-    "restricted maneuverability": 3, "restricted manoeuvrability": 3,
-    "constrained by her draught": 4, "moored": 5, "aground": 6, "engaged in fishing": 7,
-    "under way sailing": 8, "reserved for future amendment [hsc]": 9,
-    "reserved for future amendment [wig]": 10, "power-driven vessel towing astern": 11,
-    "power-driven vessel pushing ahead or towing alongside": 12,
-    "reserved for future use": 13, "ais-sart is active": 14, "unknown value": 15,
-}  # fmt: skip
 
-
-def _txt(col: str) -> pl.Expr:
-    s = pl.col(col).str.strip_chars()
-    return pl.when(~s.str.to_lowercase().is_in(_NULL_TEXT)).then(s)
-
-
-def _f(col: str) -> pl.Expr:
-    return _txt(col).cast(pl.Float64, strict=False)
-
-
-def _i(col: str) -> pl.Expr:
-    return _f(col).round(0).cast(pl.Int64, strict=False)
-
-
-def _time(col: str, fmt: str) -> pl.Expr:
-    dt = _txt(col).str.to_datetime(format=fmt, time_unit="ns", strict=False)
-    return dt.dt.epoch("ns")
-
-
-def _csv_columns(flavor: str) -> tuple[list[pl.Expr], str]:
-    """Expressions of the ``surveil.AisReport`` fields, and the time column's name."""
-    if flavor == "stonesoup":
-        return [
-            _time("Time", "%Y-%m-%d %H:%M:%S%.f").alias("time_ns"), _i("MMSI").alias("mmsi"),
-            _f("Latitude_degrees").alias("lat_deg"), _f("Longitude_degrees").alias("lon_deg"),
-            _f("SOG_knots").alias("sog_kn"), _f("COG_degrees").alias("cog_deg"),
-        ], "Time"  # fmt: skip
-    if flavor == "marinecadastre":
-        cls = _txt("TransceiverClass")
-        return [
-            _time("BaseDateTime", "%Y-%m-%dT%H:%M:%S%.f").alias("time_ns"),
-            _i("MMSI").alias("mmsi"), cls.alias("mobile_type"), cls.alias("ais_class"),
-            _f("LAT").alias("lat_deg"), _f("LON").alias("lon_deg"), _f("SOG").alias("sog_kn"),
-            _f("COG").alias("cog_deg"), _f("Heading").alias("heading_deg"),
-            _i("Status").alias("nav_status"), _txt("VesselName").alias("shipname"),
-            _txt("IMO").str.replace("^IMO", "").cast(pl.Int64, strict=False).alias("imo"),
-            _txt("CallSign").alias("callsign"), _i("VesselType").alias("ship_type"),
-            _f("Length").alias("length_m"), _f("Width").alias("width_m"),
-            _f("Draft").alias("draught_m"),
-        ], "BaseDateTime"  # fmt: skip
-    mobile = _txt("Type of mobile")
-    status = _txt("Navigational status")
-    return [
-        _time("Timestamp", "%d/%m/%Y %H:%M:%S").alias("time_ns"), _i("MMSI").alias("mmsi"),
-        mobile.alias("mobile_type"),
-        mobile.str.extract(r"^Class ([AB])$", 1).alias("ais_class"),
-        _f("Latitude").alias("lat_deg"), _f("Longitude").alias("lon_deg"),
-        _f("SOG").alias("sog_kn"), _f("COG").alias("cog_deg"), _f("Heading").alias("heading_deg"),
-        _f("ROT").alias("rot_deg_per_min"),
-        pl.col("Navigational status").str.strip_chars().str.to_lowercase()
-        .replace_strict(DMA_NAV_STATUS, default=None, return_dtype=pl.Int64).alias("nav_status"),
-        status.alias("nav_status_text"), _i("IMO").alias("imo"),
-        _txt("Callsign").alias("callsign"), _txt("Name").alias("shipname"),
-        _txt("Ship type").alias("ship_type_text"), _f("Length").alias("length_m"),
-        _f("Width").alias("width_m"), _f("Draught").alias("draught_m"),
-        _txt("Destination").alias("destination"),
-    ], "Timestamp"  # fmt: skip
-
-
-def read_ais_csv(path: Path) -> tuple[pl.DataFrame, str, str]:
-    """``(rows with the surveil.AisReport fields, flavor, time column)``."""
-    raw = path.read_bytes()
-    try:
-        data = raw.decode("utf-8")
-    except UnicodeDecodeError:
-        data = raw.decode("latin-1")
-    raw_lines = [ln for ln in split_lines(data) if ln.strip()]
-    flavor = _csv_flavor(raw_lines[0]) if raw_lines else None
-    if flavor is None:
-        raise ValueError(f"{path}: not a known AIS CSV layout")
-    df = pl.read_csv(data.encode(), infer_schema=False, truncate_ragged_lines=True)
-    df = df.rename({c: c.strip().lstrip("#").strip() for c in df.columns})
-    exprs, time_col = _csv_columns(flavor)
-    rows = raw_lines[1:] if len(raw_lines) - 1 == df.height else None
-    out = df.select(exprs).with_columns(
-        source_format=pl.lit(flavor),
-        raw=pl.Series(rows, dtype=pl.String)
-        if rows is not None
-        else pl.concat_str(pl.all(), separator=",", ignore_nulls=True),
-    )
-    fields = [f for f in _schema_fields() if f in out.columns]
-    return out.select(fields), flavor, time_col
-
-
-def _schema_fields() -> list[str]:
-    import json
-
-    doc = json.loads((resource_path("schemas") / "ais_report.schema.json").read_text())
-    return list(doc["properties"])
-
-
-def wrap_ais_csv(path: Path, out_dir: Path) -> ImportedFile:
-    """Wrap an AIS CSV table (see module docstring) as ``surveil.AisReport`` JSON."""
+def wrap_ais_csv(path: Path, out_dir: Path, *, options: CsvOptions | None = None) -> ImportedFile:
+    """Wrap an AIS CSV table (:mod:`pipeline.convert.ais_csv`) as ``surveil.AisReport``
+    JSON, one message per row, log time = the row's time (rows whose time is outside the
+    representable range go to the rejects channel)."""
     path = Path(path)
-    rows, flavor, time_col = read_ais_csv(path)
+    table = read_ais_csv(path, options)
+    rows = table.rows
+    time_reject = rows["_time_reject"].to_list()
+    rows = rows.drop("_time_reject")
     payload = rows.select(pl.struct(pl.all()).struct.json_encode().cast(pl.Binary).alias("p"))
-    log = rows["time_ns"].forward_fill().fill_null(0).to_numpy().astype(np.int64)
-    source = f"csv:{time_col}"
+    log = rows["time_ns"].forward_fill().backward_fill().fill_null(0).to_list()
+    source = f"csv:{table.time_column}"
     platform = path.name.split(".")[0] or path.name
     meta = {
         "platform_id": platform,
         "source_file": path.name,
         "log_time_source": source,
-        "source_format": flavor,
+        "source_format": table.flavor,
     }
     file_meta = {
         "format": "ais_csv",
         "source_file": path.name,
-        "source_format": flavor,
+        "source_format": table.flavor,
         "rows": str(rows.height),
         "log_time_source": source,
+        "time_parser": table.time_parser,
+        "columns_not_placed": json.dumps(table.unplaced),
     }
     out = output_path(path, out_dir)
     schema = (resource_path("schemas") / "ais_report.schema.json").read_bytes()
-    _write_mcap(
-        out,
-        [(CSV_TOPIC, "json", AIS_SCHEMA_NAME, schema, meta)],
-        np.zeros(rows.height, np.int64),
-        log,
-        payload["p"].to_list(),
-        file_meta,
-    )
-    return ImportedFile(
-        str(path), str(out), "ais_csv", {CSV_TOPIC: rows.height}, {CSV_TOPIC: source}
-    )
-
-
-# -- MCAP writing ------------------------------------------------------------------------
-
-_Channel = tuple[str, str, str | None, bytes | None, dict[str, str]]
-
-
-def _write_text_mcap(
-    out: Path,
-    topics: np.ndarray,
-    times: np.ndarray,
-    payloads: list[bytes],
-    channel_meta: dict[str, str],
-    file_meta: dict[str, str],
-) -> dict[str, int]:
-    names = [t for t in (NAV_TOPIC, AIS_TOPIC) if (topics == t).any()]
-    channels: list[_Channel] = [(t, "nmea0183", None, None, channel_meta) for t in names]
-    index = np.zeros(len(topics), dtype=np.int64)
-    for i, t in enumerate(names):
-        index[topics == t] = i
-    _write_mcap(out, channels, index, times, payloads, file_meta)
-    return {t: int((topics == t).sum()) for t in names}
-
-
-def _write_mcap(
-    out: Path,
-    channels: list[_Channel],
-    channel_index: np.ndarray,
-    times: np.ndarray,
-    payloads: list[bytes],
-    file_meta: dict[str, str],
-) -> None:
-    """Write messages in the given order (file order of the source), temp file + rename."""
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            w = Writer(f, compression=CompressionType.ZSTD)
-            w.start(profile=MCAP_PROFILE, library=MCAP_LIBRARY)
-            ids = []
-            for topic, encoding, schema_name, schema_data, meta in channels:
-                sid = 0
-                if schema_name is not None:
-                    sid = w.register_schema(schema_name, "jsonschema", schema_data or b"")
-                ids.append(w.register_channel(topic, encoding, sid, metadata=meta))
-            w.add_metadata("surveil.import", file_meta)
-            seq = [0] * len(ids)
-            # one add_message call per message: the mcap writer has no bulk API
-            for ch, t, p in zip(channel_index.tolist(), times.tolist(), payloads, strict=True):
-                w.add_message(ids[ch], t, p, t, seq[ch])
-                seq[ch] += 1
-            w.finish()
-        os.replace(tmp, out)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    channel = ChannelSpec(CSV_TOPIC, "json", AIS_SCHEMA_NAME, schema_data=schema, metadata=meta)
+    messages = [
+        Message(CSV_TOPIC, t, p, None if why is None else ("out_of_range", why))
+        for t, p, why in zip(log, payload["p"].to_list(), time_reject, strict=True)
+    ]
+    counts = write_converted(out, [channel], messages, metadata={"surveil.import": file_meta})
+    return ImportedFile(str(path), str(out), "ais_csv", counts, dict.fromkeys(counts, source))

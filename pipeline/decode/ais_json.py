@@ -9,7 +9,11 @@ for the codes):
 - SOG knots -> m/s; 102.3 kn -> null (other speeds above the limit are rejected). COG
   deg -> rad; ≥ 360 or < 0 -> null. Heading deg -> rad; 511 (or > 359) -> null. IMO 0,
   ship type 0 -> null.
-- ``msg_type`` is 0: a table row does not say which message it came from.
+- ``msg_type``: the source's message id when it has a message-type column, else 0 (a
+  table row does not say which message it came from). A static-only message (5, 24)
+  without a position gives its ``ais_static`` row and no reject; a message id that is
+  neither a position report (1, 2, 3, 18, 19, 27) nor static data is valid but not
+  kept: counted in ``not_stored``.
   ``ais_class``: the source's class, ``"A"`` when it has none (Stone Soup's Solent file).
 - Static data (name, call sign, IMO, ship type, destination) -> one ``ais_static`` row
   per message that has any of them.
@@ -41,9 +45,13 @@ from pipeline.units import KNOT_MPS
 DEG = math.pi / 180.0
 MAX_SPEED_MPS = 40.0
 NOT_VESSEL_MSG_ID = {"base station": 4, "aton": 21, "sar airborne": 9}
+POSITION_MSG_IDS = frozenset({1, 2, 3, 18, 19, 27})
+STATIC_MSG_IDS = frozenset({5, 24})
+KEPT_MSG_IDS = POSITION_MSG_IDS | STATIC_MSG_IDS
 
 SCHEMA = {
-    "time_ns": pl.Int64, "mmsi": pl.Int64, "mobile_type": pl.String, "ais_class": pl.String,
+    "time_ns": pl.Int64, "mmsi": pl.Int64, "msg_type": pl.Int64, "mobile_type": pl.String,
+    "ais_class": pl.String,
     "lat_deg": pl.Float64, "lon_deg": pl.Float64, "sog_kn": pl.Float64, "cog_deg": pl.Float64,
     "heading_deg": pl.Float64, "rot_deg_per_min": pl.Float64, "nav_status": pl.Int64,
     "nav_status_text": pl.String, "imo": pl.Int64, "callsign": pl.String,
@@ -87,6 +95,8 @@ def _problems(max_speed_mps: float) -> tuple[pl.Expr, pl.Expr]:
         (pl.col("_bad"), "undecodable", pl.lit("payload is not a surveil.AisReport object")),
         (pl.col("mmsi").is_null(), "undecodable", pl.lit("no MMSI")),
         (pl.col("time_ns").is_null(), "undecodable", pl.lit("no time")),
+        (pl.col("msg_type").is_in(list(STATIC_MSG_IDS)) & (lat.is_null() | lon.is_null()),
+         "_static_only", pl.lit("static data only")),
         (lat.is_null() | lon.is_null(), "no_position", pl.lit("no latitude/longitude")),
         ((lat == 91.0) | (lon == 181.0), "no_position",
          pl.format("position not available (lat {}, lon {})", lat, lon)),
@@ -112,7 +122,7 @@ def _si_columns() -> list[pl.Expr]:
         pl.when((cog >= 0) & (cog < 360)).then(cog * DEG).alias("cog_rad"),
         pl.when((hdg >= 0) & (hdg <= 359)).then(hdg * DEG).alias("heading_rad"),
         pl.when(cls.is_in(["A", "B"])).then(cls).otherwise(pl.lit("A")).alias("ais_class"),
-        pl.lit(0, pl.Int16).alias("msg_type"),
+        pl.col("msg_type").fill_null(0).cast(pl.Int16).alias("msg_type"),
         pl.col("time_ns").alias("time_ns"),
         pl.col("raw").alias("nmea"),
     ]
@@ -149,7 +159,11 @@ def decode_ais_json(
     not_vessel = pl.col("_kind").replace_strict(
         NOT_VESSEL_MSG_ID, default=None, return_dtype=pl.Int64
     )
-    df = df.with_columns(_not_vessel=not_vessel.fill_null(-1))
+    msg = pl.col("msg_type")
+    other_msg = msg.is_not_null() & (msg > 0) & ~msg.is_in(list(KEPT_MSG_IDS))
+    df = df.with_columns(
+        _not_vessel=pl.when(other_msg).then(msg).otherwise(not_vessel).fill_null(-1)
+    )
     skipped = df.filter((pl.col("_not_vessel") >= 0) & ~pl.col("_bad"))
     not_stored = dict(Counter(skipped["_not_vessel"].to_list()))
     code, reason = _problems(max_speed_mps)
@@ -160,7 +174,7 @@ def decode_ais_json(
     static = (
         df.filter(
             pl.col("code").is_null()
-            | (pl.col("code") == "no_position")
+            | pl.col("code").is_in(["no_position", "_static_only"])
             & pl.col("mmsi").is_not_null()
             & pl.col("time_ns").is_not_null()
         )
@@ -174,7 +188,7 @@ def decode_ais_json(
         ]
     )
     static = static.filter(has_static)
-    rej = df.filter(pl.col("code").is_not_null())
+    rej = df.filter(pl.col("code").is_not_null() & (pl.col("code") != "_static_only"))
     tables = {
         "ais_reports": conform("ais_reports", ok.to_arrow()) if ok.height else empty("ais_reports"),
         "ais_static": conform("ais_static", static.to_arrow())
@@ -223,7 +237,7 @@ class AisJsonChannelDecoder:
             source_file=self.source_file,
             topic=self.topic,
         )
-        self.not_stored.update(not_stored)
+        self.not_stored.update({f"ais_type_{k}": v for k, v in not_stored.items()})
         return {k: v for k, v in tables.items() if v.num_rows}
 
     def finish(self) -> dict[str, pa.Table]:

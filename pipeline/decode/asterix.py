@@ -54,10 +54,14 @@ Rejects (``raw`` = the whole data block, or the bytes that do not frame):
 - ``no_position``: a target report (CAT010 message type 1, or any CAT020/021/048/062
   record) with neither polar, Cartesian nor WGS-84 position; one row per record.
   CAT010 status messages (start of update cycle, periodic / event-triggered status) are
-  kept in ``airfield_obs`` with their ``message_type`` and null positions.
-- ``unsupported_category``: ONE row per channel and category (by
-  :class:`AsterixChannelDecoder`) with the count of data blocks, not one per block; raw =
-  the first such block.
+  service messages: rows of ``asterix_service`` (their other items in ``status_json``),
+  like every record of the service categories (:data:`SERVICE_LAYOUTS`, CAT034, CAT065).
+- categories we do not decode (CAT001, CAT004, CAT030, ...) are valid input we do not
+  keep: counted per channel and category in ``not_stored`` (``asterix_cat004``: the
+  ingest ledger's ``not_stored_json``), not rejected.
+- ``decoder_missing``: the optional ``asterix`` extra (``asterix_decoder``, GPL) is not
+  installed: ONE row per channel with the message count (see
+  :class:`AsterixChannelDecoder`).
 
 ``asterix_decoder`` ships definitions of CAT048 1.21 and CAT065 1.3 whose UAP lists the
 RE/SP fields without defining them, so any record carrying RE fails to parse. Before the
@@ -69,10 +73,12 @@ explicit field starts with its own length octet, so skipping it is always well d
 from __future__ import annotations
 
 import json
+import logging
 import math
 import os
 import re
 import tempfile
+from collections import Counter
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -81,6 +87,12 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
+from pipeline.decode.asterix_editions import (
+    DEFAULT_EDITIONS,
+    definition_file,
+    known_editions,
+    parse_edition_metadata,
+)
 from pipeline.decode.registry import make_rejects
 from pipeline.io.mcap_read import ChannelBatch
 from pipeline.tables import conform, empty
@@ -89,7 +101,7 @@ from pipeline.units import NM_M, NS
 DAY_NS = 86_400 * NS
 KT_MPS = NM_M / 3600.0
 TARGET_CATEGORIES = frozenset({10, 20, 21, 48, 62})
-SERVICE_CATEGORIES = frozenset({34, 65})
+SERVICE_CATEGORIES = frozenset({2, 19, 23, 25, 31, 34, 63, 65, 247, 252})
 SUPPORTED_CATEGORIES = TARGET_CATEGORIES | SERVICE_CATEGORIES
 OBS_COLUMNS = (
     "sac", "sic", "message_type", "sensor_kind", "track_number", "target_address",
@@ -177,21 +189,60 @@ def _ensure_definitions() -> None:
         if patched is None:
             continue
         fd, tmp = tempfile.mkstemp(prefix=f"surveil_{name}_", suffix=".xml")
-        try:
-            with os.fdopen(fd, "w") as f:
-                f.write(patched)
-            asterix.init(tmp)
-        finally:
-            os.unlink(tmp)
+        with os.fdopen(fd, "w") as f:
+            f.write(patched)
+        _SHIPPED_FILES[int(name[3:])] = tmp  # kept: loaded again after another edition
+        asterix.init(tmp)
     _DEFINITIONS_READY = True
 
 
-def parse_block(block: bytes) -> list[dict] | str:
-    """Records of one data block as ``asterix_decoder`` dicts (``verbose=False``), or the
-    reason why the block does not decode."""
+_SHIPPED_FILES: dict[int, str] = {}
+_LOADED: dict[int, str] = {}  # category -> edition loaded in asterix_decoder (else default)
+
+
+def shipped_file(cat: int) -> str:
+    """The decoder's definition file of ``cat`` (our patched copy for CAT048/065)."""
     import asterix
 
     _ensure_definitions()
+    return _SHIPPED_FILES.get(cat) or asterix.get_configuration_file(f"cat{cat:03d}_")
+
+
+def use_edition(cat: int, edition: str) -> None:
+    """Load ``edition`` of ``cat`` into ``asterix_decoder`` unless it is loaded (the
+    decoder keeps one definition per category: :mod:`pipeline.decode.asterix_editions`)."""
+    import asterix
+
+    _ensure_definitions()
+    default = DEFAULT_EDITIONS.get(cat)
+    if _LOADED.get(cat, default) == edition:
+        return
+    if edition == default:
+        asterix.init(shipped_file(cat))
+    else:
+        asterix.init(definition_file(cat, edition, shipped_file(cat)))
+    _LOADED[cat] = edition
+
+
+def restore_default_editions() -> None:
+    """Load the shipped edition again wherever another one is loaded (~3 ms per
+    category), so that direct ``asterix.parse`` callers see the decoder's defaults."""
+    for cat, ed in list(_LOADED.items()):
+        if ed != DEFAULT_EDITIONS.get(cat):
+            use_edition(cat, DEFAULT_EDITIONS[cat])
+
+
+def parse_block(block: bytes, edition: str | None = None) -> list[dict] | str:
+    """Records of one data block as ``asterix_decoder`` dicts (``verbose=False``), or the
+    reason why the block does not decode; ``edition`` of the block's category (default:
+    the edition the decoder ships)."""
+    import asterix
+
+    _ensure_definitions()
+    cat = block[0] if block else 0
+    edition = edition or DEFAULT_EDITIONS.get(cat)
+    if edition is not None:
+        use_edition(cat, edition)
     try:
         records = asterix.parse(block, verbose=False)
     except Exception as exc:  # the C extension raises on malformed input
@@ -201,7 +252,7 @@ def parse_block(block: bytes) -> list[dict] | str:
         return f"CAT{cat:03d} block of {len(block)} B holds no record"
     for i, rec in enumerate(records):
         if rec.get("hexdata") is None or rec.get("category") != cat:
-            return f"CAT{cat:03d} record {i + 1} does not parse under the supported edition"
+            return f"CAT{cat:03d} record {i + 1} does not parse under edition {edition}"
         if not any(k.startswith("I") for k in rec):
             return f"CAT{cat:03d} record {i + 1} has no data item (empty FSPEC)"
     filled = sum(int(r["len"]) for r in records)
@@ -333,6 +384,7 @@ def _cat021(rec: Mapping[str, Any]) -> dict[str, Any]:
             _v(rec, "I073", "time_reception_position"),
             _v(rec, "I075", "time_reception_velocity"),
             _v(rec, "I077", "time_report_transmission"),
+            _v(rec, "I030", "ToD"),  # edition 0.26
         ) if t is not None),
         None,
     )  # fmt: skip
@@ -379,6 +431,9 @@ def _cat048(rec: Mapping[str, Any]) -> dict[str, Any]:
 def _cat062(rec: Mapping[str, Any]) -> dict[str, Any]:
     """CAT062 ed 1.18 (SDPS system tracks); x/y in the system's reference frame."""
     callsign = _text(_v(rec, "I245", "TId")) or _text(_v(rec, "I380", "ID", "ACID"))
+    vx, vy = _f(_v(rec, "I185", "Vx")), _f(_v(rec, "I185", "Vy"))
+    if vx is None:  # edition 0.17: polar velocity I180 (speed m/s, heading deg)
+        vx, vy = _ground_vector(_f(_v(rec, "I180", "Spd")), _v(rec, "I180", "Hdg"))
     return {
         **_source(rec),
         "tod_s": _v(rec, "I070", "ToT"),
@@ -389,8 +444,8 @@ def _cat062(rec: Mapping[str, Any]) -> dict[str, Any]:
         "callsign": callsign,
         "x_m": _f(_v(rec, "I100", "X")),
         "y_m": _f(_v(rec, "I100", "Y")),
-        "vx_mps": _f(_v(rec, "I185", "Vx")),
-        "vy_mps": _f(_v(rec, "I185", "Vy")),
+        "vx_mps": vx,
+        "vy_mps": vy,
         "lat_deg": _f(_v(rec, "I105", "Lat")),
         "lon_deg": _f(_v(rec, "I105", "Lon")),
         "sigma_x_m": _f(_v(rec, "I500", "APC", "APC_X")),
@@ -427,6 +482,74 @@ def _cat034(rec: Mapping[str, Any]) -> dict[str, Any]:
     }
 
 
+@dataclass(frozen=True)
+class ServiceLayout:
+    """Where a service category keeps its time, message type and service id:
+    ``(item, field)`` pairs, ``names`` of the message type codes."""
+
+    tod: tuple[str, str]
+    msg: tuple[str, str] | None = None
+    names: Mapping[int, str] = field(default_factory=dict)
+    service: tuple[str, str] | None = None
+
+
+SERVICE_LAYOUTS = {
+    2: ServiceLayout(("I030", "ToD"), ("I000", "type"), {
+        1: "north marker", 2: "sector crossing", 3: "south marker",
+        8: "activation of blind zone filtering", 9: "stop of blind zone filtering"}),
+    19: ServiceLayout(("I140", "ToD"), ("I000", "MsgTyp"), {
+        1: "start of update cycle", 2: "periodic status", 3: "event-triggered status"}),
+    23: ServiceLayout(("I070", "ToD"), ("I000", "report_type"), {
+        1: "ground station status", 2: "service status", 3: "service statistics"},
+        ("I015", "SID")),
+    25: ServiceLayout(("I070", "ToD"), ("I000", "Typ"), {
+        1: "service and system status", 2: "component status", 3: "service statistics"},
+        ("I015", "SID")),
+    31: ServiceLayout(("I020", "ToM")),
+    63: ServiceLayout(("I030", "ToD"), service=("I015", "ServiceID")),
+    247: ServiceLayout(("I140", "ToD"), service=("I015", "SI")),
+    252: ServiceLayout(("I020", "ToM")),
+}  # fmt: skip
+"""The service / status categories other than CAT034 and CAT065 (EUROCONTROL: CAT002
+monoradar service, CAT019 MLAT system status, CAT023 and CAT025 ground station and
+system status, CAT031 sensor information, CAT063 sensor status, CAT247 version number
+exchange, CAT252 connection and service messages; item names of the decoder's
+definitions). Every other item of the record goes to ``status_json``."""
+
+
+def _service(cat: int) -> Callable[[Mapping[str, Any]], dict[str, Any]]:
+    lay = SERVICE_LAYOUTS[cat]
+
+    def extract(rec: Mapping[str, Any]) -> dict[str, Any]:
+        used = {"I010", lay.tod[0]} | {x[0] for x in (lay.msg, lay.service) if x}
+        msg = _v(rec, *lay.msg) if lay.msg else None
+        row = {
+            **_source(rec),
+            "tod_s": _v(rec, *lay.tod),
+            "message_type": _name(lay.names, msg),
+            "service_id": _v(rec, *lay.service) if lay.service else None,
+            "status_json": _status_json(rec, used),
+        }
+        if cat == 2:
+            row["sector_azimuth_rad"] = _rad(_v(rec, "I020", "Azi"))
+            row["antenna_period_s"] = _f(_v(rec, "I041", "RotS"))
+        return row
+
+    return extract
+
+
+def cat010_status(rec: Mapping[str, Any]) -> dict[str, Any]:
+    """A CAT010 status message (I000 = 2 start of update cycle, 3 periodic status, 4
+    event-triggered status) as an ``asterix_service`` row; its other items (I550 system
+    status, ...) in ``status_json``."""
+    return {
+        **_source(rec),
+        "tod_s": _v(rec, "I140", "ToD"),
+        "message_type": _name(CAT010_MESSAGE_TYPES, _v(rec, "I000", "MsgTyp")),
+        "status_json": _status_json(rec, {"I000", "I010", "I140"}),
+    }
+
+
 def _cat065(rec: Mapping[str, Any]) -> dict[str, Any]:
     """CAT065 ed 1.3 (SDPS service status messages)."""
     msg = _v(rec, "I000", "Typ")
@@ -442,6 +565,7 @@ def _cat065(rec: Mapping[str, Any]) -> dict[str, Any]:
 
 EXTRACTORS: dict[int, Callable[[Mapping[str, Any]], dict[str, Any]]] = {
     10: _cat010, 20: _cat020, 21: _cat021, 48: _cat048, 62: _cat062, 34: _cat034, 65: _cat065,
+    **{c: _service(c) for c in SERVICE_LAYOUTS},
 }  # fmt: skip
 
 
@@ -570,14 +694,21 @@ def decode_asterix(
     source_file: str,
     topic: str,
     metadata: Mapping[str, str] | None = None,
+    editions: Mapping[int, str] | None = None,
+    learned: dict[int, str] | None = None,
 ) -> AsterixDecoded:
     """Decode one channel's ASTERIX payloads (one data block each) with their log times.
 
     ``metadata``: the channel's MCAP metadata; ``sensor_id`` / ``sensor_kind`` there
-    override the record's SAC/SIC and kind. See the module docstring for the mapping and
-    the reject rules.
+    override the record's SAC/SIC and kind, ``asterix_editions`` (``"010=0.24"``) forces
+    editions. ``editions``: forced editions per category (the config's; they win over the
+    metadata); ``learned``: the edition that decoded each category's last block (updated;
+    pass the same dict for every batch of a channel). See the module docstring for the
+    mapping and the reject rules.
     """
     meta = metadata or {}
+    forced = {**parse_edition_metadata(meta.get("asterix_editions")), **(editions or {})}
+    learned = {} if learned is None else learned
     ctx = _Context(source_file, topic, meta.get("sensor_id"), meta.get("sensor_kind"))
     times = np.asarray(log_time_ns, dtype=np.int64)
     obs, svc, rej = _Rows(OBS_COLUMNS), _Rows(SERVICE_COLUMNS), _Rejects()
@@ -593,7 +724,7 @@ def decode_asterix(
             n_blocks += 1
             cat = block[0]
             if cat in SUPPORTED_CATEGORIES:
-                _decode_block(block, t, obs if cat in TARGET_CATEGORIES else svc, rej)
+                _decode_block(block, t, obs, svc, rej, forced, learned)
             else:
                 u = Unsupported(1, t, block)
                 unsupported[cat] = unsupported[cat].plus(u) if cat in unsupported else u
@@ -607,29 +738,70 @@ def decode_asterix(
     )  # fmt: skip
 
 
-def _decode_block(block: bytes, t: int, rows: _Rows, rej: _Rejects) -> None:
-    """Records of one block into ``rows``; the block or a record into ``rej``."""
+def extract_block(block: bytes, edition: str | None) -> tuple[str, str] | list[dict[str, Any]]:
+    """Rows of a block under one edition, or ``(reason code, reason)`` when it does not
+    decode under it (records do not parse / fill the block: ``undecodable``; a value its
+    encoding should never carry: ``out_of_range``)."""
     cat = block[0]
-    records = parse_block(block)
+    records = parse_block(block, edition)
     if isinstance(records, str):
-        rej.add(t, "undecodable", records, block)
-        return
+        return "undecodable", records
     extracted = [EXTRACTORS[cat](rec) for rec in records]
+    if cat == 10:  # status messages of CAT010 are service messages
+        extracted = [
+            row if row["message_type"] == TARGET_REPORT else cat010_status(rec)
+            for row, rec in zip(extracted, records, strict=True)
+        ]
     for k, row in enumerate(extracted):
         why = implausible(row)
         if why is not None:  # the whole block: its records share one source and edition
-            rej.add(t, "out_of_range", f"CAT{cat:03d} record {k + 1}: {why}", block)
-            return
+            return "out_of_range", f"CAT{cat:03d} record {k + 1}: {why}"
+    return extracted
+
+
+def candidate_editions(
+    cat: int, forced: Mapping[int, str], learned: Mapping[int, str]
+) -> list[str]:
+    """Editions to try for a block of ``cat``: the forced one alone (config, channel
+    metadata), else the one that decoded the channel's previous block, the shipped one,
+    then the others (:mod:`pipeline.decode.asterix_editions`)."""
+    if cat in forced:
+        return [forced[cat]]
+    out = [learned[cat]] if cat in learned else []
+    return out + [e for e in known_editions(cat) if e not in out]
+
+
+def _decode_block(
+    block: bytes, t: int, obs: _Rows, svc: _Rows, rej: _Rejects,
+    forced: Mapping[int, str] | None = None, learned: dict[int, str] | None = None,
+) -> None:  # fmt: skip
+    """Records of one block into ``obs`` (target reports) or ``svc`` (service and status
+    messages, CAT010 status messages included); the block or a record into ``rej``. The
+    first candidate edition under which the block decodes is taken (and learned)."""
+    cat = block[0]
+    learned = {} if learned is None else learned
+    eds = candidate_editions(cat, forced or {}, learned) or [None]
+    first: tuple[str, str] | None = None
+    for ed in eds:
+        out = extract_block(block, ed)
+        if not isinstance(out, tuple):
+            if ed is not None:
+                learned[cat] = ed
+            extracted = out
+            break
+        first = first or out
+    else:
+        assert first is not None
+        tried = f" (editions tried: {', '.join(e for e in eds if e)})" if len(eds) > 1 else ""
+        rej.add(t, first[0], first[1] + tried, block)
+        return
     for k, row in enumerate(extracted):
-        if (
-            cat in TARGET_CATEGORIES
-            and row.get("message_type") == TARGET_REPORT
-            and (not has_position(row))
-        ):
+        target = cat in TARGET_CATEGORIES and row.get("message_type") == TARGET_REPORT
+        if target and not has_position(row):
             reason = f"CAT{cat:03d} record {k + 1}: target report without a position"
             rej.add(t, "no_position", reason, block)
         else:
-            rows.add(row, cat, t)
+            (obs if target else svc).add(row, cat, t)
 
 
 def _framing_reason(rest: bytes) -> str:
@@ -670,24 +842,66 @@ def _table(name: str, rows: _Rows, ctx: _Context) -> pa.Table:
 # -- per channel -------------------------------------------------------------------------
 
 
+DECODER_MISSING = "decoder_missing"
+INSTALL_HINT = "pip install 'surveil-pipeline[asterix]' (asterix_decoder, GPL-licensed)"
+_log = logging.getLogger("surveil.decode.asterix")
+_WARNED = False
+
+
+def decoder_available() -> bool:
+    """``asterix_decoder`` (the optional extra ``surveil-pipeline[asterix]``) imports."""
+    try:
+        import asterix  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def _warn_missing() -> None:
+    global _WARNED
+    if not _WARNED:
+        _log.warning("ASTERIX channels are not decoded: the ASTERIX decoder is not "
+                     "installed; %s", INSTALL_HINT)  # fmt: skip
+        _WARNED = True
+
+
 @dataclass
 class AsterixChannelDecoder:
-    """Decode one channel batch by batch; unsupported categories are counted over the
-    whole channel and become ONE rejects row per category in :meth:`finish`."""
+    """Decode one channel batch by batch. Categories we do not decode are valid input we
+    do not keep: counted per category over the whole channel in ``not_stored``
+    (``asterix_cat004``), not rejected. Without the ``asterix`` extra nothing is decoded:
+    one ``decoder_missing`` rejects row per channel with the message count, one warning
+    per process, and ``missing_decoder`` tells ingest that the file was only partly read
+    (exit code 1; the file is read again once the extra is installed)."""
 
     source_file: str
     topic: str
     metadata: Mapping[str, str] = field(default_factory=dict)
     unsupported: dict[int, Unsupported] = field(default_factory=dict)
+    not_stored: Counter = field(default_factory=Counter)
+    missing_decoder: str | None = None
+    editions: Mapping[int, str] = field(default_factory=dict)
+    learned: dict[int, str] = field(default_factory=dict)
+    _missing: list[int] = field(default_factory=list)  # [count, first log time]
+    takes_editions = True  # the registry passes the config's [asterix] editions
 
     @classmethod
-    def for_channel(cls, batch: ChannelBatch, source_file: str) -> AsterixChannelDecoder:
-        return cls(source_file, batch.topic, dict(batch.metadata))
+    def for_channel(
+        cls, batch: ChannelBatch, source_file: str, editions: Mapping[int, str] | None = None
+    ) -> AsterixChannelDecoder:
+        return cls(source_file, batch.topic, dict(batch.metadata), editions=dict(editions or {}))
 
     def feed(self, batch: ChannelBatch) -> dict[str, pa.Table]:
+        if not decoder_available():
+            _warn_missing()
+            if not self._missing:
+                self._missing = [0, int(batch.log_time_ns[0]) if len(batch) else 0]
+            self._missing[0] += len(batch)
+            self.missing_decoder = f"asterix ({INSTALL_HINT})"
+            return {}
         out = decode_asterix(
             batch.payloads, batch.log_time_ns, source_file=self.source_file, topic=self.topic,
-            metadata=self.metadata,
+            metadata=self.metadata, editions=self.editions, learned=self.learned,
         )  # fmt: skip
         for cat, u in out.unsupported.items():
             prev = self.unsupported.get(cat)
@@ -695,21 +909,18 @@ class AsterixChannelDecoder:
         return {"airfield_obs": out.obs, "asterix_service": out.service, "rejects": out.rejects}
 
     def finish(self) -> dict[str, pa.Table]:
-        cats = sorted(self.unsupported)
-        if not cats:
-            return {}
-        supported = ", ".join(f"{c:03d}" for c in sorted(SUPPORTED_CATEGORIES))
-        rejects = make_rejects(
-            [self.unsupported[c].first_log_time_ns for c in cats],
-            source_file=self.source_file,
-            topic=self.topic,
-            reason_code="unsupported_category",
-            reason=[
-                f"{self.unsupported[c].count} data blocks of CAT{c:03d} not decoded "
-                f"(supported: CAT {supported}); raw = the first block"
-                for c in cats
-            ],
-            raw=[self.unsupported[c].first_block for c in cats],
-        )
+        if any(ed != DEFAULT_EDITIONS.get(c) for c, ed in self.learned.items()):
+            restore_default_editions()  # once per channel that needed another edition
+        for c, u in sorted(self.unsupported.items()):
+            self.not_stored[f"asterix_cat{c:03d}"] += u.count
         self.unsupported = {}
+        if not self._missing:
+            return {}
+        n, t = self._missing
+        self._missing = []
+        rejects = make_rejects(
+            [t], source_file=self.source_file, topic=self.topic, reason_code=DECODER_MISSING,
+            reason=f"{n} ASTERIX messages not decoded: the ASTERIX decoder is not "
+                   f"installed; {INSTALL_HINT}",
+        )  # fmt: skip
         return {"rejects": rejects}

@@ -41,7 +41,7 @@ from collections.abc import Callable
 import numpy as np
 import polars as pl
 
-from pipeline.units import KNOT_MPS, NM_M
+from pipeline.units import KNOT_MPS, NM_M, TIME_MAX_DAYS
 
 KMH_MPS = 1.0 / 3.6
 SM_M = 1609.344
@@ -49,6 +49,8 @@ DEG = math.pi / 180.0
 _DIST_M = {"N": NM_M, "K": 1000.0, "S": SM_M}
 
 Case = tuple[pl.Expr, str, pl.Expr]
+YEAR_MIN, YEAR_MAX = 1970, 2262
+"""Calendar years of the representable range (``pipeline.units.TIME_MAX_NS``)."""
 
 
 # -- field expressions ------------------------------------------------------------------
@@ -115,10 +117,13 @@ def days_from_civil(y: np.ndarray, m: np.ndarray, d: np.ndarray) -> np.ndarray:
 
 
 def _date_days(y: pl.Series, m: pl.Series, d: pl.Series) -> pl.Series:
+    """Days since 1970-01-01, null for an invalid date or one outside the representable
+    range (1970-01-01 .. 2262-04-10: its ns would not fit an int64)."""
     ok = (m >= 1) & (m <= 12) & (d >= 1) & (d <= 31) & y.is_not_null()
-    yy, mm, dd = (s.fill_null(1).to_numpy().astype(np.int64) for s in (y, m, d))
+    ok = ok & (y >= YEAR_MIN) & (y <= YEAR_MAX)
+    yy, mm, dd = (s.fill_null(1970).to_numpy().astype(np.int64) for s in (y, m, d))
     days = days_from_civil(yy, mm, dd)
-    valid = ok.fill_null(False).to_numpy()
+    valid = ok.fill_null(False).to_numpy() & (days >= 0) & (days <= TIME_MAX_DAYS)
     return pl.Series("date_days", np.where(valid, days, 0), pl.Int64).scatter(
         np.flatnonzero(~valid), None
     )
@@ -287,9 +292,19 @@ def _zda(df: pl.DataFrame, max_speed_mps: float) -> pl.DataFrame:
     partial_date = (fld(1).is_not_null() | fld(2).is_not_null() | fld(3).is_not_null()) & (
         pl.col("date_days").is_null()
     )
+    year_out = pl.col("_y").is_not_null() & ~pl.col("_y").is_between(YEAR_MIN, YEAR_MAX)
     cases = [
         _undecodable(tod_bad(0), "bad UTC time field"),
         _undecodable(not_number(1, 2, 3, 4, 5), "a numeric field is not a number"),
+        (
+            year_out,
+            "out_of_range",
+            pl.format(
+                f"ZDA year {{}} outside {YEAR_MIN}..{YEAR_MAX} (a two-digit year?): its "
+                "time cannot be represented",
+                pl.col("_y"),
+            ),
+        ),
         _undecodable(partial_date, "bad date fields (dd, mm, yyyy)"),
         _no_data(["tod_ns"]),
     ]

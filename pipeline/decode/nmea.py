@@ -8,10 +8,15 @@ module frames the lines and routes each sentence:
 - GGA RMC VTG GSA GLL ZDA -> ``nav_gnss``; HDT HDG HDM THS ROT -> ``nav_heading``;
   VHW VBW -> ``nav_speed_log``; TTM TLL -> ``arpa_targets``; OSD -> ``arpa_own_ship``
   (field decoding in :mod:`pipeline.decode.nav_nmea`);
-- anything else -> ``rejects``.
+- any other well-formed sentence (GSV, MWV, DBT, proprietary ``$P...``, ...): valid but
+  not used, so it is COUNTED per sentence type in ``not_stored`` (``nmea_GSV``,
+  ``nmea_PGRME``; the ingest ledger's ``not_stored_json``), not stored as a reject;
+- what cannot be used -> ``rejects``.
 
 Framing (NMEA 0183 v4.10 §5.3; IEC 61162-1): a sentence starts with ``$`` or ``!``, its
-address field is a 2-letter talker + 3-letter formatter (``$P...`` proprietary), and ends
+address field is a talker of any 2 characters, letters or digits (NMEA 2000 gateways
+write ``$04HDM``, ``$24HDG``) + a 3-letter formatter, or ``P`` + a proprietary sentence
+name (``$PGRME``, ``$PASHR``), and ends
 with ``*hh``, the XOR of every character between the start character and ``*``. An IEC
 62320-1 / NMEA 4 tag block ``\\s:src,c:unix_s,g:1-2-9*hh\\`` may precede it; its ``*hh``
 is the XOR of its content. A line holding several sentences (``$GPGGA...*hh$GPRMC...*hh``,
@@ -23,8 +28,7 @@ is kept). One-digit or lower-case checksums are accepted when their value is rig
 
 Rejects (``reason_code``): ``undecodable`` (garbage, empty line, bad address field, a
 field that is not a number, a bad hemisphere/time), ``bad_checksum`` (sentence or tag
-block checksum missing or wrong), ``unsupported_sentence`` (a well-formed sentence we do
-not decode: GSV, MWV, DBT, proprietary ``$P...``, ...), ``out_of_range`` (latitude beyond
+block checksum missing or wrong), ``out_of_range`` (latitude beyond
 ±90°, longitude beyond ±180°, a speed above ``NmeaLimits.max_speed_mps``, a heading
 outside [0°, 360°], and a sentence UTC time that goes backwards against the previous
 sentence of the same talker+formatter by more than ``max_time_backstep_s``),
@@ -65,7 +69,7 @@ import pyarrow as pa
 
 from pipeline.decode.registry import make_rejects
 from pipeline.tables import conform, empty
-from pipeline.units import NS
+from pipeline.units import NS, TIME_MAX_NS
 
 DAY_NS = 86_400 * NS
 AIS_FORMATTERS = frozenset({"VDM", "VDO"})
@@ -114,11 +118,12 @@ class NmeaCarry:
 
 @dataclass(frozen=True)
 class NmeaDecoded:
-    """Rows per table (every name of ``NMEA_TABLES``, conformed), AIS message ids decoded
-    but not stored (id -> count), and the carry for the channel's next batch."""
+    """Rows per table (every name of ``NMEA_TABLES``, conformed), valid messages decoded
+    but not stored (``ais_type_<id>`` / ``nmea_<formatter>`` -> count), and the carry for
+    the channel's next batch."""
 
     tables: dict[str, pa.Table]
-    not_stored: dict[int, int]
+    not_stored: dict[str, int]
     carry: NmeaCarry
 
 
@@ -219,8 +224,9 @@ def _parse_pieces(pieces: pl.DataFrame) -> pl.DataFrame:
         tag_c=pl.col("tag_text").str.extract(r"(?:^|,)c:(\d+)", 1).cast(pl.Int64, strict=False),
         tag_source=pl.col("tag_text").str.extract(r"(?:^|,)s:([^,*]*)", 1),
     )
-    proprietary = pl.col("address").str.starts_with("P")
-    std = pl.col("address").str.contains(r"^[A-Z0-9]{5}$")
+    # talker: any 2 characters, letters or digits ("04HDM" from an NMEA 2000 gateway)
+    proprietary = pl.col("address").str.contains(r"^P[A-Z0-9]+$")
+    std = pl.col("address").str.contains(r"^[A-Z0-9]{2}[A-Z]{3}$")
     p = p.with_columns(
         talker=pl.when(proprietary)
         .then(pl.lit("P"))
@@ -230,9 +236,15 @@ def _parse_pieces(pieces: pl.DataFrame) -> pl.DataFrame:
         .then(pl.col("address"))
         .when(std)
         .then(pl.col("address").str.slice(2, 3)),
-        tag_c_ns=pl.when(pl.col("tag_c") > 100_000_000_000)
+        # the c: digits are checked against the range BEFORE the multiplication (polars
+        # int64 arithmetic wraps around silently); 20+ digits do not even cast
+        tag_c_ns=pl.when(pl.col("tag_c").is_between(100_000_000_001, TIME_MAX_NS // 1_000_000))
         .then(pl.col("tag_c") * 1_000_000)
-        .otherwise(pl.col("tag_c") * NS),
+        .when(pl.col("tag_c").is_between(0, TIME_MAX_NS // NS))
+        .then(pl.col("tag_c") * NS),
+    ).with_columns(
+        tag_c_bad=pl.col("tag_text").str.contains(r"(?:^|,)c:\d").fill_null(False)
+        & pl.col("tag_c_ns").is_null(),
     )
     code, reason = _framing_problem()
     return p.with_columns(code=code, reason=reason).select(
@@ -262,6 +274,14 @@ def _framing_problem() -> tuple[pl.Expr, pl.Expr]:
             pl.lit("no 1-2 hex digit checksum at the end of the sentence"),
         ),
         (~c("body_ok"), "bad_checksum", pl.format("NMEA checksum *{} is wrong", "ck_hex")),
+        (
+            c("tag_c_bad"),
+            "out_of_range",
+            pl.format(
+                "tag block time c:{} is outside 1970-01-01 .. 2262-04-11 UTC",
+                c("tag_text").str.extract(r"(?:^|,)c:(\d+)", 1).str.slice(0, 24),
+            ),
+        ),
         (
             c("talker").is_null(),
             "undecodable",
@@ -342,7 +362,7 @@ def decode_nmea(
     good = pieces.filter(pl.col("code").is_null())
     is_ais = pl.col("formatter").is_in(list(AIS_FORMATTERS))
     is_nav = pl.col("formatter").is_in(list(_nav_decoders()))
-    rejects.append(_unsupported_rejects(good.filter(~is_ais & ~is_nav), ctx))
+    not_stored = _not_stored(good.filter(~is_ais & ~is_nav))
     ais = _decode_ais(good.filter(is_ais), carry, final, ctx)
     nav, nav_rejects, anchor, last = _decode_nav(good.filter(is_nav), carry, limits, ctx)
     rejects += [ais.rejects, nav_rejects]
@@ -351,7 +371,8 @@ def decode_nmea(
     new_carry = NmeaCarry(
         ais=ais.carry, anchor_ns=anchor[0], anchor_recv_ns=anchor[1], last_time_ns=last
     )
-    return NmeaDecoded(tables=tables, not_stored=ais.not_stored, carry=new_carry)
+    not_stored.update({f"ais_type_{k}": v for k, v in ais.not_stored.items()})
+    return NmeaDecoded(tables=tables, not_stored=not_stored, carry=new_carry)
 
 
 def _nav_decoders() -> dict:
@@ -407,17 +428,13 @@ def _framing_rejects(pieces: pl.DataFrame, ctx: _Ctx) -> pa.Table:
     return _rejects_of(pieces.filter(pl.col("code").is_not_null()), ctx, "piece")
 
 
-def _unsupported_rejects(pieces: pl.DataFrame, ctx: _Ctx) -> pa.Table:
-    p = pieces.with_columns(
-        code=pl.lit("unsupported_sentence"),
-        reason=pl.format("{}{} sentence is not decoded", "talker", "formatter"),
-    )
-    p = p.with_columns(
-        reason=pl.when(pl.col("talker") == "P")
-        .then(pl.format("proprietary sentence {} is not decoded", "formatter"))
-        .otherwise("reason")
-    )
-    return _rejects_of(p, ctx, "piece")
+def _not_stored(pieces: pl.DataFrame) -> dict[str, int]:
+    """Well-formed sentences of a formatter we do not decode, counted per sentence type
+    (``nmea_GSV``; proprietary ``nmea_PGRME``): valid input, not a reject."""
+    if not pieces.height:
+        return {}
+    counts = pieces.group_by("formatter").len()
+    return {f"nmea_{f}": int(n) for f, n in counts.sort("formatter").iter_rows()}
 
 
 # -- AIS ---------------------------------------------------------------------------------

@@ -23,11 +23,13 @@ message encoding  schema encoding  schema name                 decoder -> tables
 ``json``          ``jsonschema``   ``foxglove.LocationFix``    foxglove_json -> nav_gnss
 ``ros1``          ``ros1msg``      ``sensor_msgs/NavSatFix``   ros1 -> nav_gnss
 ``ros1``          ``ros1msg``      ``sensor_msgs/Imu``         ros1 -> nav_heading
+``ros1``          ``ros1msg``      ``nmea_msgs/Sentence``      ros1 -> (NMEA tables)
 ``json``          ``jsonschema``   ``surveil.VasnReport``      vasn -> airfield_obs
 ``json``          ``jsonschema``   ``surveil.AirfieldTruth``   airfield_truth -> airfield_truth
 ``json``          ``jsonschema``   ``surveil.GyroSignals``     ownship -> nav_gyro_signals
 ``json``          ``jsonschema``   ``surveil.OwnshipTruth``    ownship -> ownship_truth
 ``json``          ``jsonschema``   ``surveil.FaultTruth``      fault_truth -> fault_truth
+``json``          ``jsonschema``   ``surveil.ImportReject``    import_reject -> rejects
 ``protobuf``      ``protobuf``     ``surveil.RadarTrackReport``  radar_binary -> radar_tracks
 ``cdr``           ``ros2msg``      ``surveil_msgs/msg/RadarTrackReport``  radar_binary ->
                                                                radar_tracks
@@ -50,7 +52,7 @@ at ingest: ``undecodable``, ``out_of_range``, ``bad_checksum``, ``truncated_mult
 from __future__ import annotations
 
 from collections import Counter
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -89,7 +91,8 @@ _KINDS[("json", "jsonschema", "foxglove.LocationFix")] = "foxglove_json"
 _KINDS[("json", "jsonschema", "surveil.VasnReport")] = "vasn"
 _KINDS[("json", "jsonschema", "surveil.AirfieldTruth")] = "airfield_truth"
 _KINDS.update({("ros1", "ros1msg", n): "ros1" for n in ("sensor_msgs/NavSatFix",
-                                                        "sensor_msgs/Imu")})  # fmt: skip
+                                                        "sensor_msgs/Imu",
+                                                        "nmea_msgs/Sentence")})  # fmt: skip
 CHANNEL_DECODERS = {
     "nmea": "pipeline.decode.nmea:NmeaChannelDecoder",
     "ais_json": "pipeline.decode.ais_json:AisJsonChannelDecoder",
@@ -110,6 +113,8 @@ _KINDS[("json", "jsonschema", "surveil.GyroSignals")] = "gyro_signals"
 _KINDS[("json", "jsonschema", "surveil.OwnshipTruth")] = "ownship_truth"
 CHANNEL_DECODERS["fault_truth"] = "pipeline.decode.fault_truth:FaultTruthChannelDecoder"
 _KINDS[("json", "jsonschema", "surveil.FaultTruth")] = "fault_truth"
+CHANNEL_DECODERS["import_reject"] = "pipeline.decode.import_reject:ImportRejectChannelDecoder"
+_KINDS[("json", "jsonschema", "surveil.ImportReject")] = "import_reject"
 JSON_BATCH = 100_000  # JSON messages per bulk parse (~44 MB of radar payload)
 JSON_MAX_CHUNKS = 64  # chunks a pending JSON parse may hold (bounds memory: ~64 MiB)
 JSON_RAMP_STEPS = 3  # the first parses take 1/8, 1/4, 1/2 of these limits
@@ -127,7 +132,11 @@ def decoder_kind(message_encoding: str, schema_encoding: str, schema_name: str) 
 
 
 def _open_channel_decoder(
-    kind: str, batch: ChannelBatch, source_file: str, validation: ValidationConfig | None = None
+    kind: str,
+    batch: ChannelBatch,
+    source_file: str,
+    validation: ValidationConfig | None = None,
+    asterix_editions: Mapping[int, str] | None = None,
 ) -> Any:
     """The stateful decoder of ``CHANNEL_DECODERS[kind]`` for ``batch``'s channel."""
     import importlib
@@ -136,6 +145,8 @@ def _open_channel_decoder(
     factory = getattr(importlib.import_module(module), cls)
     if getattr(factory, "takes_validation", False):
         return factory.for_channel(batch, source_file, validation)
+    if getattr(factory, "takes_editions", False):
+        return factory.for_channel(batch, source_file, asterix_editions)
     return factory.for_channel(batch, source_file)
 
 
@@ -184,13 +195,19 @@ class FileDecoder:
     objects), up to ``JSON_BATCH`` undecoded radar/truth JSON messages (of at most
     ``JSON_MAX_CHUNKS`` chunks: memory does not grow with the file), and per AIS topic at
     most a few trailing fragments of a multi-part message that continues in the next
-    chunk. ``not_stored`` counts valid AIS messages of types we do not keep.
+    chunk. ``not_stored`` counts valid messages we do not keep, per type (``ais_type_4``,
+    ``nmea_GSV``, ``asterix_cat004``): the ledger's ``not_stored_json``.
+    ``missing_decoders``: optional decoders the file needed but this installation lacks
+    (its channels got a ``decoder_missing`` reject; ingest marks the file partial).
     """
 
     source_file: str
     validation: ValidationConfig
+    asterix_editions: Mapping[int, str] = field(default_factory=dict)
     parts: dict[str, list[pa.Table]] = field(default_factory=dict)
     not_stored: Counter = field(default_factory=Counter)
+    missing_decoders: set[str] = field(default_factory=set)
+    not_stored_by_channel: dict[int, Counter] = field(default_factory=dict)
     _unknown: dict[int, _UnknownChannel] = field(default_factory=dict)
     _json: list[ChannelBatch] = field(default_factory=list)
     _json_count: int = 0
@@ -229,7 +246,7 @@ class FileDecoder:
             dec = self._channels.get(batch.channel_id)
             if dec is None:
                 dec = self._channels[batch.channel_id] = _open_channel_decoder(
-                    kind, batch, self.source_file, self.validation
+                    kind, batch, self.source_file, self.validation, self.asterix_editions
                 )
             for name, table in dec.feed(batch).items():
                 self._add(name, table)
@@ -278,10 +295,15 @@ class FileDecoder:
         """Rows per raw table not yet drained (every table of ``RAW_TABLES``, possibly
         empty), conformed."""
         self._flush_json()
-        for dec in self._channels.values():
+        for channel_id, dec in self._channels.items():
             for name, table in dec.finish().items():
                 self._add(name, table)
-            self.not_stored.update(getattr(dec, "not_stored", {}))
+            counts = getattr(dec, "not_stored", {})
+            self.not_stored.update(counts)
+            if counts:
+                self.not_stored_by_channel[channel_id] = Counter(counts)
+            if getattr(dec, "missing_decoder", None):
+                self.missing_decoders.add(dec.missing_decoder)
         self._channels.clear()
         for u in self._unknown.values():
             self._add(

@@ -50,6 +50,7 @@ schema text cannot be compiled -> one ``undecodable`` row per batch with the cou
 
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -67,6 +68,7 @@ from pipeline.units import NS
 NAVSATFIX = "sensor_msgs/msg/NavSatFix"
 IMU = "sensor_msgs/msg/Imu"
 SENTENCE = "nmea_msgs/msg/Sentence"
+ROS1_SENTENCE = "nmea_msgs/Sentence"
 LOCATIONFIX = "foxglove_msgs/msg/LocationFix"
 NAVSAT_STATUS = {-1: (0, 0), 0: (1, 1), 1: (2, 1), 2: (2, 1)}  # status -> (quality, valid)
 
@@ -379,6 +381,7 @@ class Ros2ChannelDecoder:
     dialect: str = "cdr"
     nmea_carry: Any = None
     _nmea_open: bool = field(default=False)
+    not_stored: Counter = field(default_factory=Counter)
 
     @classmethod
     def for_channel(cls, batch: ChannelBatch, source_file: str) -> Ros2ChannelDecoder:
@@ -387,6 +390,10 @@ class Ros2ChannelDecoder:
         except Exception as exc:  # a schema that does not compile: reject its messages
             fn, err = None, f"{type(exc).__name__}: {exc}"
         return cls(source_file, batch.topic, batch.schema_name, platform_of(batch), fn, err)
+
+    @property
+    def is_sentence(self) -> bool:
+        return self.schema_name in (SENTENCE, ROS1_SENTENCE)
 
     @property
     def body(self) -> str | None:
@@ -415,7 +422,7 @@ class Ros2ChannelDecoder:
             sentence = "NavSatFix"
         else:
             messages, rejects = _decode_objects(self.decode, batch, self.source_file)
-            if self.schema_name == SENTENCE:
+            if self.is_sentence:
                 return self._sentences(messages, batch, rejects)
             fixes, sentence = locationfix_columns(messages), "LocationFix"
         ctx = FixContext(self.source_file, self.topic, self.platform_id, sentence)
@@ -436,6 +443,7 @@ class Ros2ChannelDecoder:
             carry=self.nmea_carry, final=final,
         )  # fmt: skip
         self.nmea_carry = out.carry
+        self.not_stored.update(out.not_stored)
         self._nmea_open = True
         tables = dict(out.tables)
         tables["rejects"] = pa.concat_tables([tables.get("rejects", empty("rejects")), rejects])
@@ -443,18 +451,35 @@ class Ros2ChannelDecoder:
 
     def finish(self) -> Mapping[str, pa.Table]:
         """Flush an NMEA channel's open multi-part AIS message (rejected if incomplete)."""
-        if self.schema_name != SENTENCE or not self._nmea_open:
+        if not self.is_sentence or not self._nmea_open:
             return {}
-        empty_batch = ChannelBatch(0, self.topic, "cdr", SENTENCE, "ros2msg", b"",
+        empty_batch = ChannelBatch(0, self.topic, "cdr", self.schema_name, "ros2msg", b"",
                                    np.empty(0, np.int64), [])  # fmt: skip
         return self._sentences([], empty_batch, empty("rejects"), final=True)
 
 
 class Ros1ChannelDecoder(Ros2ChannelDecoder):
     """ROS 1 (``ros1`` / ``ros1msg``) ``sensor_msgs/NavSatFix`` and ``sensor_msgs/Imu``:
-    the same mapping, unpacked from the packed ROS 1 layout (no per-message fallback)."""
+    the same mapping, unpacked from the packed ROS 1 layout (no per-message fallback);
+    ``nmea_msgs/Sentence`` (``nmea_navsat_driver``): the sentence string read from the
+    packed layout, then the NMEA decoder."""
 
     @classmethod
     def for_channel(cls, batch: ChannelBatch, source_file: str) -> Ros1ChannelDecoder:
-        return cls(source_file, batch.topic, batch.schema_name, platform_of(batch), None,
+        decode = ros1_sentence if batch.schema_name == ROS1_SENTENCE else None
+        return cls(source_file, batch.topic, batch.schema_name, platform_of(batch), decode,
                    dialect="ros1")  # fmt: skip
+
+
+def ros1_sentence(payload: bytes) -> Any:
+    """ROS 1 ``nmea_msgs/Sentence``: Header (uint32 seq, time stamp = uint32 sec + uint32
+    nsec, string frame_id) + string sentence; a ROS 1 string is a uint32 length + bytes."""
+    import struct
+    from types import SimpleNamespace
+
+    (n_frame,) = struct.unpack_from("<I", payload, 12)
+    at = 16 + n_frame
+    (n,) = struct.unpack_from("<I", payload, at)
+    if at + 4 + n != len(payload):
+        raise ValueError(f"sentence length {n} does not fill the message")
+    return SimpleNamespace(sentence=bytes(payload[at + 4 : at + 4 + n]).decode("latin-1"))

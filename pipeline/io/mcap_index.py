@@ -11,6 +11,7 @@ A file without a readable summary gets the channels and counts its scan actually
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 
 import pyarrow as pa
 
@@ -92,8 +93,11 @@ def mcap_index_rows(
     summary: McapSummary | None,
     channels: dict[int, ChannelInfo],
     status: ReadStatus,
+    not_stored: Mapping[int, Mapping[str, int]] | None = None,
 ) -> pa.Table:
-    """The ``mcap_index`` rows of one file (empty for a file that is not MCAP)."""
+    """The ``mcap_index`` rows of one file (empty for a file that is not MCAP);
+    ``not_stored``: per channel id, the valid messages the decoder did not keep, per type
+    (column ``not_stored_json``, null for channels without any)."""
     if status.not_mcap:
         return empty("mcap_index")
     if summary is not None:
@@ -102,4 +106,7 @@ def mcap_index_rows(
         rows = scan_rows(source_file, size_bytes, channels, status)
     if not rows:
         return empty("mcap_index")
+    for row in rows:
+        counts = (not_stored or {}).get(row["channel_id"])
+        row["not_stored_json"] = json.dumps(dict(counts), sort_keys=True) if counts else None
     return conform("mcap_index", pa.Table.from_pylist(rows))

@@ -151,7 +151,12 @@ def read_table(
     if predicate is not None:
         expr = predicate if expr is None else expr & predicate
     dataset = DeltaTable(str(table_path(warehouse, name))).to_pyarrow_dataset()
-    table = dataset.to_table(columns=list(target.names), filter=expr).cast(target)
+    have = set(dataset.schema.names)
+    table = dataset.to_table(columns=[c for c in target.names if c in have], filter=expr)
+    for i, f in enumerate(target):  # a nullable column added to the schema after the table
+        if f.name not in have:
+            table = table.add_column(i, f, pa.nulls(table.num_rows, f.type))
+    table = table.cast(target)
     keys = spec(name).sort_by
     if table.num_rows and keys and all(k in target.names for k in keys):
         table = table.sort_by([(k, "ascending") for k in keys])  # files come in any order
@@ -168,7 +173,9 @@ def replace_rows(warehouse: Path, name: str, table: pa.Table, *, predicate_sql: 
 
     ``table`` is conformed to the canonical schema and sorted by the sort key first. A row
     of ``table`` outside the predicate makes Delta reject the whole write (``DeltaError``);
-    nothing is committed then. An empty ``table`` deletes the matching rows.
+    nothing is committed then. An empty ``table`` deletes the matching rows. A nullable
+    column added to the canonical schema after the table was created is added to the
+    table by this write (``schema_mode="merge"``; older rows read as null).
     """
     data = conform(name, table)
     s = spec(name)
@@ -179,6 +186,7 @@ def replace_rows(warehouse: Path, name: str, table: pa.Table, *, predicate_sql: 
         predicate=predicate_sql,
         partition_by=list(s.partition_by) or None,
         writer_properties=_writer_properties(),
+        schema_mode="merge",
     )
 
 

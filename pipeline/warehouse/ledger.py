@@ -45,9 +45,11 @@ def ledger_entry(
     start_time_ns: int | None,
     end_time_ns: int | None,
     ingested_at_ns: int | None = None,
+    not_stored: dict[str, int] | None = None,
 ) -> pa.Table:
-    """One conformed ledger row. ``rows`` (rows written per table) is stored as JSON;
-    ``ingested_at_ns`` defaults to the wall clock (ns since the Unix epoch)."""
+    """One conformed ledger row. ``rows`` (rows written per table) and ``not_stored``
+    (valid messages not kept, per type: ``nmea_GSV``, ``ais_type_4``, ...) are stored as
+    JSON; ``ingested_at_ns`` defaults to the wall clock (ns since the Unix epoch)."""
     if status not in STATUSES:
         raise ValueError(f"ledger status must be one of {STATUSES}, got {status!r}")
     row = {
@@ -62,6 +64,7 @@ def ledger_entry(
         "start_time_ns": start_time_ns,
         "end_time_ns": end_time_ns,
         "ingested_at_ns": time.time_ns() if ingested_at_ns is None else ingested_at_ns,
+        "not_stored_json": json.dumps(not_stored or {}, sort_keys=True),
     }
     return conform(LEDGER, pa.Table.from_pylist([row]))
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import struct
+import sys
 from datetime import UTC, date, datetime
 from pathlib import Path
 
@@ -172,14 +173,22 @@ def test_cat010_metadata_overrides_sensor_and_kind():
     assert (r["sensor_id"], r["sensor_kind"]) == ("mlat_north", "mlat")
 
 
-def test_cat010_status_message_kept_target_without_position_rejected():
-    status = cat010_record(msg_type=2, tod=36000.0)  # start of update cycle, no position
+@pytest.mark.parametrize(
+    ("msg_type", "name"),
+    [(2, "start of update cycle"), (3, "periodic status"), (4, "event-triggered status")],
+)
+def test_cat010_status_messages_go_to_asterix_service(msg_type, name):
+    status = cat010_record(msg_type=msg_type, tod=36000.0)  # no position: not a target
     lost = cat010_record(msg_type=1, tod=36001.0)  # target report without any position
-    out = decode([block(10, status, lost)], [T0])
-    (r,) = out.obs.to_pylist()
-    assert r["message_type"] == "start of update cycle" and r["x_m"] is None
+    report = cat010_record(msg_type=1, tod=36002.0, xy=(5, 6))
+    out = decode([block(10, status, lost, report)], [T0])
+    (r,) = out.service.to_pylist()
+    assert (r["message_type"], r["asterix_category"], r["sac"], r["sic"]) == (name, 10, 1, 2)
+    assert r["time_ns"] == T0 - T0 % DAY_NS + 36_000 * NS
+    (o,) = out.obs.to_pylist()
+    assert o["message_type"] == "target report" and (o["x_m"], o["y_m"]) == (5.0, 6.0)
     assert out.rejects["reason_code"].to_pylist() == ["no_position"]
-    assert out.rejects["raw"][0].as_py() == block(10, status, lost)
+    assert out.rejects["raw"][0].as_py() == block(10, status, lost, report)
 
 
 @pytest.mark.parametrize(
@@ -235,7 +244,7 @@ def test_implausible_record_rejects_its_block():
     assert "record 2" in out.rejects["reason"][0].as_py()
 
 
-def test_unsupported_category_one_reject_per_channel_with_count(tmp_path):
+def test_unsupported_category_is_counted_not_rejected(tmp_path):
     cat001 = bytes([1, 0, 6, 0x80, 1, 2])
     msgs = []
     for k in range(300):  # many chunks (1 KiB chunk size)
@@ -248,24 +257,72 @@ def test_unsupported_category_one_reject_per_channel_with_count(tmp_path):
         dec.feed(b)
     out = dec.finish()
     assert scan.status.chunks_read > 10
-    assert out["airfield_obs"].num_rows == 300
-    (rej,) = out["rejects"].to_pylist()
-    assert rej["reason_code"] == "unsupported_category"
-    assert rej["reason"].startswith("300 data blocks of CAT001")
-    assert rej["raw"] == cat001 and rej["log_time_ns"] == T0 + 1
+    assert out["airfield_obs"].num_rows == 300 and out["rejects"].num_rows == 0
+    assert dec.not_stored == {"asterix_cat001": 300}
 
 
 def test_channel_decoder_accumulates_across_batches():
     dec = AsterixChannelDecoder("f", "/t")
-    cat002 = bytes([2, 0, 6, 0x80, 1, 2])
+    cat004 = bytes([4, 0, 6, 0x80, 1, 2])
     for k in range(3):
         batch = ChannelBatch(1, "/t", "asterix", "", "", b"", np.array([T0 + k, T0 + k]),
-                             [cat002, cat002])  # fmt: skip
+                             [cat004, cat004])  # fmt: skip
         assert dec.feed(batch)["rejects"].num_rows == 0
-    (rej,) = dec.finish()["rejects"].to_pylist()
-    assert rej["reason"].startswith("6 data blocks of CAT002")
-    assert rej["log_time_ns"] == T0
-    assert dec.finish() == {}
+    assert dec.finish() == {} and dec.not_stored == {"asterix_cat004": 6}
+
+
+def _service_record(frns: dict[int, bytes]) -> bytes:
+    return fspec(sorted(frns)) + b"".join(frns[k] for k in sorted(frns))
+
+
+@pytest.mark.parametrize(
+    ("cat", "frns", "want"),
+    [
+        # CAT002 north marker: I010, I000 = 1, I030 ToD, I041 antenna period 4 s
+        (2, {1: b"\x01\x02", 2: b"\x01", 4: round(3600.5 * 128).to_bytes(3, "big"),
+             5: (4 * 128).to_bytes(2, "big")},
+         {"message_type": "north marker", "antenna_period_s": 4.0}),
+        # CAT019 MLAT periodic status: I010, I000 = 2, I140 ToD, I550 status
+        (19, {1: b"\x01\x02", 2: b"\x02", 3: round(3600.5 * 128).to_bytes(3, "big"),
+              4: b"\x00"}, {"message_type": "periodic status"}),
+        # CAT063 sensor status: I010, I015 service id 7, I030 ToD, I050 sensor SAC/SIC
+        (63, {1: b"\x01\x02", 2: b"\x07", 3: round(3600.5 * 128).to_bytes(3, "big"),
+              4: b"\x03\x04"}, {"service_id": 7}),
+        # CAT247 version number exchange: I010, I015, I140 ToD, I550 (1 x CAT 48 ed 1.21)
+        (247, {1: b"\x01\x02", 2: b"\x01", 3: round(3600.5 * 128).to_bytes(3, "big"),
+               4: b"\x01\x30\x01\x15"}, {"service_id": 1}),
+    ],
+)  # fmt: skip
+def test_service_categories_go_to_asterix_service(cat, frns, want):
+    pytest.importorskip("asterix")
+    out = decode([block(cat, _service_record(frns))], [T0])
+    assert out.rejects.num_rows == 0 and out.obs.num_rows == 0
+    (r,) = out.service.to_pylist()
+    assert (r["asterix_category"], r["sac"], r["sic"]) == (cat, 1, 2)
+    assert r["time_ns"] == T0 - T0 % DAY_NS + round(3600.5 * NS)
+    for k, v in want.items():
+        assert r[k] == v, k
+
+
+def test_without_the_asterix_extra_one_reject_per_channel_and_exit_1(tmp_path, monkeypatch):
+    from jobs.ingest import run_ingest
+    from pipeline.warehouse.delta import read_table
+
+    path = write_asterix_mcap(tmp_path / "a.mcap", [
+        ("/a", T0 + k * NS, block(10, cat010_record(xy=(k, k)))) for k in range(5)])  # fmt: skip
+    monkeypatch.setitem(sys.modules, "asterix", None)  # import asterix -> ImportError
+    summary = run_ingest([path], load_config(), tmp_path / "wh", executor="serial")
+    assert summary.exit_code == 1 and summary.files_partial == 1
+    assert "pip install 'surveil-pipeline[asterix]'" in summary.render()
+    (rej,) = read_table(tmp_path / "wh", "rejects").to_pylist()
+    assert rej["reason_code"] == "decoder_missing" and rej["reason"].startswith("5 ASTERIX")
+    (led,) = read_table(tmp_path / "wh", "ingest_ledger").to_pylist()
+    assert led["status"] == "partial" and "decoder not installed" in led["error"]
+    monkeypatch.undo()  # installed now: the file is read again
+    summary = run_ingest([path], load_config(), tmp_path / "wh", executor="serial")
+    assert summary.exit_code == 0 and summary.files_skipped == 0
+    assert read_table(tmp_path / "wh", "airfield_obs").num_rows == 5
+    assert read_table(tmp_path / "wh", "rejects").num_rows == 0
 
 
 def test_registry_routes_asterix_channels():

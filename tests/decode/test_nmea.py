@@ -104,13 +104,29 @@ def test_garbage_empty_and_junk_around_a_sentence():
     assert out["nav_heading"].num_rows == 1  # the sentence after the junk is kept
 
 
-def test_unsupported_and_proprietary_sentences():
+def test_unused_and_proprietary_sentences_are_counted_not_rejected():
     gsv = sentence("GPGSV,1,1,00")
     pashr = sentence("PASHR,204132.000,010.51,T,+00.39,-00.79,-00.84,0.151,0.075,0.555,1,0")
-    out = decode([gsv, pashr])
-    rej = rows(out, "rejects")
-    assert [r["reason_code"] for r in rej] == ["unsupported_sentence"] * 2
-    assert "GPGSV" in rej[0]["reason"] and "PASHR" in rej[1]["reason"]
+    out = decode_nmea([gsv, gsv, pashr, sentence("WIMWV,214.8,R,0.1,K,A"), HDT],
+                      times(5), source_file=SRC, topic=TOPIC, platform_id=PLATFORM)  # fmt: skip
+    assert out.tables["rejects"].num_rows == 0 and out.tables["nav_heading"].num_rows == 1
+    assert out.not_stored == {"nmea_GSV": 2, "nmea_PASHR": 1, "nmea_MWV": 1}
+
+
+@pytest.mark.parametrize("talker", ["04", "24", "II", "A1", "U0"])
+def test_any_two_character_talker_including_digits(talker):
+    """NMEA 2000 gateways write numeric talkers ($04HDM, $24HDG); CRLF, no time."""
+    lines = [sentence(f"{talker}HDM,123.4,M") + b"\r\n", sentence(f"{talker}HDG,101.1,,,3.0,E")]
+    out = decode(lines)
+    assert reasons(out) == []
+    hdg = rows(out, "nav_heading")
+    assert [r["talker"] for r in hdg] == [talker, talker]
+    assert [r["sentence"] for r in hdg] == ["HDM", "HDG"]
+
+
+def test_address_of_five_digits_or_a_lower_case_formatter_is_undecodable():
+    out = decode([sentence("12345,1"), sentence("04hdm,1.0,M")])
+    assert reasons(out) == ["undecodable", "undecodable"]
 
 
 def test_bad_address_field_undecodable():

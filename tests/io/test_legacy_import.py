@@ -211,7 +211,7 @@ def test_asterix_inputs_go_to_the_asterix_wrapper(tmp_path):
     summary = run_import([src], tmp_path / "o")
     assert len(summary.imported) + len(summary.failed) == 1
     if summary.imported:
-        assert summary.imported[0].format == "asterix"
+        assert summary.imported[0].format == "asterix:raw"
         assert Path(summary.imported[0].output).name == "cat048.raw.mcap"
 
 

@@ -11,9 +11,9 @@ Expected counts are established without the decoder under test:
   record's FSPEC ``bf df ff 02`` and SAC/SIC ``19 64`` start at byte 0x43 of the file) and
   1 CAT065 record; the other CroatiaControl raw files hold one record per block;
 - editions: SOURCES.md and the jASTERIX file names give each block's edition; the blocks
-  of editions the decoder does not read (CAT010 0.24 Sensis, CAT021 0.26, the 2008
-  CAT062 capture) must each end as ONE rejects row (``undecodable`` or ``out_of_range``,
-  depending on where the other edition's layout breaks), never as rows.
+  of editions the shipped decoder does not read (CAT010 0.24 Sensis, CAT021 0.26, the
+  2008 CAT062 capture, pre-1.0) are decoded with the editions we declare
+  (``pipeline/decode/asterix_editions.py``) and checked against jASTERIX's tests.
 """
 
 from __future__ import annotations
@@ -32,9 +32,9 @@ from pipeline.families import load_config
 from pipeline.units import NS
 
 pytestmark = pytest.mark.realdata
-SUPPORTED = {10, 20, 21, 34, 48, 62, 65}
-SERVICE = {34, 65}
-OTHER_EDITION = {"cat010ed0.24_sensis.bin", "cat021ed0.26.bin", "croatiacontrol_asterix.pcap"}
+SERVICE = {2, 19, 23, 25, 31, 34, 63, 65, 247, 252}
+SUPPORTED = {10, 20, 21, 48, 62} | SERVICE
+OTHER_EDITION: set[str] = set()  # every edition of the samples is decoded now
 # records per block where a file's blocks hold more than one (see the module docstring)
 RECORDS = {
     "croatiacontrol_cat_062_065.pcap": {62: 2, 65: 1},
@@ -76,14 +76,14 @@ def block_categories(path: Path) -> list[int]:
     return cats
 
 
-def expected(path: Path) -> tuple[int, int, Counter]:
-    """(airfield_obs rows, asterix_service rows, rejects per reason) for one file."""
+def expected(path: Path) -> tuple[int, int, Counter, Counter]:
+    """(airfield_obs rows, asterix_service rows, rejects per reason, not stored per type)
+    for one file: categories we do not decode are counted in the ledger, not rejected."""
     cats = block_categories(path)
     per = RECORDS.get(path.name, {})
     obs = svc = 0
     rejects: Counter = Counter()
-    unsupported = {c for c in cats if c not in SUPPORTED}
-    rejects["unsupported_category"] = len(unsupported)  # one row per category and channel
+    not_stored = Counter(f"asterix_cat{c:03d}" for c in cats if c not in SUPPORTED)
     for c in cats:
         if c not in SUPPORTED:
             continue
@@ -93,7 +93,7 @@ def expected(path: Path) -> tuple[int, int, Counter]:
             svc += per.get(c, 1)
         else:
             obs += per.get(c, 1)
-    return obs, svc, +rejects
+    return obs, svc, +rejects, not_stored
 
 
 @pytest.fixture(scope="module")
@@ -108,7 +108,7 @@ def ingested(tmp_path_factory):
     wrapped = {wrap_asterix_file(p, tmp / "mcap"): p for p in files}
     summary = run_ingest(list(wrapped), load_config(), tmp / "wh", executor="serial")
     tables = {n: read_table(tmp / "wh", n) for n in ("airfield_obs", "asterix_service",
-                                                     "rejects")}  # fmt: skip
+                                                     "rejects", "ingest_ledger")}  # fmt: skip
     by_source = {str(k.resolve()): v for k, v in wrapped.items()}
     return files, summary, tables, by_source
 
@@ -126,8 +126,10 @@ def test_every_file_ingests_with_the_expected_counts(ingested):
     obs = _rows_of(tables["airfield_obs"], by_source)
     svc = _rows_of(tables["asterix_service"], by_source)
     rej = _rows_of(tables["rejects"], by_source)
+    ledger = _rows_of(tables["ingest_ledger"], by_source)
     for path in files:
-        n_obs, n_svc, reasons = expected(path)
+        n_obs, n_svc, reasons, not_stored = expected(path)
+        assert json.loads(ledger[path.name][0]["not_stored_json"]) == dict(not_stored)
         got = Counter(r["reason_code"] for r in rej.get(path.name, []))
         other = got.pop("undecodable", 0) + got.pop("out_of_range", 0)
         assert len(obs.get(path.name, [])) == n_obs, path.name
@@ -136,12 +138,19 @@ def test_every_file_ingests_with_the_expected_counts(ingested):
         assert got == reasons, path.name
 
 
-def test_unsupported_category_rows_count_blocks(ingested):
+def test_unsupported_categories_are_counted_per_block_in_the_ledger(ingested):
     _, _, tables, by_source = ingested
-    rej = _rows_of(tables["rejects"], by_source)
-    (row,) = rej["cat004ed1.4.bin"]  # three CAT004 blocks in one file -> one row
-    assert row["reason_code"] == "unsupported_category"
-    assert row["reason"].startswith("3 data blocks of CAT004")
+    assert "cat004ed1.4.bin" not in _rows_of(tables["rejects"], by_source)
+    (led,) = _rows_of(tables["ingest_ledger"], by_source)["cat004ed1.4.bin"]
+    assert json.loads(led["not_stored_json"]) == {"asterix_cat004": 3}  # three blocks
+
+
+@pytest.mark.parametrize("name", ["cat002ed1.0.bin", "cat019ed1.3.bin", "cat063ed1.0.bin",
+                                  "cat247ed1.2.bin", "cat252ed7.0.bin"])  # fmt: skip
+def test_service_categories_land_in_asterix_service(ingested, name):
+    _, _, tables, by_source = ingested
+    (row,) = _rows_of(tables["asterix_service"], by_source)[name]
+    assert row["asterix_category"] == int(name[3:6])
 
 
 def test_croatiacontrol_reference_decode_matches_field_by_field(ingested):
@@ -173,6 +182,42 @@ def test_croatiacontrol_reference_decode_matches_field_by_field(ingested):
     assert svc["service_id"] == item["I015"]["SID"]
     assert svc["batch_number"] == item["I020"]["BTN"]
     assert svc["time_ns"] == day + round(item["I030"]["ToD"] * NS)
+
+
+def test_cat010_edition_024_matches_the_jasterix_expectations(ingested):
+    """hpuhr/jASTERIX src/test/test_cat010_0.24_sensis.cpp."""
+    _, _, tables, by_source = ingested
+    (r,) = _rows_of(tables["airfield_obs"], by_source)["cat010ed0.24_sensis.bin"]
+    assert (r["sac"], r["sic"], r["track_number"]) == (0, 0, 922)
+    assert r["lat_deg"] == pytest.approx(25.62264827080070972443, abs=1e-10)
+    assert r["lon_deg"] == pytest.approx(22.1754983067512512207, abs=1e-10)
+    assert (r["x_m"], r["y_m"]) == (-1423.0, 1368.0)
+    assert (r["vx_mps"], r["vy_mps"]) == (-8.0, 1.0)
+    assert r["target_address"] == 4672673
+    assert (r["sigma_x_m"], r["sigma_y_m"]) == (2.5, 3.25)
+    assert r["time_ns"] == round(84080.484375 * NS)
+
+
+def test_cat021_edition_026_matches_the_jasterix_expectations(ingested):
+    """hpuhr/jASTERIX src/test/test_cat021_0.26.cpp."""
+    _, _, tables, by_source = ingested
+    (r,) = _rows_of(tables["airfield_obs"], by_source)["cat021ed0.26.bin"]
+    assert (r["sac"], r["sic"], r["target_address"]) == (0, 5, 4811822)
+    assert r["lat_deg"] == pytest.approx(38.77732336521148681641, abs=1e-12)
+    assert r["lon_deg"] == pytest.approx(-9.131237268447875976563, abs=1e-12)
+    assert r["time_ns"] == round(14418.484375 * NS)
+
+
+def test_2008_cat062_capture_decodes_with_the_pre_1_0_edition(ingested):
+    """The 2008 CroatiaControl capture: 100 system tracks of SAC/SIC 25/100, each within
+    a second of its capture time, over the Adriatic / Balkans, at airliner speeds."""
+    _, _, tables, by_source = ingested
+    rows = _rows_of(tables["airfield_obs"], by_source)["croatiacontrol_asterix.pcap"]
+    assert len(rows) == 100 and {(r["sac"], r["sic"]) for r in rows} == {(25, 100)}
+    assert all(abs(r["time_ns"] - r["log_time_ns"]) < NS for r in rows)
+    assert all(40 < r["lat_deg"] < 48 and 12 < r["lon_deg"] < 22 for r in rows)
+    speeds = [math.hypot(r["vx_mps"], r["vy_mps"]) for r in rows if r["vx_mps"] is not None]
+    assert len(speeds) > 50 and 50 < sorted(speeds)[len(speeds) // 2] < 300
 
 
 def test_cat010_matches_the_jasterix_expectations(ingested):

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import csv
 import io
+import json
 import math
 import re
 from collections import Counter
@@ -69,6 +70,18 @@ def warehouse(tmp_path_factory) -> tuple[Path, dict[str, dict[str, int]], dict]:
         key = [pl.col("file"), pl.lit(name) if name != "rejects" else pl.col("reason_code")]
         for f, k, n in df.group_by(key).len().iter_rows():
             got.setdefault(f, Counter())[k if name == "rejects" else name] += n
+    index = pl.from_arrow(read_table(tmp / "wh", "mcap_index"))
+    per_file: dict[str, Counter] = {}
+    for f, j in index.select("source_file", "not_stored_json").iter_rows():
+        per_file.setdefault(Path(f).name.removesuffix(".mcap"), Counter()).update(
+            json.loads(j) if j else {}
+        )
+    got["__index__"] = per_file  # type: ignore[assignment]
+    ledger = pl.from_arrow(read_table(tmp / "wh", "ingest_ledger"))
+    got["__ledger__"] = {  # type: ignore[assignment]
+        Path(f).name.removesuffix(".mcap"): json.loads(j)
+        for f, j in ledger.select("source_file", "not_stored_json").iter_rows()
+    }
     return root, got, frames
 
 
@@ -201,10 +214,23 @@ def expected_nmea(path: Path) -> Counter:
             table, data = NAV[fmt]
             empty = all((fields[i].strip() if i < len(fields) else "") == "" for i in data)
             want["no_data" if empty else table] += 1
-        elif fmt not in ("VDM", "VDO"):
-            want["unsupported_sentence"] += 1
-    want.update({k: v for k, v in _ais_counts(good).items() if not k.startswith("not_stored")})
+        elif fmt not in ("VDM", "VDO"):  # valid, not decoded: counted in the ledger
+            want[f"nmea_{fmt}"] += 1
+    want.update(_ais_counts(good))
     return want
+
+
+def split_not_stored(want: Counter) -> tuple[Counter, Counter]:
+    """``(rows and rejects, valid messages not stored)`` of an expectation."""
+    rest, not_stored = Counter(), Counter()
+    for k, v in want.items():
+        if k.startswith("nmea_"):
+            not_stored[k] = v
+        elif k.startswith("not_stored_"):
+            not_stored[f"ais_type_{k.removeprefix('not_stored_')}"] = v
+        else:
+            rest[k] = v
+    return rest, not_stored
 
 
 def expected_csv(path: Path) -> Counter:
@@ -241,7 +267,11 @@ def test_counts_per_file_match_a_plain_reading(warehouse, name):
     root, got, _ = warehouse
     (path,) = [p for p in _inputs(root) if p.name == name]
     want = expected_csv(path) if path.suffix == ".csv" else expected_nmea(path)
+    want, not_stored = split_not_stored(want)
     assert dict(got.get(name, Counter())) == dict(+want)
+    if path.suffix != ".csv":  # valid but unused sentences: counted per type, not rejected
+        assert got["__ledger__"][name] == dict(not_stored)
+        assert dict(got["__index__"][name]) == dict(not_stored)  # the channels' sum
 
 
 def test_sources_md_facts(warehouse):

@@ -64,3 +64,23 @@ def test_is_unchanged_rules(tmp_path):
     assert table_version(tmp_path, "ingest_ledger") == v + 1
     assert read_table(tmp_path, "ingest_ledger").num_rows == 3
     assert lookup(tmp_path, "/a.mcap")["sha256"] == "new"
+
+
+def test_not_stored_column_is_added_to_a_ledger_written_before_it(tmp_path):
+    """A warehouse whose ledger predates ``not_stored_json``: reads give null for the old
+    rows, and the next entry adds the column (schema merge) instead of failing."""
+    from deltalake import write_deltalake
+
+    from pipeline.warehouse.delta import table_path
+
+    old = entry("/a.mcap", "aa").drop_columns(["not_stored_json"])
+    write_deltalake(str(table_path(tmp_path, "ingest_ledger")), old)
+    (row,) = read_table(tmp_path, "ingest_ledger").to_pylist()
+    assert row["source_file"] == "/a.mcap" and row["not_stored_json"] is None
+    new = ledger_entry("/b.mcap", size_bytes=1, sha256="bb", status="ok", error=None,
+                       message_count=3, rows={}, rejects_count=0, start_time_ns=1,
+                       end_time_ns=2, not_stored={"nmea_GSV": 2})  # fmt: skip
+    write_entry(tmp_path, new)
+    rows = {r["source_file"]: r for r in read_table(tmp_path, "ingest_ledger").to_pylist()}
+    assert rows["/a.mcap"]["not_stored_json"] is None
+    assert json.loads(rows["/b.mcap"]["not_stored_json"]) == {"nmea_GSV": 2}
