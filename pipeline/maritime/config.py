@@ -170,6 +170,8 @@ class ChannelIntegrityConfig:
       transponder only its reports out of the identification vote: the radars' q is the
       smaller;
     - ``readmit_run``: consecutive passing checks that readmit an excluded channel;
+    - ``radar_confirm``: epochs in a row a radar must fail (upper tail) before it is
+      excluded (1: at the first failure, the airfield rule; the flag is never delayed);
     - ``exclusion``: false records every check but fuses and identifies with every channel;
     - ``ais_sigma_position_m``: AIS position sigma the test assumes (the transponder's
       GNSS), ``ais_max_age_s``: an AIS report is a reference this long after it was sent;
@@ -192,6 +194,7 @@ class ChannelIntegrityConfig:
     radar_q: float = probability(0.001)
     ais_q: float = probability(0.01)
     readmit_run: int = count(5)
+    radar_confirm: int = count(2)
     exclusion: bool = setting(True)
     ais_sigma_position_m: float = positive(3.0)
     ais_max_age_s: float = positive(10.0)

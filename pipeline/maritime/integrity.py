@@ -67,8 +67,12 @@ Exclusion and readmission follow the airfield rule
 (:func:`pipeline.filters.integrity.step_exclusion`): excluded on a failure of an upper
 threshold (eta = 1 from the lower tail of the NIS sum, a channel agreeing better than
 its sigmas, is recorded but excludes nothing: it harms no fusion), readmitted after
-``readmit_run`` passing checks in a row. With ``exclusion = false`` every check is
-recorded and nothing is excluded.
+``readmit_run`` passing checks in a row. One deviation for radars: an upper-tail failure
+excludes once ``radar_confirm`` (2) epochs in a row failed. A radar false alarm would
+otherwise take a good radar out of every sector for ``readmit_run`` epochs (~2 % of a
+fault-free hour at radar_q = 0.001), leaving a sector to a radar 4x worse; confirmation
+costs one epoch of exclusion delay on a real fault (the flag itself is not delayed).
+With ``exclusion = false`` every check is recorded and nothing is excluded.
 
 The loop runs over epochs; inside it every track, radar row and AIS report of the epoch
 is one array operation.
@@ -480,6 +484,7 @@ class _State:
     ais_jumped: np.ndarray
     ais_sector: np.ndarray  # sector of the transponder's last report
     rad_age: np.ndarray  # epochs each radar group has been excluded in a row
+    rad_fail: np.ndarray  # epochs each radar group has failed in a row (upper tail)
 
 
 @dataclass(eq=False)
@@ -567,7 +572,8 @@ def check_channels(
     st = _State(np.zeros(n_groups, bool), np.zeros(n_groups, np.int64), np.zeros(M, bool),
                 np.zeros(M, np.int64), np.full(M, -1, np.int64), np.zeros(M, np.int64),
                 np.zeros(M, np.int64), np.full(M, -1, np.int64), np.zeros(M, np.int64),
-                np.zeros(M, bool), np.full(M, G, np.int64), np.zeros(n_groups, np.int64))
+                np.zeros(M, bool), np.full(M, G, np.int64), np.zeros(n_groups, np.int64),
+                np.zeros(n_groups, np.int64))
     ro = _RadarOut(*(np.zeros((K, n_groups), t) for t in (bool, bool, bool, np.int8,
                                                             np.int64, float, float)),
                    np.full((K, n_groups, 3), np.nan),
@@ -622,6 +628,7 @@ def check_channels(
         expected = np.where(np.repeat(tracking[k], G + 1), expected, 0)
         below, checked = _radar_decisions(k, grp, expected, missed, scan_down[k],
                                           site_sectors, G, thr, ic, ro)
+        upper = ~below & checked
         if ic.exclusion:
             in_fault = st.rad_age > lasting
             # only an upper-tail failure excludes: a NIS sum below d1 (the channel agrees
@@ -629,9 +636,11 @@ def check_channels(
             # and a group that cannot be checked while its site publishes scans and fails
             # nowhere counts a pass (after an outage, a sector where the radar has no
             # testable track would otherwise stay excluded for good)
-            failing = (~below & checked).reshape(C, G + 1).any(axis=1) | scan_down[k]
+            failing = upper.reshape(C, G + 1).any(axis=1) | scan_down[k]
             idle = st.rad_excl & ~checked & ~np.repeat(failing, G + 1)
-            st.rad_excl, st.rad_run = step_exclusion(st.rad_excl, st.rad_run, ~below & checked,
+            st.rad_fail = np.where(checked, np.where(upper, st.rad_fail + 1, 0), st.rad_fail)
+            confirmed = upper & (st.rad_fail >= ic.radar_confirm)
+            st.rad_excl, st.rad_run = step_exclusion(st.rad_excl, st.rad_run, confirmed,
                                                      below | idle, checked | idle,
                                                      ic.readmit_run)
             if (in_fault & ~st.rad_excl).any():
@@ -646,7 +655,9 @@ def check_channels(
         if db > da:
             lapsed = (st.ais_ref >= 0) & (st.ais_ref_seen < t_k - timeout_ns)
             st.ais_ref[lapsed] = -1
-            pic = _picture(rad, a, b, s0, s1, in_service, (st.rad_age > lasting)[g])
+            # a radar failing now is no reference for the transponders, confirmed or not
+            trusted_now = in_service & ~(upper[g] if ic.exclusion else False)
+            pic = _picture(rad, a, b, s0, s1, trusted_now, (st.rad_age > lasting)[g])
             _ais_epoch(da, db, ais, pic, st, gate, thr, ic, ao)
 
     health = _health_frame(ro, ao, epochs, scan_gap, ais, cfg, sector_names, thr, ic)
