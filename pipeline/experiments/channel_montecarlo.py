@@ -24,8 +24,11 @@ Per injected fault (one row per affected channel: a swap is two):
   each radar alone on the same points (the best of them is the goal for a radar bias
   jump).
 
-Fault-free runs give the share of decisions flagged per sensor kind (q = 0.01 for radars
-and AIS, ``gnss_q`` + the gate's 3-sigma tail for GNSS).
+Fault-free runs give the share of decisions flagged per sensor kind (against radar_q,
+ais_q; the GNSS position test against ``gnss_q`` and the filter's gate against its 3-sigma
+tail, apart) and the share of decisions after which the channel was excluded (what false
+alarms cost the fused picture: a radar is excluded after ``radar_confirm`` failures in a
+row).
 """
 
 from __future__ import annotations
@@ -146,8 +149,9 @@ def run_seed(unit: McUnit) -> dict[str, pl.DataFrame]:
 def _false_alarms(health: pl.DataFrame, key: str) -> pl.DataFrame:
     return health.filter(pl.col("eta").is_not_null()).group_by(key).agg(
         pl.len().alias("decisions"), (pl.col("eta") == 1).sum().alias("flagged"),
-        pl.col("q").mean().alias("q"),
-    ).rename({key: "sensor_kind"}).select("sensor_kind", "decisions", "flagged", "q")
+        pl.col("q").mean().alias("q"), pl.col("excluded").sum().alias("excluded"),
+    ).rename({key: "sensor_kind"}).select("sensor_kind", "decisions", "flagged", "q",
+                                          "excluded")
 
 
 def _points(errors: pl.DataFrame, source: str, t0: int, t1: int) -> pl.DataFrame:
@@ -250,11 +254,12 @@ def _gnss_seed(unit: McUnit) -> tuple[pl.DataFrame, pl.DataFrame]:
     pos = sol_c.filter(pl.col("gnss_nis").is_not_null()).select(
         pl.lit("gnss_position").alias("sensor_kind"), pl.len().alias("decisions"),
         ((pl.col("gnss_nis") <= d1) | (pl.col("gnss_nis") >= d2)).sum().alias("flagged"),
-        pl.lit(oc.nav.gnss_q).alias("q"))
+        pl.lit(oc.nav.gnss_q).alias("q"), pl.col("gnss_excluded").sum().alias("excluded"))
     gate = sol_c.filter(pl.col("gate").is_not_null()).select(
         pl.lit("gnss_gate").alias("sensor_kind"), pl.len().alias("decisions"),
         (pl.col("gate") == "reject").sum().alias("flagged"),
-        pl.lit(math.erfc(oc.model.settings.gate_n_sigma / math.sqrt(2.0))).alias("q"))
+        pl.lit(math.erfc(oc.model.settings.gate_n_sigma / math.sqrt(2.0))).alias("q"),
+        (pl.col("gate") == "reject").sum().alias("excluded"))  # a rejected fix is not used
     return pl.DataFrame(rows), pl.concat([pos, gate], how="vertical_relaxed")
 
 
@@ -326,10 +331,12 @@ def summarise(res: dict[str, pl.DataFrame]) -> pl.DataFrame:
     ).with_columns(pl.lit(None, pl.Float64).alias("false_alarm_share"),
                    pl.lit(None, pl.Float64).alias("q"))
     fa = res["false_alarms"].group_by("sensor_kind").agg(
-        pl.col("decisions").sum(), pl.col("flagged").sum(), pl.col("q").mean())
+        pl.col("decisions").sum(), pl.col("flagged").sum(), pl.col("q").mean(),
+        pl.col("excluded").sum())
     fa = fa.select(
         pl.lit("(fault-free)").alias("kind"), "sensor_kind",
         pl.col("decisions").cast(pl.UInt32).alias("runs"),
-        (pl.col("flagged") / pl.col("decisions")).alias("false_alarm_share"), "q")
+        (pl.col("flagged") / pl.col("decisions")).alias("false_alarm_share"), "q",
+        (pl.col("excluded") / pl.col("decisions")).alias("false_exclusion_share"))
     return pl.concat([faults.sort("sensor_kind", "kind"), fa.sort("sensor_kind")],
                      how="diagonal_relaxed")
