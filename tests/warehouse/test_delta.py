@@ -208,3 +208,17 @@ def test_a_table_written_before_its_schema_gained_a_column(tmp_path):
     assert read_table(tmp_path, "truth").equals(read_table(tmp_path, "truth").cast(schema("truth")))
     register_tables(con, tmp_path, ["truth"])
     assert con.execute("SELECT count(*) FROM truth").fetchone() == (rows.num_rows,)
+
+
+def test_a_column_doc_edited_since_the_table_was_written(tmp_path):
+    """A column's doc changed in schemas/ after the table was created (main's rejects.stage):
+    delta-rs refuses a write whose column metadata differs; the write keeps the table's."""
+    from deltalake import write_deltalake
+
+    from pipeline.tables import conform
+
+    rows = conform("truth", truth_rows(hours(0, 2)))
+    old = pa.schema([f.with_metadata({"doc": "an older doc"}) for f in rows.schema])
+    write_deltalake(str(table_path(tmp_path, "truth")), rows.cast(old), partition_by=["date"])
+    replace_window(tmp_path, "truth", rows, start_ns=T0, end_ns=T0 + DAY)
+    assert read_table(tmp_path, "truth").num_rows == rows.num_rows
