@@ -616,6 +616,30 @@ def channel_faults(st: _State, runs, first_seed, executor, fmt, out_path) -> Non
     click.echo(format_report(summarise(res).to_arrow(), fmt, title="channel faults Monte Carlo"))
 
 
+@experiment.command()
+@click.option("--runs", type=click.IntRange(1, 1000), default=50, show_default=True,
+              help="simulated runs (seeds first-seed .. first-seed + runs - 1)")
+@click.option("--first-seed", type=int, default=1, show_default=True)
+@click.option("--duration", default="30m", show_default=True,
+              help="length of each run (the paper's scenario: the turn is in minutes 15-19)")
+@click.option("--per-seed", is_flag=True, help="one row per seed instead of the summary")
+@_EXECUTOR
+@click.option("--format", "fmt", type=click.Choice(["table", "csv", "json"]), default="table",
+              show_default=True)
+@click.pass_obj
+def ownship(st: _State, runs, first_seed, duration, per_seed, executor, fmt) -> None:
+    """Own-ship heading over seeds (gyro/GNSS/log paper): integrated heading RMS and max
+    after convergence per seed against truth, the gyro alone, the gate's rejections."""
+    from jobs.report import format_report
+    from pipeline.experiments.ownship_montecarlo import run_montecarlo, summarise
+
+    table = run_montecarlo(st.cfg, seeds=range(first_seed, first_seed + runs),
+                           duration_s=_duration_s(duration),
+                           executor=executor or st.cfg.execution.executor)
+    out = table if per_seed else summarise(table)
+    click.echo(format_report(out.to_arrow(), fmt, title="ownship Monte Carlo"))
+
+
 @cli.command("gaps-montecarlo")
 @click.option("--runs", type=click.IntRange(1, 1000), default=20, show_default=True,
               help="simulated runs (seeds first-seed .. first-seed + runs - 1)")

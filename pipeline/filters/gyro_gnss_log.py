@@ -62,9 +62,19 @@ for its gyro under roll and a full turn).
   from :mod:`pipeline.filters.current_log`, smoothed over ``speed_smoothing_s``: V from
   SOG would put the current into the term (measured: 0.35 deg RMS heading error with a
   0.3 m/s current against 0.07 deg without). K-dot is the gyro heading change minus the
-  change of alpha^: each step is updated twice, the second time with K-dot from the first
-  posterior (the predicted alpha change is ~8x noisier and its error is correlated with
-  the step's process noise). The errors of a_s enter Q, R11 and M like the roll noise.
+  change of alpha over the step, (dK_P - alpha_k + alpha_{k-1}) / dt, with alpha_{k-1}
+  cloned into the state for the step, so a_s is linear in the state (no iteration, and
+  a correction of alpha's level is not read as a turn). The errors of a_s beyond that
+  (speed through water, ``cross_accel_sigma_mps2``) enter Q, R11 and M like the roll
+  noise.
+
+**Heading in the model (extended Kalman filter).** The filter's heading is K_P - alpha^,
+so every sin K / cos K above depends on the state. The mean is propagated and predicted
+with the estimated heading; the covariance and gain use the derivatives with respect to
+alpha of W cos K and a_s sin K in the prediction (dF/dK, dGamma/dK, exact by Van Loan)
+and in y1. A speed change and a turn thus inform alpha; without these derivatives the
+filter was overconfident while converging (NEES ~4 at 300-600 s) and its heading RMS
+after 600 s exceeded 0.1 deg on 6-17 % of seeds (docs/ownship.md §4).
 
 **Gate (paper, eq. 3)** before each update with a GNSS acceleration:
 |W_o - W^-| <= n_sigma sqrt(P66^- + sigma_w^2), n_sigma = 3; when it fails, W keeps its
@@ -186,6 +196,47 @@ def continuous_model(
     return A, G, B
 
 
+def heading_derivative(
+    heading_rad: np.ndarray, m: NavFilterModel
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(dA/dK, dB/dK)`` of :func:`continuous_model` for the terms of a_N whose size is
+    known apart from the gyro: W cos K (W from GNSS) and -a_s sin K (a_s from the turn
+    rate and the speed). Shapes (n, 6, 6) and (n, 6, 1).
+
+    The roll term z phi-ddot sin K is left out on purpose: roll reaches the gyro only
+    through that product, so a heading error in it is a rescaling of the roll states by
+    (1 + e cot K), which they absorb; its derivative is not an independent direction
+    (measured: with it, alpha converged slower at a 60 deg heading, same at 90 deg).
+    """
+    n = np.shape(heading_rad)[0]
+    Ta = m.gyro.amplifier_time_constant_s
+    dA = np.zeros((n, N_STATE, N_STATE))
+    dA[:, ID, IW] = -np.sin(heading_rad) / (G_MPS2 * Ta)
+    dB = np.zeros((n, N_STATE, 1))
+    dB[:, ID, 0] = -np.cos(heading_rad) / (G_MPS2 * Ta)
+    return dA, dB
+
+
+def discrete_heading_derivative(
+    A: np.ndarray, B: np.ndarray, dA: np.ndarray, dB: np.ndarray, dt_s: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(dF/dK, dGamma/dK)`` of the step's F = e^{A dt} and Gamma = int e^{As} ds B,
+    exactly: with C = [[A, B], [0, 0]], the derivative of e^{C dt} along dC is the
+    upper-right block of exp([[C, dC], [0, C]] dt) (Van Loan 1978)."""
+    n, d, p = B.shape
+    q = d + p
+    C = np.zeros((n, q, q))
+    C[:, :d, :d], C[:, :d, d:] = A, B
+    dC = np.zeros((n, q, q))
+    dC[:, :d, :d], dC[:, :d, d:] = dA, dB
+    big = np.zeros((n, 2 * q, 2 * q))
+    big[:, :q, :q] = C
+    big[:, :q, q:] = dC
+    big[:, q:, q:] = C
+    dE = kalman.expm(big * dt_s)[:, :q, q:]
+    return dE[:, :d, :d], dE[:, :d, d:]
+
+
 @dataclass(frozen=True)
 class StepModel:
     """Discrete model of one step for n filters (see :func:`step_model`)."""
@@ -197,6 +248,8 @@ class StepModel:
     R: np.ndarray  # (n, 3, 3) main-mode measurement covariance incl. the D w term
     M: np.ndarray  # (n, 6, 3) E[w_{k-1} v_k']
     u_gain: np.ndarray  # (n,) U_y = u_gain * a_s
+    F_dheading: np.ndarray  # (n, 6, 6) derivative of F with respect to the heading
+    Gamma_dheading: np.ndarray  # (n, 6, 1) derivative of Gamma with respect to the heading
 
 
 def step_model(
@@ -237,7 +290,8 @@ def step_model(
     R[:, 0, 0] = s.accelerometer_sigma_rad**2 + np.einsum("ni,nij,nj->n", d1, Q[:, roll, roll], d1)
     R[:, 1, 1] = s.amplifier_sigma_rad**2
     R[:, 2, 2] = s.gnss_accel_sigma_mps2**2
-    return StepModel(F, Q, Gamma, H, R, M, -sK / G_MPS2)
+    dF, dGamma = discrete_heading_derivative(A, B, *heading_derivative(heading_rad, m), dt_s)
+    return StepModel(F, Q, Gamma, H, R, M, -sK / G_MPS2, dF, dGamma)
 
 
 def cross_input_noise(
@@ -322,18 +376,15 @@ class _Carry:
     speed: np.ndarray  # (n,) smoothed speed through water, m/s
 
 
-def _headings(x: np.ndarray, kp: np.ndarray, c: _Carry, dt: float,
-              k_a: float) -> tuple[np.ndarray, np.ndarray]:
-    """Corrected heading K = K_P - alpha^ in the middle and at the end of the step
-    (alpha changes by about -k_a delta dt over it). Without a gyro heading: the last
-    GNSS track."""
+def _heading_mid(x: np.ndarray, kp: np.ndarray, c: _Carry, dt: float,
+                 k_a: float) -> np.ndarray:
+    """Corrected heading K = K_P - alpha^ in the middle of the step (alpha changes by
+    about -k_a delta dt over it). Without a gyro heading: the last GNSS track."""
     track = _z(np.arctan2(c.v_last[:, 0], c.v_last[:, 1]))
     turn = _z(_wrap(kp - c.kp_prev))
     d_alpha = -k_a * x[:, ID] * dt
     has = np.isfinite(kp)
-    mid = np.where(has, kp - 0.5 * turn - (x[:, IA] + 0.5 * d_alpha), track)
-    end = np.where(has, kp - (x[:, IA] + d_alpha), track)
-    return mid, end
+    return np.where(has, kp - 0.5 * turn - (x[:, IA] + 0.5 * d_alpha), track)
 
 
 def run_filter(
@@ -346,15 +397,14 @@ def run_filter(
     last ACCEPTED fix, split along (W_o, y3) and across the heading; gate eq. 3 on W_o,
     and the same 3-sigma rule across the heading against the predicted centripetal
     acceleration; a rejected fix gives no y3 (W keeps its prediction) and is not used
-    for later differences. The centripetal input is a_s = V_w K-dot with the speed
-    through water V_w from the current/log-bias estimator
-    (``pipeline.filters.current_log``) and a smoothed GNSS speed. The turn rate is the
-    gyro heading change minus the change of alpha^; the step is updated twice, the
-    second time with the turn rate from the first posterior (the predicted alpha
-    change is ~8x noisier, and its error is correlated with the step's process noise).
-    In the emergency mode y3 is the log speed difference with the log's sigma (paper:
-    same structure, other covariances). Without y1/y2 (no gyro signals logged) only y3
-    updates the state and alpha keeps its prior.
+    for later differences. In the emergency mode y3 is the log speed difference with
+    the log's sigma (paper: same structure, other covariances). Without y1/y2 (no gyro
+    signals logged) only y3 updates the state and alpha keeps its prior.
+
+    The heading K = K_P - alpha is a function of the state, and so is the turn rate
+    (see :func:`_step_prior`): the step is an extended Kalman filter in alpha, with the
+    previous alpha carried as a cloned state so that a_s = V_w (dK_P - alpha_k +
+    alpha_{k-1}) / dt is linear in the (augmented) state.
     """
     from pipeline.filters import current_log
 
@@ -373,48 +423,37 @@ def run_filter(
                np.full(n, np.nan))
     for k in range(T):  # time steps: sequential by nature
         kp = inp.gyro_heading_rad[:, k]
-        K_mid, K_end = _headings(x, kp, c, dt, k_a)
+        K_mid = _heading_mid(x, kp, c, dt, k_a)
         sm = step_model(_z(inp.lat_rad[:, k]), K_mid, dt, m)
-        x_pred, P_pred = kalman.predict(x, P, sm.F, sm.Q)
         cur, Pc = current_log.predict(cur, Pc, dt, cl)
-        c.speed = c.speed + _z(x_pred[:, IW]) * dt  # dV_w/dt = W
+        c.speed = c.speed + _z(sm.F[:, IW, IW] * x[:, IW]) * dt  # dV_w/dt = W
         Vw, sig_Vw = _z(c.speed), _speed_sigma(Pc, cur, c, s, cl)
-        k_dot = _turn_rate(kp, c.kp_prev, x[:, IA], x_pred[:, IA], sm.Gamma[:, IA, 0] * Vw, dt)
-        g = _gnss_step(inp, k, c, K_mid, x_pred, P_pred, Vw * k_dot,
-                       np.hypot(sig_Vw * k_dot, s.cross_accel_sigma_mps2), s)
+        pr = _step_prior(x, P, sm, K_mid, kp, c.kp_prev, Vw, sig_Vw, dt, m)
+        g = _gnss_step(inp, k, c, K_mid, pr.x[:, :N_STATE], pr.P[:, :N_STATE, :N_STATE],
+                       pr.a_s, pr.sig_as, s)
         z = np.stack([inp.accel_signal_rad[:, k], inp.amplifier_rad[:, k], g.w_obs], axis=1)
         use = np.isfinite(z)
         use[:, :2] &= np.isfinite(kp)[:, None]
         use[:, 2] &= g.use_w  # a failed gate: no y3 (W stays as predicted)
-        R = sm.R.copy()
+        R = pr.R.copy()
         R[:, 2, 2] = g.sig_w**2
-        for it in range(2):  # second pass: turn rate from the first posterior
-            a_s = Vw * k_dot
-            sig_as = np.hypot(sig_Vw * k_dot, s.cross_accel_sigma_mps2)
-            dQ, dR11, dM1 = cross_input_noise(sm, sig_as)
-            Ri, Mi, U = R.copy(), sm.M.copy(), np.zeros((n, 3))
-            Ri[:, 0, 0] += dR11
-            Mi[:, :, 0] += dM1
-            U[:, 0] = sm.u_gain * a_s  # the paper's U_y
-            xi = x_pred + sm.Gamma[:, :, 0] * a_s[:, None]  # + Gamma u
-            x_post, P_post, nis_k = kalman.update_masked(
-                xi, P_pred + dQ, _z(z), sm.H, Ri, use, Mi, U)
-            k_dot = _turn_rate(kp, c.kp_prev, x[:, IA], x_post[:, IA], 0.0, dt)
-            if it == 0:
-                # the posterior alpha moved by the correction too: a turn-rate error
-                sig_kdot = np.sqrt(cl.turn_rate_sigma_radps**2 + np.maximum(
-                    P_pred[:, IA, IA] - P_post[:, IA, IA], 0.0) / dt**2)
-                cur, Pc = current_log.update(
-                    cur, Pc, v_gnss=_z(g.v), heading_rad=K_end,
-                    log_speed_mps=inp.log_speed_mps[:, k],
-                    cross_accel_mps2=np.where(g.first, np.nan, g.cross), turn_rate_radps=k_dot,
-                    turn_rate_sigma_radps=sig_kdot, dt_s=dt,
-                    use=g.fix_ok & np.isfinite(kp), st=cl)
-                c.speed = _smooth_speed(
-                    c.speed, current_log.water_speed(cur, Pc, _z(g.v))[0],
-                    g.fix_ok & np.isfinite(kp), dt / s.speed_smoothing_s)
-                Vw, sig_Vw = _z(c.speed), _speed_sigma(Pc, cur, c, s, cl)
-        x, P = x_post, P_post
+        X, PX, nis_k = kalman.update_masked(pr.x, pr.P, _z(z), pr.H, R, use, pr.M, pr.U)
+        x, P = X[:, :N_STATE], PX[:, :N_STATE, :N_STATE]
+        # turn rate over the step from the posterior of (alpha_k, alpha_{k-1})
+        d_alpha = X[:, IA] - X[:, N_STATE]
+        var_d = PX[:, IA, IA] + PX[:, N_STATE, N_STATE] - 2.0 * PX[:, IA, N_STATE]
+        k_dot = pr.has_turn * (pr.dkp - d_alpha) / dt
+        sig_kdot = np.sqrt(cl.turn_rate_sigma_radps**2 + np.maximum(var_d, 0.0) / dt**2)
+        K_end = kp - x[:, IA]
+        cur, Pc = current_log.update(
+            cur, Pc, v_gnss=_z(g.v), heading_rad=_z(K_end),
+            log_speed_mps=inp.log_speed_mps[:, k],
+            cross_accel_mps2=np.where(g.first, np.nan, g.cross), turn_rate_radps=k_dot,
+            turn_rate_sigma_radps=sig_kdot, dt_s=dt,
+            use=g.fix_ok & np.isfinite(kp), st=cl)
+        c.speed = _smooth_speed(
+            c.speed, current_log.water_speed(cur, Pc, _z(g.v))[0],
+            g.fix_ok & np.isfinite(kp), dt / s.speed_smoothing_s)
         c.v_last = np.where(g.fix_ok[:, None], g.v, c.v_last)
         c.t_last = np.where(g.fix_ok, k, c.t_last)
         c.kp_prev = kp
@@ -425,12 +464,103 @@ def run_filter(
         out["nis"][:, k] = nis_k
         out["heading"][:, k] = np.where(np.isfinite(kp), np.mod(kp - x[:, IA], 2 * np.pi), np.nan)
         out["w_obs"][:, k] = np.where(g.has_w, g.w_obs, np.nan)
-        out["innov"][:, k] = np.where(g.has_w, g.w_obs - x_pred[:, IW], np.nan)
+        out["innov"][:, k] = np.where(g.has_w, g.w_obs - pr.x[:, IW], np.nan)
         out["innov_sig"][:, k] = g.sig_gate
         out["gate"][:, k] = g.gate
         accepted[:, k] = g.fix_ok
     return FilterOutputs(out_x, out_p, out["heading"], out["w_obs"], out["innov"],
                          out["innov_sig"], out["gate"], accepted, out["nis"], out_c, out_cs, out_cc)
+
+
+@dataclass(frozen=True)
+class _Prior:
+    """One step's augmented prior and measurement model (see :func:`_step_prior`)."""
+
+    x: np.ndarray  # (n, 7) [x_k^-, alpha_{k-1}]
+    P: np.ndarray  # (n, 7, 7)
+    H: np.ndarray  # (n, 3, 7)
+    R: np.ndarray  # (n, 3, 3)
+    M: np.ndarray  # (n, 7, 3)
+    U: np.ndarray  # (n, 3)
+    a_s: np.ndarray  # (n,) predicted centripetal acceleration, m/s^2
+    sig_as: np.ndarray  # (n,) its error beyond the state's share
+    dkp: np.ndarray  # (n,) gyro heading change over the step (0 without headings)
+    has_turn: np.ndarray  # (n,) float 1 when both headings exist
+
+
+def _step_prior(x: np.ndarray, P: np.ndarray, sm: StepModel, K_mid: np.ndarray,
+                kp: np.ndarray, kp_prev: np.ndarray, Vw: np.ndarray, sig_Vw: np.ndarray,
+                dt: float, m: NavFilterModel) -> _Prior:
+    """Prediction over one step, and eq. 2's rows, with the heading a function of the
+    state (extended Kalman filter in alpha).
+
+    Turn rate: K = K_P - alpha, so over the step K-dot = (dK_P - alpha_k + alpha_{k-1})
+    / dt and a_s = V_w K-dot depends on alpha at both ends. alpha_{k-1} is cloned into
+    the state (its 7th element; the clone shares the update, so a correction of the
+    level of alpha is not read as a turn). With g = Gamma V_w / dt, the propagation
+    x_k = F x_{k-1} + Gamma a_s + w solves to
+
+    .. math:: N x_k = (F + g e_\\alpha^T) x_{k-1} + g\\, dK_P + w, \\qquad N = I + g e_\\alpha^T
+
+    and U_y = u a_s gives y1 the rows -u V_w/dt on alpha_k and +u V_w/dt on the clone.
+
+    Heading Jacobian: F, Gamma and y1 depend on K = K_P - alpha through a_N = W cos K +
+    z phi-ddot sin K - a_s sin K. The mean is propagated with the estimated heading;
+    the covariance and the gain use the derivatives with respect to alpha of the W and
+    a_s terms: -(dF/dK x + dGamma/dK a_s) for the prediction and -dh1/dK for y1, with
+    dh1/dK = -(W sin K + a_s cos K) / g at the prior. They carry what a speed change and
+    a turn say about the heading error (ignoring them left the filter overconfident,
+    NEES ~4 at 300-600 s, and slow to converge). The roll term's derivative is left
+    out: see :func:`heading_derivative`.
+    """
+    n = x.shape[0]
+    d = N_STATE
+    has_turn = (np.isfinite(kp) & np.isfinite(kp_prev)).astype(float)
+    dkp = has_turn * _z(_wrap(kp - kp_prev))
+    gam = sm.Gamma[:, :, 0]
+    g = gam * (has_turn * Vw / dt)[:, None]
+    # N^-1 = I - g e_a' / (1 + g_a) (Sherman-Morrison)
+    Ninv = np.broadcast_to(np.eye(d), (n, d, d)) - g[:, :, None] * (
+        np.eye(d)[IA][None, None, :] / (1.0 + g[:, IA])[:, None, None])
+    Fg = sm.F.copy()
+    Fg[:, :, IA] += g
+    Fp = Ninv @ Fg
+    x_pred = np.einsum("nij,nj->ni", Fp, x) + np.einsum("nij,nj->ni", Ninv, g * dkp[:, None])
+    a_s = has_turn * Vw * (dkp - x_pred[:, IA] + x[:, IA]) / dt
+    k_dot = a_s / np.maximum(Vw, 1e-9)
+    sig_as = np.hypot(sig_Vw * k_dot, m.settings.cross_accel_sigma_mps2)
+    dQ, dR11, dM1 = cross_input_noise(sm, sig_as)
+    # heading Jacobian of the propagation (K_mid = ... - alpha_{k-1})
+    J = np.einsum("nij,nj->ni", sm.F_dheading, x) + sm.Gamma_dheading[:, :, 0] * a_s[:, None]
+    Fj = Fp.copy()
+    Fj[:, :, IA] -= np.einsum("nij,nj->ni", Ninv, J)
+    Qp = Ninv @ (sm.Q + dQ) @ np.swapaxes(Ninv, 1, 2)
+    P6 = Fj @ P @ np.swapaxes(Fj, 1, 2) + Qp
+    cross = np.einsum("nij,nj->ni", Fj, P[:, :, IA])  # Cov(x_k, alpha_{k-1})
+    PX = np.zeros((n, d + 1, d + 1))
+    PX[:, :d, :d] = P6
+    PX[:, :d, d] = PX[:, d, :d] = cross
+    PX[:, d, d] = P[:, IA, IA]
+    PX = 0.5 * (PX + np.swapaxes(PX, 1, 2))
+    X = np.concatenate([x_pred, x[:, IA:IA + 1]], axis=1)
+    H = np.zeros((n, 3, d + 1))
+    H[:, :, :d] = sm.H
+    U = np.zeros((n, 3))
+    gain = sm.u_gain * has_turn * Vw / dt
+    H[:, 0, IA] -= gain  # U_y = u a_s, a_s = V_w (dK_P - alpha_k + alpha_{k-1}) / dt
+    H[:, 0, d] += gain
+    U[:, 0] = gain * dkp
+    # heading Jacobian of y1 (linearised at the prior: the innovation is unchanged)
+    dh1 = (-np.sin(K_mid) * x_pred[:, IW] - np.cos(K_mid) * a_s) / G_MPS2  # d h1 / dK
+    H[:, 0, IA] -= dh1  # d h1 / d alpha = -d h1 / dK
+    U[:, 0] += dh1 * x_pred[:, IA]
+    R = sm.R.copy()
+    R[:, 0, 0] += dR11
+    M = np.zeros((n, d + 1, 3))
+    M6 = sm.M.copy()
+    M6[:, :, 0] += dM1
+    M[:, :d] = Ninv @ M6
+    return _Prior(X, PX, H, R, M, U, a_s, sig_as, dkp, has_turn)
 
 
 @dataclass(frozen=True)
@@ -495,17 +625,6 @@ def _speed_sigma(Pc: np.ndarray, cur: np.ndarray, c: _Carry, s: FilterSettings,
     _, sig_c = current_log.water_speed(cur, Pc, _z(c.v_last))
     ratio = min(1.0, 2.0 * cl.gnss_velocity_tau_s / s.speed_smoothing_s)
     return np.hypot(sig_c, cl.gnss_velocity_sigma_mps * np.sqrt(ratio))
-
-
-def _turn_rate(kp: np.ndarray, kp_prev: np.ndarray, alpha: np.ndarray,
-               alpha_pred: np.ndarray, gain: np.ndarray, dt: float) -> np.ndarray:
-    """True turn rate over the step: the gyro heading change minus the change of its
-    error, (dK_P - (alpha^-_k - alpha^_{k-1})) / dt. The predicted alpha includes the
-    centripetal input's share Gamma_alpha a_s = ``gain`` K-dot, so K-dot solves
-    K-dot (1 + gain / dt) = (dK_P - (alpha_pred - alpha)) / dt. (dK_P/dt + k_a delta
-    would miss that delta swings with the roll within the step.) 0 without a heading."""
-    turn = _wrap(kp - kp_prev) - (alpha_pred - alpha)
-    return _z(turn / dt / (1.0 + np.asarray(gain) / dt))
 
 
 def _z(a: np.ndarray) -> np.ndarray:

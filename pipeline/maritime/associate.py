@@ -4,37 +4,51 @@ Gates (multi-radar paper, "determination of common tracks"): two synchronised tr
 may belong to one ship only when ALL differences are inside gates set from the
 expected accuracies:
 
-- position: squared Mahalanobis distance d^2 = D^T (P_a + P_b)^-1 D below
-  chi2.ppf(gate_probability, 2) (D = difference of positions, m; P in m^2);
+- position and velocity: squared Mahalanobis distance d^2 = D^T (P_a + P_b)^-1 D below
+  chi2.ppf(gate_probability, 4), D the difference of the state vectors (east, north,
+  v_east, v_north) (m, m/s) and P their covariances, block-diagonal (the trackers'
+  position-velocity cross-covariance is not in the log), so d^2 is the position term
+  plus the velocity term; with ``velocity_cost = false`` the position term alone
+  below chi2.ppf(gate_probability, 2);
 - course: |wrap(C_a - C_b)| <= max_course_difference_rad, skipped when both speeds are
   below course_gate_min_speed_mps (the course of a stopped ship is noise);
 - speed: |V_a - V_b| <= max_speed_difference_mps.
 
+The velocity v = V (sin C, cos C) has covariance J diag(sigma_V^2, sigma_C^2) J^T:
+sigma_V along the course and V sigma_C across it (:func:`velocity_covariance`; as
+``pipeline.maritime.hypothesis.velocity_covariance``). Below course_gate_min_speed_mps
+the course is noise (the course gate's rule), so the across-course sigma is raised to at
+least sigma_V.
+
 Among competing pairings the least summed Mahalanobis distance wins (two-radar
 identification paper, eq. 7-16: hypotheses H1..H4 of case A, and cases B/C when one
-radar sees fewer targets). For two radars the paper's per-hypothesis sum
-Sum_i (X_i - X_p)^T P_i^-1 (X_i - X_p), with X_p the fused position, equals the pairwise
-D^T (P_1 + P_2)^-1 D, so minimising it over all hypotheses is the assignment problem
-``scipy.optimize.linear_sum_assignment`` on [d^2 | diag(gate)]: leaving a track
-unpaired costs the gate, which yields cases B and C (and any m x n) naturally.
+radar sees fewer targets; its state vector, eq. 2, has the velocity components, which
+its simulation left out and its conclusion proposes to use). For two radars the paper's
+per-hypothesis sum Sum_i (X_i - X_p)^T P_i^-1 (X_i - X_p), with X_p the fused state,
+equals the pairwise D^T (P_1 + P_2)^-1 D, so minimising it over all hypotheses is the
+assignment problem ``scipy.optimize.linear_sum_assignment`` on [d^2 | diag(gate)]:
+leaving a track unpaired costs the gate, which yields cases B and C (and any m x n)
+naturally.
 
 N radars: sites are taken in a fixed order; site k's tracks are assigned to the
-candidate system tracks built from sites < k (their eq. 14 fused position/course/speed,
-position in matrix form: the same ``Information`` sums that pipeline.maritime.fuse
-publishes), unassigned ones start new candidates.
+candidate system tracks built from sites < k (their eq. 14 fused position/course/speed
+and the sigmas of speed and course, position in matrix form: the same ``Information``
+sums that pipeline.maritime.fuse publishes), unassigned ones start new candidates.
 
 Continuity over epochs: (site_id, local_track_id) -> system_track_id. A local track keeps
 its system track as long as the gates still pass (its pairing gets a bonus that no
 sum of gated distances can outweigh); a candidate takes the id most of its members
 had (a pairing that persisted keeps its id; ties: closer to that track's last fused
 state); a candidate made only of new local tracks joins a system track seen within
-track_timeout_s that it gates with (extrapolated to the epoch), else it gets a new id
+track_timeout_s that it gates with (extrapolated to the epoch; position d^2, 2 dof, and
+the course/speed gates: the velocity of a track last seen up to track_timeout_s ago is
+a stale estimate, with no manoeuvre model to widen it), else it gets a new id
 ``id_base + counter``. A mapping not refreshed for track_timeout_s is forgotten.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 from itertools import pairwise
 
 import numpy as np
@@ -55,7 +69,8 @@ _BONUS_GATES = 1000.0
 @dataclass(frozen=True)
 class Kinematics:
     """Positions, covariances and velocities of n tracks (all arrays (n,)): x_m, y_m
-    (regional ENU), P_xx, P_yy, P_xy (m^2), speed_mps, course_rad."""
+    (regional ENU), P_xx, P_yy, P_xy (m^2), speed_mps, course_rad, and the sigmas of
+    speed and course (m/s, rad; None: the velocity is not used in d^2)."""
 
     x_m: np.ndarray
     y_m: np.ndarray
@@ -64,25 +79,65 @@ class Kinematics:
     P_xy: np.ndarray
     speed_mps: np.ndarray
     course_rad: np.ndarray
+    sigma_speed_mps: np.ndarray | None = None
+    sigma_course_rad: np.ndarray | None = None
 
     def take(self, idx: np.ndarray) -> Kinematics:
-        return Kinematics(*(np.asarray(getattr(self, f.name))[idx] for f in fields(self)))
+        return Kinematics(*(None if (v := getattr(self, f.name)) is None else np.asarray(v)[idx]
+                            for f in fields(self)))
+
+    def has_velocity(self) -> bool:
+        return self.sigma_speed_mps is not None and self.sigma_course_rad is not None
 
 
-def gate_threshold(gate_probability: float) -> float:
-    """chi2.ppf(gate_probability, 2): the position gate on d^2 (2 degrees of freedom)."""
-    return float(chi2.ppf(gate_probability, 2))
+def gate_threshold(gate_probability: float, dof: int = 2) -> float:
+    """chi2.ppf(gate_probability, dof): the gate on d^2 (2 dof: position; 4: position
+    and velocity)."""
+    return float(chi2.ppf(gate_probability, dof))
+
+
+def association_gate(cfg: AssociationConfig) -> float:
+    """The gate of the track-to-track cost: 4 dof with ``velocity_cost``, else 2."""
+    return gate_threshold(cfg.gate_probability, 4 if cfg.velocity_cost else 2)
+
+
+def velocity_covariance(
+    k: Kinematics, min_course_speed_mps: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(V_xx, V_yy, V_xy), (m/s)^2, of v = V (sin C, cos C): sigma_V^2 along the course,
+    (V sigma_C)^2 across it (J diag(sigma_V^2, sigma_C^2) J^T), the across term raised to
+    at least sigma_V^2 below ``min_course_speed_mps`` (a stopped ship's course is noise)."""
+    s, c = np.sin(k.course_rad), np.cos(k.course_rad)
+    along = np.asarray(k.sigma_speed_mps, float) ** 2
+    across = (k.speed_mps * k.sigma_course_rad) ** 2
+    across = np.where(k.speed_mps < min_course_speed_mps, np.maximum(across, along), across)
+    return along * s * s + across * c * c, along * c * c + across * s * s, (along - across) * s * c
+
+
+def _d2(dx, dy, sxx, syy, sxy) -> np.ndarray:
+    """(dx, dy) S^-1 (dx, dy)^T with S = [[sxx, sxy], [sxy, syy]] (closed-form inverse)."""
+    return (syy * dx * dx - 2.0 * sxy * dx * dy + sxx * dy * dy) / (sxx * syy - sxy * sxy)
 
 
 def gated_d2(a: Kinematics, b: Kinematics, cfg: AssociationConfig, gate: float) -> np.ndarray:
     """(n_a, n_b) squared Mahalanobis distances D^T (P_a + P_b)^-1 D, +inf where the
-    position, course or speed gate fails (broadcast, closed-form 2x2 inverse)."""
+    d^2, course or speed gate fails (broadcast, closed-form 2x2 inverses). D is the
+    position difference, plus the velocity difference when ``cfg.velocity_cost`` and
+    both sides carry speed and course sigmas (then ``gate`` should be the 4-dof one,
+    :func:`association_gate`)."""
     dx = a.x_m[:, None] - b.x_m[None, :]
     dy = a.y_m[:, None] - b.y_m[None, :]
     sxx = a.P_xx[:, None] + b.P_xx[None, :]
     syy = a.P_yy[:, None] + b.P_yy[None, :]
     sxy = a.P_xy[:, None] + b.P_xy[None, :]
-    d2 = (syy * dx * dx - 2.0 * sxy * dx * dy + sxx * dy * dy) / (sxx * syy - sxy * sxy)
+    d2 = _d2(dx, dy, sxx, syy, sxy)
+    if cfg.velocity_cost and a.has_velocity() and b.has_velocity():
+        ua = a.speed_mps * np.sin(a.course_rad), a.speed_mps * np.cos(a.course_rad)
+        ub = b.speed_mps * np.sin(b.course_rad), b.speed_mps * np.cos(b.course_rad)
+        Va = velocity_covariance(a, cfg.course_gate_min_speed_mps)
+        Vb = velocity_covariance(b, cfg.course_gate_min_speed_mps)
+        d2 = d2 + _d2(ua[0][:, None] - ub[0][None, :], ua[1][:, None] - ub[1][None, :],
+                      *(Va[i][:, None] + Vb[i][None, :] for i in range(3)))
     va, vb = a.speed_mps[:, None], b.speed_mps[None, :]
     slow = (va < cfg.course_gate_min_speed_mps) & (vb < cfg.course_gate_min_speed_mps)
     dc = np.abs(wrap_angle(a.course_rad[:, None] - b.course_rad[None, :]))
@@ -168,10 +223,11 @@ class _Candidates:
         return idx
 
     def state(self) -> tuple[Kinematics, np.ndarray, np.ndarray]:
-        """Fused kinematics of the candidates (eq. 14, :meth:`Information.estimate`),
-        with (sigma_speed, sigma_course)."""
+        """Fused kinematics of the candidates (eq. 14, :meth:`Information.estimate`:
+        position, speed, course and their sigmas), with (sigma_speed, sigma_course)."""
         f = Information(*self.sums[: self.n].T).estimate()
-        kin = Kinematics(f.x_m, f.y_m, f.P_xx, f.P_yy, f.P_xy, f.speed_mps, f.course_rad)
+        kin = Kinematics(f.x_m, f.y_m, f.P_xx, f.P_yy, f.P_xy, f.speed_mps, f.course_rad,
+                         f.sigma_speed_mps, f.sigma_course_rad)
         return kin, f.sigma_speed_mps, f.sigma_course_rad
 
 
@@ -229,10 +285,11 @@ def _assign_ids(
     kin = Kinematics(
         *(
             df[c].to_numpy().astype(float)
-            for c in ("x_enu_m", "y_enu_m", "P_xx", "P_yy", "P_xy", "speed_mps", "course_rad")
+            for c in ("x_enu_m", "y_enu_m", "P_xx", "P_yy", "P_xy", "speed_mps", "course_rad",
+                      "sigma_speed_mps", "sigma_course_rad")
         )
     )
-    sv, sc = df["sigma_speed_mps"].to_numpy(), df["sigma_course_rad"].to_numpy()
+    sv, sc = kin.sigma_speed_mps, kin.sigma_course_rad
     key = df["_key"].to_numpy().astype(np.int64)
     mem = _Memory(
         key_sys=np.full(n_keys, -1, np.int64),
@@ -240,7 +297,8 @@ def _assign_ids(
         sys_seen=np.zeros(max(16, n_keys), np.int64),
         sys_state=np.zeros((max(16, n_keys), 9)),
     )
-    gate = gate_threshold(cfg.gate_probability)
+    gate = association_gate(cfg)  # the cost of the per-epoch assignment
+    gate_position = gate_threshold(cfg.gate_probability, 2)  # ids against past tracks
     timeout_ns = round(cfg.track_timeout_s * NS)
     out = np.empty(t.size, np.int64)
     bounds = np.flatnonzero(np.r_[True, t[1:] != t[:-1], True]) if t.size else np.zeros(1, int)
@@ -250,7 +308,7 @@ def _assign_ids(
         cand, member = _cluster_epoch(
             kin.take(rows), sv[rows], sc[rows], prev, site_idx[rows], n_sites, cfg, gate
         )
-        ids = _resolve_ids(cand, mem, int(t[a]), cfg, gate)
+        ids = _resolve_ids(cand, mem, int(t[a]), cfg, gate_position)
         out[rows] = ids[member]
         mem.key_sys[key[rows]] = out[rows]
         mem.key_seen[key[rows]] = t[a]
@@ -283,7 +341,9 @@ def _cluster_epoch(
     gate: float,
 ) -> tuple[_Candidates, np.ndarray]:
     """Sequential N-radar clustering of one epoch's rows (sorted by site). Returns the
-    candidates and each row's candidate index."""
+    candidates and each row's candidate index. ``gate``: :func:`association_gate`."""
+    if not rows.has_velocity():
+        rows = replace(rows, sigma_speed_mps=sv, sigma_course_rad=sc)
     cand = _Candidates(site.size, n_sites)
     member = np.full(site.size, -1)
     for s in np.unique(site):
@@ -311,7 +371,8 @@ def _resolve_ids(
     id (+ rank/n_live < 1), ties between candidates for one id to the one closer to
     that track's last state (+ 0.01 min(d^2/gate, 1))), or, when none of its members
     had an id, an id it gates with (cost d^2/gate - 1, in [-1, 0)). The rest get new
-    ids."""
+    ids. d^2 is the position's (``gate``: 2 dof): :func:`_predict` carries no velocity
+    sigmas, the last fused velocity being a stale estimate."""
     live = np.flatnonzero(mem.sys_seen[: mem.n_sys] >= t_ns - round(cfg.track_timeout_s * NS))
     votes = (cand.prev_ids[: cand.n, :, None] == live[None, None, :]).sum(axis=1)
     fused, _, _ = cand.state()

@@ -39,13 +39,16 @@ class SyncConfig:
 
 @dataclass(frozen=True)
 class AssociationConfig:
-    """Track-to-track gates (multi-radar paper) and the track timeout."""
+    """Track-to-track gates (multi-radar paper), the track timeout, and whether the
+    assignment cost and its chi-square gate use position and velocity (4 dof, two-radar
+    identification paper eq. 9-10 with the velocity rows) or the position only (2 dof)."""
 
     gate_probability: float = probability(0.999)
     max_course_difference_rad: float = setting(30.0, unit="deg", gt=0.0, le=180.0)
     max_speed_difference_mps: float = positive(2.5)
     course_gate_min_speed_mps: float = setting(1.0, ge=0.0)
     track_timeout_s: float = positive(30.0)
+    velocity_cost: bool = setting(True)  # position + velocity d^2 (4 dof); False: position only
 
 
 @dataclass(frozen=True)

@@ -38,6 +38,23 @@ def test_roll_row_tends_to_the_continuous_acceleration():
     assert sm.u_gain[0] == pytest.approx(-math.sin(K[0]) / G_MPS2)
 
 
+def test_heading_derivative_of_the_step_agrees_with_central_differences():
+    """dF/dK (W column) and dGamma/dK of the step, exact by Van Loan, against central
+    differences of the discretised model (the roll columns are left out on purpose, and
+    W and a_s never reach the roll states, so these columns are complete)."""
+    m = NavFilterModel()
+    K = np.radians([0.0, 30.0, 135.0, 250.0])
+    lat = np.full(K.size, LAT[0])
+    sm = step_model(lat, K, 1.0, m)
+    eps = 1e-6
+    hi, lo = step_model(lat, K + eps, 1.0, m), step_model(lat, K - eps, 1.0, m)
+    assert np.allclose(sm.F_dheading[:, :, IW], (hi.F - lo.F)[:, :, IW] / (2 * eps),
+                       rtol=1e-6, atol=1e-12)
+    assert np.allclose(sm.Gamma_dheading, (hi.Gamma - lo.Gamma) / (2 * eps),
+                       rtol=1e-6, atol=1e-12)
+    assert np.abs(sm.Gamma_dheading).max() > 1e-3  # not trivially zero
+
+
 def test_discrete_model_matches_the_simulated_gyro_and_roll():
     """Q, the correlated-noise cross-covariance M (eq. 2, D W) and R11 of one 1-s step
     against 6000 s of the simulator's exact fine-step gyro + roll (seeded)."""

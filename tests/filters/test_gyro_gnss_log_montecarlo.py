@@ -1,65 +1,53 @@
-"""Seeded Monte Carlo of the ownship acceptance figures (slow): 24 scenario seeds run as
-24 filters in one vectorised call. Prints the distribution (pytest -s)."""
+"""Seeded Monte Carlo of the own-ship heading (slow): the paper's scenario on seeds 1-50,
+30 min each, two work units of 25 filters in one vectorised call each
+(``pipeline.experiments.ownship_montecarlo``; the same as ``surveil experiment ownship
+--runs 50 --per-seed``). Prints the per-seed table of docs/ownship.md §4 (pytest -s).
+
+Goal (issue 21 item 5): heading RMS after convergence <= 0.1 deg on >= 95 % of the seeds
+and max <= 0.3 deg on all. Seeds 1-50 were not used to choose anything: the filter
+change was checked on seeds 100-149 first.
+"""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
+from pipeline.experiments.ownship_montecarlo import run_montecarlo, summarise
 from pipeline.families import load_config
-from pipeline.filters.gyro_gnss_log import FilterInputs, run_filter
-from pipeline.nav.config import ownship_config
-from pipeline.simulate.ownship import simulate_ownship
 
 pytestmark = pytest.mark.slow
-SEEDS = range(1, 25)
-CONVERGED_S = 600
+SEEDS = range(1, 51)
 
 
-def _stack(scs) -> tuple[FilterInputs, np.ndarray, np.ndarray, np.ndarray]:
-    cols = {k: [] for k in ("acc", "amp", "kp", "lat", "ve", "vn", "log", "em")}
-    heading, alpha, outlier = [], [], []
-    for sc in scs:
-        g = sc.gnss
-        q = g["fix_quality"].to_numpy()
-        cols["acc"].append(sc.gyro_signals["accel_signal_rad"].to_numpy())
-        cols["amp"].append(sc.gyro_signals["amplifier_rad"].to_numpy())
-        cols["kp"].append(sc.gyro_heading["heading_rad"].to_numpy())
-        cols["lat"].append(np.radians(g["lat_deg"].fill_null(strategy="forward").to_numpy()))
-        cols["ve"].append((g["sog_mps"] * g["cog_rad"].sin()).fill_null(np.nan).to_numpy())
-        cols["vn"].append((g["sog_mps"] * g["cog_rad"].cos()).fill_null(np.nan).to_numpy())
-        cols["log"].append(sc.speed_log["speed_water_mps"].to_numpy())
-        cols["em"].append(q == 0)
-        heading.append(sc.truth["heading_rad"].to_numpy())
-        alpha.append(sc.truth["gyro_error_rad"].to_numpy())
-        outlier.append(g["is_outlier"].to_numpy())
-    a = {k: np.stack(v) for k, v in cols.items()}
-    inp = FilterInputs(1.0, a["acc"], a["amp"], a["kp"], a["lat"], a["ve"], a["vn"],
-                       a["log"], a["em"])
-    return inp, np.stack(heading), np.stack(alpha), np.stack(outlier)
+def _markdown(table) -> str:
+    head = ("| seed | RMS deg | max deg | max at s | RMS before turn | RMS turn | RMS after "
+            "| NEES |\n|---:|---:|---:|---:|---:|---:|---:|---:|")
+    rows = [f"| {r['seed']} | {r['heading_rms_deg']:.3f} | {r['heading_max_deg']:.3f} "
+            f"| {r['heading_max_at_s']:.0f} | {r['rms_before_turn_deg']:.3f} "
+            f"| {r['rms_turn_deg']:.3f} | {r['rms_after_turn_deg']:.3f} | {r['nees']:.2f} |"
+            for r in table.iter_rows(named=True)]
+    return "\n".join([head, *rows])
 
 
-def test_acceptance_figures_over_seeds():
-    oc = ownship_config(load_config())
-    scs = [simulate_ownship(oc.scenario, start_ns=0, duration_s=1800.0, seed=s) for s in SEEDS]
-    inp, heading, alpha, outlier = _stack(scs)
-    out = run_filter(inp, oc.model, oc.current)
-    err = np.degrees(np.angle(np.exp(1j * (out.heading_rad - heading))))[:, CONVERGED_S:]
-    rms = np.sqrt(np.mean(err**2, axis=1))
-    mx = np.abs(err).max(axis=1)
-    gyro = np.degrees(np.abs(alpha).max(axis=1))
-    rejected = out.gate_passed == 0
-    false_alarm = (rejected & ~outlier).sum() / np.isfinite(out.gate_passed).sum()
-    print(f"\nownship Monte Carlo, {len(SEEDS)} seeds, converged = t >= {CONVERGED_S} s")
-    print(f"  integrated heading RMS deg: median {np.median(rms):.4f}  mean {rms.mean():.4f}"
-          f"  max {rms.max():.4f}  share <= 0.1: {(rms <= 0.1).mean():.2f}")
-    print(f"  integrated heading max deg: median {np.median(mx):.4f}  max {mx.max():.4f}"
-          f"  share <= 0.3: {(mx <= 0.3).mean():.2f}")
-    print(f"  gyro alone max deg: min {gyro.min():.2f}  median {np.median(gyro):.2f}")
-    print(f"  outliers rejected: {rejected[outlier].sum()}/{outlier.sum()}"
-          f"  false rejections: {false_alarm:.4f} of fixes")
-    assert (gyro > 10.0).all()
-    assert rejected[outlier].all()
-    assert np.median(rms) <= 0.1 and (rms <= 0.1).mean() >= 0.7
-    assert np.median(mx) <= 0.3
-    assert false_alarm < 0.02
+def test_heading_goal_over_50_seeds():
+    table = run_montecarlo(load_config(), seeds=SEEDS, duration_s=1800.0)
+    s = summarise(table).row(0, named=True)
+    print("\n" + _markdown(table))
+    print(f"\nshare RMS <= 0.1: {s['share_rms_le_goal']:.2f} ({s['seeds_rms_above_goal']} above)"
+          f"  median RMS {s['rms_median_deg']:.4f}  max RMS {s['rms_max_deg']:.4f}"
+          f"  share max <= 0.3: {s['share_max_le_goal']:.2f}  max {s['max_max_deg']:.4f}"
+          f"  mean NEES {s['nees_mean']:.2f}  gyro alone >= {s['gyro_max_min_deg']:.2f} deg"
+          f"  outliers rejected {s['outliers_rejected']}/{s['outliers']}"
+          f"  false rejections {s['false_rejection_share']:.4f}")
+    assert table.height == 50
+    assert s["share_rms_le_goal"] >= 0.95
+    assert s["max_max_deg"] <= 0.3
+    assert s["gyro_max_min_deg"] > 10.0
+    assert s["outliers_rejected"] == s["outliers"] == 6 * 50
+    assert s["false_rejection_share"] < 0.02
+    # the filter's sigma is honest: neither overconfident (the misses of the old filter,
+    # NEES ~2-4 while converging) nor uselessly wide
+    z = (table["error_at_converged_deg"] / table["sigma_at_converged_deg"]).to_numpy()
+    assert 0.4 < np.std(z) < 1.3
+    assert 0.1 < s["nees_mean"] < 1.5

@@ -69,6 +69,13 @@ def test_velocity_raises_the_probability(cfg):
     pos, vel = r["position_only"], r["position_velocity"]
     assert vel["ci_low"] > pos["ci_high"], r
     assert pos["ci_low"] <= closed_form_probability(30.0, 30.0, 0.0) <= pos["ci_high"]
+    # the batch association with the velocity cost (default) follows the d = 4 test, with
+    # the position cost the d = 2 one (same draws; they differ only by the gate)
+    batch, batch_pos = r["batch_association"], r["batch_association_position_cost"]
+    assert r["batch_velocity_cost"] is True
+    assert abs(batch["correct"] - vel["correct"]) <= 5
+    assert abs(batch_pos["correct"] - pos["correct"]) <= 5
+    assert batch["ci_low"] > batch_pos["ci_high"]
 
 
 def test_wilson_interval():
@@ -91,3 +98,23 @@ def test_cli_json_and_usage_errors():
     assert text.exit_code == 0 and "position + velocity" in text.output
     bad = _surveil("experiment", "identification", "--sigma", "0", "--trials", "10")
     assert bad.returncode == 2 and "sigma" in bad.stderr and "Traceback" not in bad.stderr
+
+
+def test_ownship_montecarlo_cli_per_seed_and_summary():
+    """`surveil experiment ownship`: seeded per-seed rows (two seeds in one vectorised
+    unit, serial) and their summary; the same seeds give the same figures."""
+    runner = CliRunner()
+    args = ["experiment", "ownship", "--runs", "2", "--first-seed", "4", "--duration", "700s",
+            "--executor", "serial", "--format", "json"]
+    res = runner.invoke(cli, [*args, "--per-seed"])
+    assert res.exit_code == 0, res.output
+    rows = json.loads(res.output)
+    assert [r["seed"] for r in rows] == [4, 5]
+    for r in rows:
+        assert r["gyro_max_deg"] > 0.5 and r["heading_rms_deg"] < 0.5  # no turn yet
+        assert r["rms_turn_deg"] is None  # 700 s end before the turn at 900 s
+    again = json.loads(runner.invoke(cli, [*args, "--per-seed"]).output)
+    assert again == rows
+    summary = json.loads(runner.invoke(cli, args).output)
+    assert summary[0]["seeds"] == 2
+    assert summary[0]["rms_max_deg"] == pytest.approx(max(r["heading_rms_deg"] for r in rows))
