@@ -1,9 +1,7 @@
-"""What every job shares: time parsing, logging setup, exit codes, the allocator."""
+"""What every job shares: time parsing, logging setup, exit codes."""
 
 from __future__ import annotations
 
-import ctypes
-import ctypes.util
 import json
 import logging
 import re
@@ -18,34 +16,6 @@ EXIT_OK = 0
 EXIT_UNITS_FAILED = 1
 EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130
-
-
-# glibc mallopt parameters (malloc.h)
-_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
-MMAP_THRESHOLD_BYTES = 32 << 20  # glibc's largest on 64-bit
-TRIM_THRESHOLD_BYTES = 128 << 20
-
-
-def keep_freed_memory() -> bool:
-    """Let glibc's malloc keep freed memory for reuse instead of handing it back to the
-    kernel: blocks up to 32 MiB come from the heap (not a fresh ``mmap`` each), and up to
-    128 MiB free at the heap's top stays mapped. A job allocates and frees arrays of
-    ~1 MiB per column and group all the time; each fresh page costs a page fault here
-    (~1 ms per MiB). A 1 M protobuf ingest: ~130 k -> ~46 k page faults, ~0.5 s less.
-    The process keeps up to 128 MiB it no longer uses; peak resident set of a 1.2 M
-    JSON ingest 396 -> 431 MB. False (nothing done) where the C library is not glibc."""
-    if not sys.platform.startswith("linux"):
-        return False
-    try:
-        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
-        mallopt = libc.mallopt
-    except (OSError, AttributeError):  # musl and others: no mallopt
-        return False
-    mallopt.argtypes = [ctypes.c_int, ctypes.c_int]
-    return bool(
-        mallopt(_M_MMAP_THRESHOLD, MMAP_THRESHOLD_BYTES)
-        and mallopt(_M_TRIM_THRESHOLD, TRIM_THRESHOLD_BYTES)
-    )
 
 
 def parse_time_ns(text: str) -> int:

@@ -15,12 +15,22 @@
 A unit that raises is reported as ``UnitResult(ok=False, error=...)``; nothing raises past
 ``map_units``, so the caller can list failed units and re-run only those. Results arrive
 in completion order (serial: input order).
+
+``map_units(fn, units, context=factory)``: ``factory`` (picklable, no arguments) makes a
+context manager that each worker enters once and leaves at its end, and ``fn`` is called
+as ``fn(unit, value)`` with what it entered to (e.g. the ingest's buffer pool and helper
+threads, :class:`pipeline.ingest.IngestContext`). Serial: entered once, in this process,
+around the whole map. Process pool: entered by each worker process's initializer (after
+the thread caps), left when that process exits. Ray: entered per task.
 """
 
 from __future__ import annotations
 
+import contextlib
 import multiprocessing
+import multiprocessing.util
 import os
+import pickle
 import traceback
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import (
@@ -29,6 +39,7 @@ from concurrent.futures import (
     ProcessPoolExecutor,
     wait,
 )
+from contextlib import AbstractContextManager
 from dataclasses import dataclass
 from typing import Any, Generic, Protocol, TypeVar
 
@@ -63,8 +74,14 @@ class UnitResult(Generic[U, V]):
     error: str | None = None
 
 
+ContextFactory = Callable[[], AbstractContextManager[Any]]
+"""Makes the context a worker enters once (see the module docstring)."""
+
+
 class Executor(Protocol):
-    def map_units(self, fn: Callable[[U], V], units: Iterable[U]) -> Iterator[UnitResult]: ...
+    def map_units(
+        self, fn: Callable[..., V], units: Iterable[U], *, context: ContextFactory | None = None
+    ) -> Iterator[UnitResult]: ...
 
 
 def thread_env(threads_per_worker: int) -> dict[str, str]:
@@ -83,6 +100,35 @@ def limit_threads(threads_per_worker: int) -> None:
         pass
 
 
+# what the context factory of map_units entered to, in a pool worker process (set by its
+# initializer, _start_worker; never in the driver's process)
+_worker_context: Any = None
+
+
+def _start_worker(threads_per_worker: int, context: bytes | None) -> None:
+    """Pool worker initializer: cap the thread pools, then enter the pickled context
+    factory's context (unpickled only now: it may import polars); it is left when the
+    worker process exits."""
+    global _worker_context
+    limit_threads(threads_per_worker)
+    if context is None:
+        return
+    manager = pickle.loads(context)()
+    _worker_context = manager.__enter__()
+    multiprocessing.util.Finalize(
+        None, manager.__exit__, args=(None, None, None), exitpriority=10
+    )
+
+
+def _call_in_worker(fn: Callable[..., V], unit: Any) -> V:
+    return fn(unit, _worker_context)
+
+
+def _call_with_own_context(fn: Callable[..., V], context: ContextFactory, unit: Any) -> V:
+    with context() as value:
+        return fn(unit, value)
+
+
 def _describe(exc: BaseException) -> str:
     tb = traceback.extract_tb(exc.__traceback__)
     where = f" (at {tb[-1].filename}:{tb[-1].lineno})" if tb else ""
@@ -93,14 +139,17 @@ def _describe(exc: BaseException) -> str:
 class SerialExecutor:
     """Runs units one after the other in this process."""
 
-    def map_units(self, fn: Callable[[U], V], units: Iterable[U]) -> Iterator[UnitResult]:
-        for unit in units:
-            try:
-                value = fn(unit)
-            except Exception as exc:  # reported per unit, never raised past the map
-                yield UnitResult(unit, False, error=_describe(exc))
-            else:
-                yield UnitResult(unit, True, value=value)
+    def map_units(
+        self, fn: Callable[..., V], units: Iterable[U], *, context: ContextFactory | None = None
+    ) -> Iterator[UnitResult]:
+        with context() if context is not None else contextlib.nullcontext() as ctx:
+            for unit in units:
+                try:
+                    value = fn(unit) if context is None else fn(unit, ctx)
+                except Exception as exc:  # reported per unit, never raised past the map
+                    yield UnitResult(unit, False, error=_describe(exc))
+                else:
+                    yield UnitResult(unit, True, value=value)
 
 
 @dataclass(frozen=True)
@@ -110,18 +159,24 @@ class ProcessExecutor:
     max_workers: int
     threads_per_worker: int = 1
 
-    def map_units(self, fn: Callable[[U], V], units: Iterable[U]) -> Iterator[UnitResult]:
+    def map_units(
+        self, fn: Callable[..., V], units: Iterable[U], *, context: ContextFactory | None = None
+    ) -> Iterator[UnitResult]:
         units = list(units)
         if not units:
             return
         ctx = multiprocessing.get_context("spawn")
+        blob = None if context is None else pickle.dumps(context)
         with ProcessPoolExecutor(
             max_workers=max(1, min(self.max_workers, len(units))),
             mp_context=ctx,
-            initializer=limit_threads,
-            initargs=(self.threads_per_worker,),
+            initializer=_start_worker,
+            initargs=(self.threads_per_worker, blob),
         ) as pool:
-            futures: dict[Future, Any] = {pool.submit(fn, u): u for u in units}
+            futures: dict[Future, Any] = {
+                (pool.submit(fn, u) if blob is None else pool.submit(_call_in_worker, fn, u)): u
+                for u in units
+            }
             pending = set(futures)
             while pending:
                 done, pending = wait(pending, return_when=FIRST_COMPLETED)
@@ -144,7 +199,9 @@ class RayExecutor:
     threads_per_worker: int = 1
     max_retries: int = 0
 
-    def map_units(self, fn: Callable[[U], V], units: Iterable[U]) -> Iterator[UnitResult]:
+    def map_units(
+        self, fn: Callable[..., V], units: Iterable[U], *, context: ContextFactory | None = None
+    ) -> Iterator[UnitResult]:
         import ray
 
         if not ray.is_initialized():
@@ -153,8 +210,11 @@ class RayExecutor:
             num_cpus=1,
             max_retries=self.max_retries,
             runtime_env={"env_vars": thread_env(self.threads_per_worker)},
-        )(fn)
-        refs = {remote.remote(u): u for u in units}
+        )(fn if context is None else _call_with_own_context)
+        if context is None:
+            refs = {remote.remote(u): u for u in units}
+        else:
+            refs = {remote.remote(fn, context, u): u for u in units}
         pending = list(refs)
         while pending:
             done, pending = ray.wait(pending, num_returns=1)

@@ -108,19 +108,34 @@ def with_date(table: pa.Table, time_column: str) -> pa.Table:
     return table.append_column("date", date)
 
 
-def constant_strings(value: str, n: int) -> pa.Array:
-    """``value`` ``n`` times, as a string array: a slice of one array kept per value
-    (provenance columns repeat one source file and one topic over every decoded group;
-    building them anew per group touches ~8 MB of fresh pages per 100,000 rows)."""
-    with _CONSTANT_LOCK:
-        held = _CONSTANT_STRINGS.pop(value, None)
-        if held is None or len(held) < n:
-            size = n if held is None else max(n, 2 * len(held))
-            held = _repeated(value, size)
-        _CONSTANT_STRINGS[value] = held  # most recent last
-        while len(_CONSTANT_STRINGS) > 16:
-            _CONSTANT_STRINGS.pop(next(iter(_CONSTANT_STRINGS)))
-    return held.slice(0, n)
+class ConstantStrings:
+    """String arrays of one repeated value, kept for reuse: :meth:`get` answers a slice
+    of one array per value (provenance columns repeat one source file and one topic over
+    every decoded group; building them anew per group touches ~8 MB of fresh pages per
+    100,000 rows). Holds the ``limit`` values used last; its owner (an ingest's context)
+    drops it when done. Thread-safe: decoders of several files may run in threads."""
+
+    def __init__(self, limit: int = 16):
+        self._limit = limit
+        self._held: dict[str, pa.Array] = {}
+        self._lock = threading.Lock()
+
+    def get(self, value: str, n: int) -> pa.Array:
+        """``value`` ``n`` times, a slice of the array kept for ``value``."""
+        with self._lock:
+            held = self._held.pop(value, None)
+            if held is None or len(held) < n:
+                size = n if held is None else max(n, 2 * len(held))
+                held = _repeated(value, size)
+            self._held[value] = held  # most recent last
+            while len(self._held) > self._limit:
+                self._held.pop(next(iter(self._held)))
+        return held.slice(0, n)
+
+
+def constant_strings(value: str, n: int, held: ConstantStrings | None = None) -> pa.Array:
+    """``value`` ``n`` times, as a string array: from ``held`` (reused) or built now."""
+    return held.get(value, n) if held is not None else _repeated(value, n)
 
 
 def _repeated(value: str, n: int) -> pa.Array:
@@ -133,9 +148,6 @@ def _repeated(value: str, n: int) -> pa.Array:
     buffers = [None, pa.py_buffer(offsets), pa.py_buffer(raw * n)]
     return pa.Array.from_buffers(pa.string(), n, buffers, null_count=0)
 
-
-_CONSTANT_STRINGS: dict[str, pa.Array] = {}
-_CONSTANT_LOCK = threading.Lock()  # decoders of several files may run in threads
 
 
 def shape(name: str, data: pa.Table | pl.DataFrame) -> pa.Table:

@@ -70,6 +70,7 @@ DAY_NS = 86_400 * NS
 SYNTHETIC_STEP_NS = 1_000_000
 NAV_TOPIC, AIS_TOPIC, CSV_TOPIC = "/nav/nmea", "/ais/nmea", "/ais/csv"
 AIS_SCHEMA_NAME = "surveil.AisReport"
+AIS_REPORT_SCHEMA = "ais_report.schema.json"  # the row's fields, in order (pipeline.messages)
 _SAMPLE = 65_536
 PCAP_MAGICS = (b"\xa1\xb2\xc3\xd4", b"\xd4\xc3\xb2\xa1", b"\xa1\xb2\x3c\x4d",
                b"\x4d\x3c\xb2\xa1", b"\x0a\x0d\x0d\x0a")  # fmt: skip

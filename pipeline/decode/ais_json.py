@@ -39,6 +39,7 @@ import polars as pl
 import pyarrow as pa
 
 from pipeline.decode.registry import make_rejects
+from pipeline.messages import message_layout
 from pipeline.tables import conform, empty
 from pipeline.units import KNOT_MPS
 
@@ -49,16 +50,8 @@ POSITION_MSG_IDS = frozenset({1, 2, 3, 18, 19, 27})
 STATIC_MSG_IDS = frozenset({5, 24})
 KEPT_MSG_IDS = POSITION_MSG_IDS | STATIC_MSG_IDS
 
-SCHEMA = {
-    "time_ns": pl.Int64, "mmsi": pl.Int64, "msg_type": pl.Int64, "mobile_type": pl.String,
-    "ais_class": pl.String,
-    "lat_deg": pl.Float64, "lon_deg": pl.Float64, "sog_kn": pl.Float64, "cog_deg": pl.Float64,
-    "heading_deg": pl.Float64, "rot_deg_per_min": pl.Float64, "nav_status": pl.Int64,
-    "nav_status_text": pl.String, "imo": pl.Int64, "callsign": pl.String,
-    "shipname": pl.String, "ship_type": pl.Int64, "ship_type_text": pl.String,
-    "length_m": pl.Float64, "width_m": pl.Float64, "draught_m": pl.Float64,
-    "destination": pl.String, "source_format": pl.String, "raw": pl.String,
-}  # fmt: skip
+SCHEMA = message_layout("ais_report.schema.json").polars_schema()
+"""The fields of ``schemas/ais_report.schema.json`` (the source's units and codes)."""
 
 
 def parse_payloads(payloads: list[bytes]) -> tuple[pl.DataFrame, list[int]]:

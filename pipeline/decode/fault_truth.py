@@ -22,24 +22,14 @@ from pipeline.decode.json_bulk import (
 )
 from pipeline.decode.vasn import rejects_for
 from pipeline.io.mcap_read import ChannelBatch
+from pipeline.messages import message_layout
 from pipeline.tables import conform
 
 FAULT_TRUTH_SCHEMA = "surveil.FaultTruth"
 
-FIELDS: dict[str, pl.DataType] = {
-    "start_ns": pl.Int64(),
-    "end_ns": pl.Int64(),
-    "family": pl.String(),
-    "sensor_kind": pl.String(),
-    "channel": pl.String(),
-    "kind": pl.String(),
-    "value": pl.Float64(),
-    "unit": pl.String(),
-    "vessel_id": pl.Int64(),
-    "mmsi": pl.Int64(),
-    "detail": pl.String(),
-}
-REQUIRED = ["start_ns", "end_ns", "family", "sensor_kind", "channel", "kind"]
+FAULT_TRUTH_LAYOUT = message_layout("fault_truth.schema.json")
+FIELDS: dict[str, pl.DataType] = FAULT_TRUTH_LAYOUT.polars_schema()
+REQUIRED = FAULT_TRUTH_LAYOUT.required
 
 
 def decode_fault_truth(

@@ -31,6 +31,7 @@ import io
 import json
 import math
 from collections.abc import Callable, Sequence
+from concurrent.futures import Executor
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -41,7 +42,7 @@ import pyarrow as pa
 from pipeline.config import ValidationConfig
 from pipeline.decode.json_columns import native_kinds, parse_spans
 from pipeline.io.mcap_read import ChannelBatch, ChunkData
-from pipeline.tables import conform, constant_strings, empty, shape
+from pipeline.tables import ConstantStrings, conform, constant_strings, empty, shape
 
 NEWLINE, SPACE = 10, 32
 _SHORT_GAP = 64  # gaps up to this many bytes are blanked by one scatter per length
@@ -428,7 +429,9 @@ def _blank(out: np.ndarray, starts: np.ndarray, stops: np.ndarray) -> None:
 
 
 def parse_json_batches(
-    batches: Sequence[ChannelBatch], schema: dict[str, pl.DataType]
+    batches: Sequence[ChannelBatch],
+    schema: dict[str, pl.DataType],
+    pool: Executor | None = None,
 ) -> tuple[JsonParse, MessageOrder]:
     """Parse the payloads of ``batches`` (any channels, any chunks) with ``schema``.
 
@@ -438,11 +441,12 @@ def parse_json_batches(
     schema with other than float/int/string/bool fields: one ``read_ndjson`` over a
     buffer built with numpy (:func:`ndjson_buffer`), payload by payload when that fails.
 
-    Row ``_idx`` of the result is message ``_idx`` of the returned order."""
+    Row ``_idx`` of the result is message ``_idx`` of the returned order. ``pool``: the
+    compiled parser's helper threads (:func:`~pipeline.decode.json_columns.parser_pool`)."""
     order = message_order(batches)
     if len(order) == 0:
         return JsonParse(pl.DataFrame(schema={**schema, "_idx": pl.Int64()}), [], [], []), order
-    native = parse_columns(order, schema)
+    native = parse_columns(order, schema, pool)
     if native is not None:
         return native, order
     buf = ndjson_buffer(order)
@@ -452,7 +456,9 @@ def parse_json_batches(
     return parse_json_payloads(order.payloads(np.arange(len(order))), schema), order
 
 
-def parse_columns(order: MessageOrder, schema: dict[str, pl.DataType]) -> JsonParse | None:
+def parse_columns(
+    order: MessageOrder, schema: dict[str, pl.DataType], pool: Executor | None = None
+) -> JsonParse | None:
     """The compiled parser over ``order`` (``None`` when it is not built or ``schema`` has
     a field type it does not decode); its flagged rows go through
     :func:`parse_json_payloads`, which gives the same rows or the exact reject reasons."""
@@ -460,7 +466,7 @@ def parse_columns(order: MessageOrder, schema: dict[str, pl.DataType]) -> JsonPa
     if kinds is None:
         return None
     table, flagged = parse_spans(
-        [c.raw for c in order.chunks], order.chunk, order.start, order.end, schema, kinds
+        [c.raw for c in order.chunks], order.chunk, order.start, order.end, schema, kinds, pool
     )
     if len(flagged) == 0:
         return JsonParse(table, [], [], [], finite=True)
@@ -506,12 +512,15 @@ def decode_json_batches(
     *,
     source_file: str,
     validation: ValidationConfig,
+    parse_pool: Executor | None = None,
+    strings: ConstantStrings | None = None,
 ) -> dict[str, pa.Table]:
     """Rows per table (each ``kind.table``, and ``rejects``) of JSON batches of several
     channels. ``kinds``: channel id -> its :class:`JsonKind`; the kinds' fields must not
-    conflict (they share one parse)."""
+    conflict (they share one parse). ``parse_pool``, ``strings``: the caller's parser
+    threads and provenance columns to reuse (``None``: made for this call)."""
     schema = union_schema(list(dict.fromkeys(kinds.values())))
-    parsed, order = parse_json_batches(batches, schema)
+    parsed, order = parse_json_batches(batches, schema, parse_pool)
     topic = {b.channel_id: b.topic for b in batches}
     out: dict[str, list[pa.Table]] = {}
     bad_idx = np.asarray(parsed.bad_idx, dtype=np.int64)
@@ -543,7 +552,9 @@ def decode_json_batches(
         if rows.num_rows:
             every = rows.num_rows == len(order)  # every message, in order: no gather
             times = order.log_time_ns if every else order.log_time_ns[rows_idx]
-            good = table_with_provenance(rows, times, source_file=source_file, topic=topic[ch])
+            good = table_with_provenance(
+                rows, times, source_file=source_file, topic=topic[ch], strings=strings
+            )
             renames = {k: v for k, v in kind.rename.items() if k in good.column_names}
             out.setdefault(kind.table, []).append(shape(kind.table, good.rename_columns(renames)))
     return {name: pa.concat_tables(parts) for name, parts in out.items()}
@@ -578,14 +589,20 @@ def _rejects(
 
 
 def table_with_provenance(
-    table: pa.Table, log_time_ns: np.ndarray, *, source_file: str, topic: str
+    table: pa.Table,
+    log_time_ns: np.ndarray,
+    *,
+    source_file: str,
+    topic: str,
+    strings: ConstantStrings | None = None,
 ) -> pa.Table:
     """``table`` with source_file, topic (one value each) and ``log_time_ns`` (one per row,
-    in row order) appended: the Arrow form of :func:`with_provenance`."""
+    in row order) appended: the Arrow form of :func:`with_provenance`. ``strings``: where
+    the constant columns are kept for reuse."""
     n = table.num_rows
     return (
-        table.append_column("source_file", constant_strings(source_file, n))
-        .append_column("topic", constant_strings(topic, n))
+        table.append_column("source_file", constant_strings(source_file, n, strings))
+        .append_column("topic", constant_strings(topic, n, strings))
         .append_column("log_time_ns", pa.array(np.asarray(log_time_ns, dtype=np.int64)))
     )
 

@@ -3,7 +3,9 @@
 The compiled parser ``_json_columns`` (``_json_columns.c``, built at install time; see
 its header for what it accepts) reads every payload where it lies, for the fields of a
 schema only, into numpy arrays, two threads on two halves of the rows with the GIL
-released. Rows it cannot decode exactly are *flagged*, never guessed: the caller sends
+released (the caller's thread and a helper of the pool it passes: an ingest keeps one,
+:class:`pipeline.ingest.IngestContext`; without one, helpers live for the call only).
+Rows it cannot decode exactly are *flagged*, never guessed: the caller sends
 them to the Python fallback. When the extension could not be built (no C compiler),
 :data:`AVAILABLE` is false and :func:`native_kinds` answers ``None``: callers use the
 ``polars.read_ndjson`` path.
@@ -11,10 +13,11 @@ them to the Python fallback. When the extension could not be built (no C compile
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import os
 from collections.abc import Sequence
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Executor
 
 import numpy as np
 import polars as pl
@@ -29,10 +32,10 @@ except ImportError:  # built without a C compiler: the read_ndjson path is used
 
 AVAILABLE = _json_columns is not None
 PARALLEL_ROWS = 20_000  # below this, one thread: the split costs more than it saves
+HELPER_THREADS = 3  # the caller's thread parses one part, these the others
 
 _KIND = {"f": (pl.Float64(), np.float64), "i": (pl.Int64(), np.int64),
          "s": (pl.String(), np.int64), "b": (pl.Boolean(), np.uint8)}  # fmt: skip
-_POOL: ThreadPoolExecutor | None = None
 
 
 def native_kinds(schema: dict[str, pl.DataType]) -> str | None:
@@ -58,11 +61,10 @@ def threads() -> int:
     return max(1, min(4, len(os.sched_getaffinity(0))))
 
 
-def _pool() -> ThreadPoolExecutor:
-    global _POOL
-    if _POOL is None:
-        _POOL = helper_pool(3, "json-columns", SECOND_PARSER_NICE)
-    return _POOL
+def parser_pool() -> Executor:
+    """A pool for :func:`parse_spans`' helper threads (niced ``SECOND_PARSER_NICE``: the
+    chunk fetch thread comes first). The caller owns it and shuts it down."""
+    return helper_pool(HELPER_THREADS, "json-columns", SECOND_PARSER_NICE)
 
 
 def parse_spans(
@@ -72,12 +74,14 @@ def parse_spans(
     end: np.ndarray,
     schema: dict[str, pl.DataType],
     kinds: str,
+    pool: Executor | None = None,
 ) -> tuple[pa.Table, np.ndarray]:
     """Parse the payloads ``chunks[chunk[r]][start[r]:end[r]]`` into ``schema``'s columns.
 
     Returns an Arrow table of one row per payload (values of flagged rows are meaningless;
     Arrow, not polars: the caller converts only the columns it validates) and the indexes
-    of the flagged rows (int64, ascending)."""
+    of the flagged rows (int64, ascending). ``pool``: where the helper threads run
+    (:func:`parser_pool`; ``None``: a pool for this call only)."""
     n = len(chunk)
     chunk, start, end = (np.ascontiguousarray(a, dtype=np.int64) for a in (chunk, start, end))
     outs = [np.empty(2 * n if k == "s" else n, dtype=_KIND[k][1]) for k in kinds]
@@ -87,15 +91,18 @@ def parse_spans(
     args = (list(chunks), chunk, start, end, keys, kinds, outs, valid, status)
     parts = threads() if n >= PARALLEL_ROWS else 1
     bounds = np.linspace(0, n, parts + 1).astype(np.int64).tolist()
-    # disjoint row ranges of the same output arrays, the last one in this thread; the C
-    # loop holds no GIL
-    jobs = [
-        _pool().submit(_json_columns.parse_objects, *args, a, b)
-        for a, b in itertools.pairwise(bounds[:-1])
-    ]
-    _json_columns.parse_objects(*args, bounds[-2], bounds[-1])
-    for job in jobs:
-        job.result()
+    with contextlib.ExitStack() as own:
+        if pool is None and parts > 1:
+            pool = own.enter_context(parser_pool())
+        # disjoint row ranges of the same output arrays, the last one in this thread; the
+        # C loop holds no GIL
+        jobs = [
+            pool.submit(_json_columns.parse_objects, *args, a, b)  # type: ignore[union-attr]
+            for a, b in itertools.pairwise(bounds[:-1])
+        ]
+        _json_columns.parse_objects(*args, bounds[-2], bounds[-1])
+        for job in jobs:
+            job.result()
     flagged = np.flatnonzero(status).astype(np.int64)
     columns = {
         name: _column(kind, out, valid[i].view(bool), list(chunks), chunk)

@@ -28,36 +28,19 @@ from pipeline.decode.json_bulk import (
 )
 from pipeline.decode.vasn import rejects_for
 from pipeline.io.mcap_read import ChannelBatch
+from pipeline.messages import message_layout
 from pipeline.tables import conform
 
 GYRO_SIGNALS_SCHEMA = "surveil.GyroSignals"
 OWNSHIP_TRUTH_SCHEMA = "surveil.OwnshipTruth"
 
-GYRO_FIELDS: dict[str, pl.DataType] = {
-    "time_ns": pl.Int64(),
-    "platform_id": pl.String(),
-    "accel_signal_rad": pl.Float64(),
-    "amplifier_rad": pl.Float64(),
-    "interval_s": pl.Float64(),
-}
-_GYRO_NUMERIC = ["accel_signal_rad", "amplifier_rad", "interval_s"]
+GYRO_LAYOUT = message_layout("gyro_signals.schema.json")
+GYRO_FIELDS: dict[str, pl.DataType] = GYRO_LAYOUT.polars_schema()
+_GYRO_NUMERIC = GYRO_LAYOUT.required_numbers
 
-TRUTH_FIELDS: dict[str, pl.DataType] = {
-    "time_ns": pl.Int64(),
-    "platform_id": pl.String(),
-    "lat_deg": pl.Float64(),
-    "lon_deg": pl.Float64(),
-    "heading_rad": pl.Float64(),
-    "gyro_error_rad": pl.Float64(),
-    "speed_water_mps": pl.Float64(),
-    "sog_mps": pl.Float64(),
-    "cog_rad": pl.Float64(),
-    "accel_mps2": pl.Float64(),
-    "roll_rad": pl.Float64(),
-    "current_east_mps": pl.Float64(),
-    "current_north_mps": pl.Float64(),
-}
-_TRUTH_NUMERIC = [c for c in TRUTH_FIELDS if c not in ("time_ns", "platform_id")]
+TRUTH_LAYOUT = message_layout("ownship_truth.schema.json")
+TRUTH_FIELDS: dict[str, pl.DataType] = TRUTH_LAYOUT.polars_schema()
+_TRUTH_NUMERIC = TRUTH_LAYOUT.required_numbers
 
 
 def _platform(rows: pl.DataFrame, platform_id: str | None, topic: str) -> pl.DataFrame:
@@ -72,7 +55,7 @@ def decode_gyro_signals(
     """``(nav_gyro_signals rows, rejects rows)`` of a batch of gyro-signal payloads."""
     parsed = parse_json_payloads(payloads, GYRO_FIELDS)
     checks = [
-        *missing(["time_ns", *_GYRO_NUMERIC]),
+        *missing(GYRO_LAYOUT.required),
         *nonfinite(_GYRO_NUMERIC),
         outside("interval_s", 0.0, None, lo_open=True),
         outside("accel_signal_rad", -1.0, 1.0),
@@ -92,7 +75,7 @@ def decode_ownship_truth(
     """``(ownship_truth rows, rejects rows)`` of a batch of truth payloads."""
     parsed = parse_json_payloads(payloads, TRUTH_FIELDS)
     checks = [
-        *missing(["time_ns", *_TRUTH_NUMERIC]),
+        *missing(TRUTH_LAYOUT.required),
         *nonfinite(_TRUTH_NUMERIC),
         outside("lat_deg", -90.0, 90.0),
         outside("lon_deg", -180.0, 180.0),

@@ -37,10 +37,12 @@ from pipeline.decode.json_bulk import (
     outside,
     parse_json_payloads,
 )
+from pipeline.messages import RADAR_REPORT, message_layout
 
 __all__ = [
     "RADAR",
     "RADAR_FIELDS",
+    "RADAR_LAYOUT",
     "RADAR_RENAME",
     "JsonParse",
     "decode_radar_reports",
@@ -48,23 +50,11 @@ __all__ = [
     "radar_checks",
 ]
 
-RADAR_FIELDS: dict[str, pl.DataType] = {
-    "site_id": pl.String(),
-    "track_id": pl.Int64(),
-    "time_ns": pl.Int64(),
-    "range_m": pl.Float64(),
-    "azimuth_rad": pl.Float64(),
-    "x_m": pl.Float64(),
-    "y_m": pl.Float64(),
-    "course_rad": pl.Float64(),
-    "speed_mps": pl.Float64(),
-    "sigma_range_m": pl.Float64(),
-    "sigma_azimuth_rad": pl.Float64(),
-    "sigma_course_rad": pl.Float64(),
-    "sigma_speed_mps": pl.Float64(),
-    "scan_period_s": pl.Float64(),
-    "scan_end_azimuth_rad": pl.Float64(),
-}
+RADAR_LAYOUT = message_layout(RADAR_REPORT)
+"""``schemas/radar_track_report.schema.json``: the report's one declaration."""
+RADAR_FIELDS: dict[str, pl.DataType] = RADAR_LAYOUT.polars_schema(omit=("status",))
+"""The fields decoded into ``radar_tracks``: every field of the schema but ``status``
+(the site tracker's status is not stored)."""
 RADAR_RENAME = {"track_id": "local_track_id", "x_m": "x_site_m", "y_m": "y_site_m"}
 _POSITIVE = (
     "sigma_range_m",
@@ -79,7 +69,7 @@ def radar_checks(validation: ValidationConfig) -> list[Check]:
     """Validation checks of a radar report (see module docstring)."""
     numeric = [c for c, t in RADAR_FIELDS.items() if t == pl.Float64()]
     return [
-        *missing(list(RADAR_FIELDS)),
+        *missing(RADAR_LAYOUT.required),
         *nonfinite(numeric),
         outside("range_m", 0.0, validation.max_range_m),
         outside("azimuth_rad", 0.0, 2 * math.pi),

@@ -50,14 +50,15 @@ import pyarrow as pa
 
 from pipeline.config import ValidationConfig
 from pipeline.decode.json_bulk import JsonKind, kind_checks, split_valid, with_provenance
-from pipeline.decode.radar import RADAR
+from pipeline.decode.radar import RADAR, RADAR_LAYOUT
 from pipeline.io.mcap_chunks import PAD
 from pipeline.io.mcap_read import ChannelBatch
+from pipeline.messages import PROTO_TYPE_NUMBERS, RADAR_ROS2_NAME
 from pipeline.resources import resource_path
 from pipeline.tables import shape
 
-PROTO_SCHEMA = "surveil.RadarTrackReport"
-ROS2_SCHEMA = "surveil_msgs/msg/RadarTrackReport"
+PROTO_SCHEMA = RADAR_LAYOUT.name  # surveil.RadarTrackReport
+ROS2_SCHEMA = RADAR_ROS2_NAME  # surveil_msgs/msg/RadarTrackReport
 _AR10 = np.arange(10)
 _SHIFT7 = (7 * np.arange(10)).astype(np.uint64)
 MAX_FIELDS = 256  # tags read per protobuf message before it is declared undecodable
@@ -119,32 +120,24 @@ def protobuf_fields(descriptor_set: bytes, message: str) -> list[FlatField]:
 
 
 def radar_descriptor_set() -> bytes:
-    """``FileDescriptorSet`` of ``schemas/radar_track_report.proto`` (built from the
-    field list below, which mirrors that file: no ``protoc`` needed)."""
+    """``FileDescriptorSet`` of ``schemas/radar_track_report.proto``, built from the
+    report's layout (``schemas/radar_track_report.schema.json``, from which that file is
+    generated: field ``k`` of the schema is field number ``k``; no ``protoc`` needed)."""
     from google.protobuf import descriptor_pb2
 
     f = descriptor_pb2.FileDescriptorProto(
         name="radar_track_report.proto", package="surveil", syntax="proto3"
     )
     m = f.message_type.add(name="RadarTrackReport")
-    for number, (name, ftype) in enumerate(_RADAR_PROTO_FIELDS, start=1):
-        m.field.add(name=name, number=number, type=ftype, label=1, json_name=_camel(name))
+    for number, fld in enumerate(RADAR_LAYOUT.fields, start=1):
+        ftype = PROTO_TYPE_NUMBERS[fld.proto_type]
+        m.field.add(name=fld.name, number=number, type=ftype, label=1, json_name=_camel(fld.name))
     return descriptor_pb2.FileDescriptorSet(file=[f]).SerializeToString()
 
 
 def _camel(name: str) -> str:
     head, *rest = name.split("_")
     return head + "".join(p[:1].upper() + p[1:] for p in rest)
-
-
-_D, _I64, _S = 1, 3, 9
-_RADAR_PROTO_FIELDS = [
-    ("site_id", _S), ("track_id", _I64), ("time_ns", _I64), ("range_m", _D),
-    ("azimuth_rad", _D), ("x_m", _D), ("y_m", _D), ("course_rad", _D), ("speed_mps", _D),
-    ("sigma_range_m", _D), ("sigma_azimuth_rad", _D), ("sigma_course_rad", _D),
-    ("sigma_speed_mps", _D), ("scan_period_s", _D), ("scan_end_azimuth_rad", _D),
-    ("status", _S),
-]  # fmt: skip
 
 
 def _varint(buf: np.ndarray, pos: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -708,5 +701,6 @@ def _rejects(
 
 @cache
 def radar_ros2_text() -> str:
-    """``schemas/radar_track_report.msg``: the ROS 2 definition of the report."""
+    """``schemas/radar_track_report.msg``: the ROS 2 definition of the report (generated
+    from its JSON schema by :mod:`pipeline.messages`)."""
     return (resource_path("schemas") / "radar_track_report.msg").read_text()

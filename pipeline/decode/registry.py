@@ -53,6 +53,7 @@ from __future__ import annotations
 
 from collections import Counter
 from collections.abc import Mapping, Sequence
+from concurrent.futures import Executor
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -67,7 +68,7 @@ from pipeline.decode.json_bulk import decode_json_batches
 from pipeline.decode.radar import RADAR as RADAR_KIND
 from pipeline.decode.truth import TRUTH as TRUTH_KIND
 from pipeline.io.mcap_read import ChannelBatch
-from pipeline.tables import conform, empty
+from pipeline.tables import ConstantStrings, conform, empty
 
 RAW_TABLES = (
     "radar_tracks", "ais_reports", "ais_static", "truth", "rejects",
@@ -199,11 +200,17 @@ class FileDecoder:
     ``nmea_GSV``, ``asterix_cat004``): the ledger's ``not_stored_json``.
     ``missing_decoders``: optional decoders the file needed but this installation lacks
     (its channels got a ``decoder_missing`` reject; ingest marks the file partial).
+
+    ``parse_pool``, ``strings``: what the bulk JSON decoding reuses across groups and
+    files (the ingest context's parser threads and provenance columns; ``None``: made
+    per group).
     """
 
     source_file: str
     validation: ValidationConfig
     asterix_editions: Mapping[int, str] = field(default_factory=dict)
+    parse_pool: Executor | None = None
+    strings: ConstantStrings | None = None
     parts: dict[str, list[pa.Table]] = field(default_factory=dict)
     not_stored: Counter = field(default_factory=Counter)
     missing_decoders: set[str] = field(default_factory=set)
@@ -264,7 +271,12 @@ class FileDecoder:
             kind = decoder_kind(b.message_encoding, b.schema_encoding, b.schema_name)
             kinds[b.channel_id] = RADAR_KIND if kind == "radar" else TRUTH_KIND
         tables = decode_json_batches(
-            batches, kinds, source_file=self.source_file, validation=self.validation
+            batches,
+            kinds,
+            source_file=self.source_file,
+            validation=self.validation,
+            parse_pool=self.parse_pool,
+            strings=self.strings,
         )
         for name, table in tables.items():
             self._add(name, table)

@@ -15,18 +15,12 @@ import pyarrow as pa
 
 from pipeline.config import ValidationConfig
 from pipeline.decode.json_bulk import Check, JsonKind, decode_payloads, missing, nonfinite, outside
+from pipeline.messages import message_layout
 
-TRUTH_FIELDS: dict[str, pl.DataType] = {
-    "vessel_id": pl.Int64(),
-    "mmsi": pl.Int64(),
-    "time_ns": pl.Int64(),
-    "lat_deg": pl.Float64(),
-    "lon_deg": pl.Float64(),
-    "course_rad": pl.Float64(),
-    "speed_mps": pl.Float64(),
-}
-_REQUIRED = ["vessel_id", "time_ns", "lat_deg", "lon_deg", "course_rad", "speed_mps"]
-_NUMERIC = ["lat_deg", "lon_deg", "course_rad", "speed_mps"]
+TRUTH_LAYOUT = message_layout("truth_state.schema.json")
+TRUTH_FIELDS: dict[str, pl.DataType] = TRUTH_LAYOUT.polars_schema()
+_REQUIRED = TRUTH_LAYOUT.required
+_NUMERIC = TRUTH_LAYOUT.required_numbers
 
 
 def truth_checks(_validation: ValidationConfig) -> list[Check]:

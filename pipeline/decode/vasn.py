@@ -32,40 +32,22 @@ from pipeline.decode.json_bulk import (
 )
 from pipeline.decode.registry import make_rejects
 from pipeline.io.mcap_read import ChannelBatch
+from pipeline.messages import message_layout
 from pipeline.tables import conform, empty
 
 VASN_SCHEMA_NAME = "surveil.VasnReport"
 TRUTH_SCHEMA_NAME = "surveil.AirfieldTruth"
 
-VASN_FIELDS: dict[str, pl.DataType] = {
-    "sensor_id": pl.String(),
-    "track_id": pl.Int64(),
-    "time_ns": pl.Int64(),
-    "x_m": pl.Float64(),
-    "y_m": pl.Float64(),
-    "vx_mps": pl.Float64(),
-    "vy_mps": pl.Float64(),
-    "sigma_x_m": pl.Float64(),
-    "sigma_y_m": pl.Float64(),
-}
-_VASN_REQUIRED = ["sensor_id", "track_id", "time_ns", "x_m", "y_m", "vx_mps", "vy_mps"]
-_VASN_NUMERIC = ["x_m", "y_m", "vx_mps", "vy_mps"]
+# fields from the schemas (pipeline.messages); a VASN report's "last" flag is not decoded
+VASN_LAYOUT = message_layout("vasn_report.schema.json")
+VASN_FIELDS: dict[str, pl.DataType] = VASN_LAYOUT.polars_schema(omit=("last",))
+_VASN_REQUIRED = VASN_LAYOUT.required
+_VASN_NUMERIC = VASN_LAYOUT.required_numbers
 
-TRUTH_FIELDS: dict[str, pl.DataType] = {
-    "time_ns": pl.Int64(),
-    "target_id": pl.Int64(),
-    "kind": pl.String(),
-    "callsign": pl.String(),
-    "target_address": pl.Int64(),
-    "lat_deg": pl.Float64(),
-    "lon_deg": pl.Float64(),
-    "vx_mps": pl.Float64(),
-    "vy_mps": pl.Float64(),
-    "engines_on": pl.Boolean(),
-    "transponder_on": pl.Boolean(),
-}
-_TRUTH_REQUIRED = ["time_ns", "target_id", "lat_deg", "lon_deg", "vx_mps", "vy_mps"]
-_TRUTH_NUMERIC = ["lat_deg", "lon_deg", "vx_mps", "vy_mps"]
+TRUTH_LAYOUT = message_layout("airfield_truth.schema.json")
+TRUTH_FIELDS: dict[str, pl.DataType] = TRUTH_LAYOUT.polars_schema()
+_TRUTH_REQUIRED = TRUTH_LAYOUT.required
+_TRUTH_NUMERIC = TRUTH_LAYOUT.required_numbers
 
 
 def rejects_for(parsed: JsonParse, bad: pl.DataFrame, payloads: list[bytes],

@@ -199,11 +199,11 @@ class ChunkBuffers:
             return buf
 
 
-# the process's pool, shared by every fetcher: a job that reads many files touches fresh
-# memory for its first file only. It holds what can be alive at once: the chunks fetched
-# ahead, plus those a consumer holds (a pending JSON parse keeps up to
-# registry.JSON_MAX_CHUNKS = 64)
-SHARED_BUFFERS = ChunkBuffers(limit=(PREFETCH_BYTES >> 20) + 72)
+# buffers a pool keeps: what can be alive at once, the chunks fetched ahead plus those a
+# consumer holds (a pending JSON parse keeps up to registry.JSON_MAX_CHUNKS = 64). A job
+# that reads many files passes one pool to every reader (pipeline.ingest.IngestContext):
+# it touches fresh memory for its first file only
+POOL_BUFFERS = (PREFETCH_BYTES >> 20) + 72
 
 
 _GRAIN = 64 << 10  # pool buffer sizes are multiples of this (see _capacity)
@@ -537,18 +537,28 @@ class ChunkFetcher:
     ``PREFETCH_BYTES`` of decompressed data ahead of the consumer, in ``FETCH_THREADS``
     background threads; file reads are serialised by a lock (they alone use ``f``).
 
-    ``read_bytes`` counts every byte read from the file. Iterate once; the end of the
-    iteration (or closing the generator) stops the threads.
+    ``buffers``: the pool zstd chunks are decompressed into (the caller's, so that its
+    later files reuse it; ``None``: a pool of this fetcher's own). ``read_bytes`` counts
+    every byte read from the file. Iterate once; the end of the iteration (or closing the
+    generator) stops the threads.
     """
 
-    def __init__(self, f: BinaryIO, size: int, chunks: Sequence[ChunkIndex], *, threaded: bool):
+    def __init__(
+        self,
+        f: BinaryIO,
+        size: int,
+        chunks: Sequence[ChunkIndex],
+        *,
+        threaded: bool,
+        buffers: ChunkBuffers | None = None,
+    ):
         self._f = f
         self._size = size
         self._chunks = list(chunks)
         self._threaded = threaded
         self._lock = threading.Lock()
         self._zstd = threading.local()
-        self._buffers = SHARED_BUFFERS
+        self._buffers = buffers if buffers is not None else ChunkBuffers(limit=POOL_BUFFERS)
         self.read_bytes = 0
         self.decompressed = 0
 

@@ -49,6 +49,7 @@ from mcap.stream_reader import StreamReader
 from pipeline.io.mcap_chunks import (
     OP_CHANNEL,
     OP_SCHEMA,
+    ChunkBuffers,
     ChunkData,
     ChunkFetcher,
     CorruptChunkError,
@@ -66,6 +67,7 @@ from pipeline.io.mcap_chunks import (
 __all__ = [
     "ChannelBatch",
     "ChannelInfo",
+    "ChunkBuffers",
     "ChunkData",
     "CorruptChunkError",
     "McapBatches",
@@ -319,11 +321,18 @@ class _CountingFile:
 class McapBatches(Iterator[ChannelBatch]):
     """Iterator of :class:`ChannelBatch`; ``status`` is final once it is exhausted.
 
-    ``prefetch``: read and decompress chunks in a background thread (default on).
+    ``prefetch``: read and decompress chunks in a background thread (default on);
+    ``buffers``: the pool chunks are decompressed into (``None``: the reader's own).
     """
 
     def __init__(
-        self, path: str | Path, start_ns: int | None, end_ns: int | None, *, prefetch: bool = True
+        self,
+        path: str | Path,
+        start_ns: int | None,
+        end_ns: int | None,
+        *,
+        prefetch: bool = True,
+        buffers: ChunkBuffers | None = None,
     ):
         if start_ns is not None and end_ns is not None and end_ns <= start_ns:
             raise ValueError(f"empty time window [{start_ns}, {end_ns})")
@@ -331,6 +340,7 @@ class McapBatches(Iterator[ChannelBatch]):
         self.start_ns = start_ns
         self.end_ns = end_ns
         self.prefetch = prefetch
+        self.buffers = buffers
         self.status = ReadStatus(path=str(path))
         self.summary: McapSummary | None = None
         self._channels: dict[int, ChannelInfo] = {}
@@ -473,7 +483,8 @@ class McapBatches(Iterator[ChannelBatch]):
         wanted = [
             ci for ci in indexes if self._overlaps(ci.message_start_time, ci.message_end_time)
         ]
-        fetcher = ChunkFetcher(f, size, wanted, threaded=self.prefetch and len(wanted) > 1)
+        threaded = self.prefetch and len(wanted) > 1
+        fetcher = ChunkFetcher(f, size, wanted, threaded=threaded, buffers=self.buffers)
         self._chunks_left = len(wanted)
         try:
             for got in fetcher:
@@ -673,15 +684,17 @@ def read_mcap_batches(
     start_ns: int | None = None,
     end_ns: int | None = None,
     prefetch: bool = True,
+    buffers: ChunkBuffers | None = None,
 ) -> McapBatches:
     """Per-channel batches of the messages with log time in ``[start_ns, end_ns)``.
 
     Iterate the result; afterwards ``result.status`` (:class:`ReadStatus`) holds messages
     read, chunks skipped and what was lost, and ``result.summary`` the file's summary
     (``None`` when it has none). Never raises on damaged content (only on an unreadable
-    path, e.g. ``FileNotFoundError``).
+    path, e.g. ``FileNotFoundError``). ``buffers``: a pool of decompression buffers to
+    reuse (a job reading many files passes one; ``None``: the reader makes its own).
     """
-    return McapBatches(path, start_ns, end_ns, prefetch=prefetch)
+    return McapBatches(path, start_ns, end_ns, prefetch=prefetch, buffers=buffers)
 
 
 def read_mcap_summary(path: str | Path) -> McapSummary | None:

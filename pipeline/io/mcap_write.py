@@ -15,7 +15,6 @@ converters divert such messages to rejects beforehand (:mod:`pipeline.convert.ou
 
 from __future__ import annotations
 
-import json
 import os
 import tempfile
 from collections.abc import Mapping, Sequence
@@ -26,7 +25,6 @@ from pathlib import Path
 import polars as pl
 from mcap.writer import CompressionType, Writer
 
-from pipeline.resources import resource_path
 from pipeline.units import NS, TIME_MAX_NS, TIME_MIN_NS, describe_time
 
 MCAP_PROFILE = ""
@@ -121,11 +119,6 @@ def write_messages(
             os.unlink(tmp)
         raise
     return {c.topic: n for c, n in zip(channels, seq, strict=True) if n}
-
-
-def schema_bytes(file_name: str) -> tuple[bytes, list[str]]:
-    data = (resource_path("schemas") / file_name).read_bytes()
-    return data, list(json.loads(data)["properties"])
 
 
 def json_payloads(df: pl.DataFrame, fields: list[str]) -> pl.Series:

@@ -890,7 +890,8 @@ def _ais_epoch(
         pos, have = _lookup(pic.tracks, st.ais_ref[mj])
         # not decided on a track a radar in a lasting fault reports (the fault corrupts
         # the picture, its association included: the disagreements are the radar's)
-        test = have & pic.served[pos] & ~pic.tainted[pos]
+        test = have.copy()  # (no radar tracks at all: AIS only, the gaps scene)
+        test[have] = pic.served[pos[have]] & ~pic.tainted[pos[have]]
         r = np.full((j.size, 2), np.nan)
         xi = np.full(j.size, np.nan)
         if test.any():

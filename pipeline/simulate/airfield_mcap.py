@@ -19,7 +19,6 @@ temp file + ``os.replace``; the bytes depend only on the inputs.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -29,7 +28,7 @@ from pipeline.airfield.config import AirfieldConfig, airfield_config
 from pipeline.config import Config
 from pipeline.decode import asterix_encode as cat010
 from pipeline.io.mcap_write import archive_file_name, write_mcap_file
-from pipeline.resources import resource_path
+from pipeline.messages import message_layout
 from pipeline.simulate.airfield import AirfieldScenario, simulate_airfield
 from pipeline.units import NS
 
@@ -43,8 +42,9 @@ def sensor_topic(sensor_id: str, kind: str) -> str:
 
 
 def _schema(file_name: str) -> tuple[bytes, list[str]]:
-    data = (resource_path("schemas") / file_name).read_bytes()
-    return data, list(json.loads(data)["properties"])
+    """The schema's bytes (the channel's MCAP schema) and its fields in order."""
+    layout = message_layout(file_name)
+    return layout.data, layout.names
 
 
 def _json(df: pl.DataFrame, fields: list[str]) -> pl.Series:

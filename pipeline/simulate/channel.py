@@ -75,7 +75,6 @@ import shapely
 from scipy.special import ndtr
 
 from pipeline.config import Config, RadarSite
-from pipeline.decode.radar import RADAR_FIELDS
 from pipeline.frames import (
     TWO_PI,
     enu_to_geodetic,
@@ -86,6 +85,7 @@ from pipeline.frames import (
 )
 from pipeline.geometry import sector_polygons
 from pipeline.maritime.config import ChannelFault, SiteBias, channel_faults, radar_bias_config
+from pipeline.messages import RADAR_REPORT, message_layout
 from pipeline.simulate.ais_traffic import AisStation, StateFn, draw_identity, simulate_ais
 from pipeline.simulate.channel_faults import (
     FAULT_TRUTH_SCHEMA,
@@ -125,19 +125,10 @@ SCAN_END_AZIMUTH_RAD = TWO_PI
 _FLEET, _ARRIVALS, _FERRIES, _IDENTITY, _RADAR_PHASE, _RADAR, _AIS = range(1, 8)
 
 RADAR_REPORT_SCHEMA: dict[str, pl.DataType] = {
-    **RADAR_FIELDS,  # the message fields of schemas/radar_track_report.schema.json
-    "status": pl.String(),
+    **message_layout(RADAR_REPORT).polars_schema(),  # every field of the report, in order
     "log_time_ns": pl.Int64(),
 }
-TRUTH_SCHEMA: dict[str, pl.DataType] = {
-    "vessel_id": pl.Int64(),
-    "mmsi": pl.Int64(),
-    "time_ns": pl.Int64(),
-    "lat_deg": pl.Float64(),
-    "lon_deg": pl.Float64(),
-    "course_rad": pl.Float64(),
-    "speed_mps": pl.Float64(),
-}
+TRUTH_SCHEMA: dict[str, pl.DataType] = message_layout("truth_state.schema.json").polars_schema()
 _STATUS = np.array(["", "new", "confirmed", "coasting"], dtype=object)
 
 

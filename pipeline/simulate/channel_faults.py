@@ -36,21 +36,12 @@ import polars as pl
 
 from pipeline.frames import TWO_PI
 from pipeline.maritime.config import ChannelFault
+from pipeline.messages import message_layout
 from pipeline.units import NS
 
-FAULT_TRUTH_SCHEMA: dict[str, pl.DataType] = {
-    "start_ns": pl.Int64(),
-    "end_ns": pl.Int64(),
-    "family": pl.String(),
-    "sensor_kind": pl.String(),
-    "channel": pl.String(),
-    "kind": pl.String(),
-    "value": pl.Float64(),
-    "unit": pl.String(),
-    "vessel_id": pl.Int64(),
-    "mmsi": pl.Int64(),
-    "detail": pl.String(),
-}
+FAULT_TRUTH_SCHEMA: dict[str, pl.DataType] = message_layout(
+    "fault_truth.schema.json").polars_schema()
+"""Columns of a ``fault_truth`` frame: the fields of ``schemas/fault_truth.schema.json``."""
 
 _UNITS = {
     "radar_range_bias": "m",

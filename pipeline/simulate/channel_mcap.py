@@ -12,10 +12,13 @@ topic                     message encoding    schema                        payl
 ``/truth/faults``         ``json``            ``surveil.FaultTruth``         compact JSON
 ========================  ==================  ============================  ============
 
+``/truth/faults`` only when the scene has faults: a fault-free scene (``channel-clean``,
+``gaps``) has the channels and bytes it had before the fault schedule existed.
+
 JSON payloads carry exactly the fields of the channel's JSON schema (``schemas/``), in
 the schema's order; AIS payloads are the ASCII sentence without CR/LF. Messages are
-written in non-decreasing log time across channels (ties: radar, AIS, truth, then row
-order); ``publish_time`` = ``log_time``. A file covers [k·P, (k+1)·P) of log time
+written in non-decreasing log time across channels (ties: radar, AIS, truth, faults,
+then row order); ``publish_time`` = ``log_time``. A file covers [k·P, (k+1)·P) of log time
 (P = ``file_period_s``, aligned to the Unix epoch, so 3600 s gives UTC hours) and is
 named ``<scenario>_<YYYYMMDDTHHMMSSZ of its period start>.mcap``. Each file holds a
 metadata record ``surveil.scenario`` (name, seed, start, duration, the file's period).
@@ -29,8 +32,9 @@ from pathlib import Path
 import polars as pl
 
 from pipeline.config import Config
-from pipeline.io.mcap_write import archive_file_name, json_payloads, schema_bytes, write_mcap_file
+from pipeline.io.mcap_write import archive_file_name, json_payloads, write_mcap_file
 from pipeline.maritime.config import without_faults
+from pipeline.messages import RADAR_REPORT, message_layout
 from pipeline.simulate.channel import ChannelScenario, simulate_channel
 from pipeline.units import NS
 
@@ -64,9 +68,11 @@ def write_channel_archive(
         raise ValueError(f"file_period_s must be positive, got {file_period_s}")
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    radar_schema, radar_fields = schema_bytes("radar_track_report.schema.json")
-    truth_schema, truth_fields = schema_bytes("truth_state.schema.json")
-    fault_schema, fault_fields = schema_bytes("fault_truth.schema.json")
+    radar, truth_layout = message_layout(RADAR_REPORT), message_layout("truth_state.schema.json")
+    radar_schema, radar_fields = radar.data, radar.names
+    truth_schema, truth_fields = truth_layout.data, truth_layout.names
+    fault_layout = message_layout("fault_truth.schema.json")
+    fault_schema, fault_fields = fault_layout.data, fault_layout.names
 
     # (topic, message encoding, schema name or None) in channel-id order
     site_ids = list(scenario.site_ids)
@@ -74,8 +80,10 @@ def write_channel_archive(
         *((radar_topic(s), "json", RADAR_SCHEMA_NAME) for s in site_ids),
         (AIS_TOPIC, "nmea0183", None),
         (TRUTH_TOPIC, "json", TRUTH_SCHEMA_NAME),
-        (FAULT_TOPIC, "json", FAULT_SCHEMA_NAME),
     ]
+    faults = scenario.fault_truth
+    if faults.height:  # a fault-free scene's archive has the channels it had before faults
+        channels.append((FAULT_TOPIC, "json", FAULT_SCHEMA_NAME))
     rank = {topic: i for i, (topic, _, _) in enumerate(channels)}
 
     parts = []
@@ -110,17 +118,17 @@ def write_channel_archive(
             }
         )
     )
-    faults = scenario.fault_truth
-    parts.append(
-        pl.DataFrame(
-            {
-                "log_time_ns": faults["start_ns"],
-                "channel": rank[FAULT_TOPIC],
-                "payload": json_payloads(faults, fault_fields),
-            },
-            schema={"log_time_ns": pl.Int64, "channel": pl.Int64, "payload": pl.Binary},
+    if faults.height:
+        parts.append(
+            pl.DataFrame(
+                {
+                    "log_time_ns": faults["start_ns"],
+                    "channel": rank[FAULT_TOPIC],
+                    "payload": json_payloads(faults, fault_fields),
+                },
+                schema={"log_time_ns": pl.Int64, "channel": pl.Int64, "payload": pl.Binary},
+            )
         )
-    )
     messages = (
         pl.concat(
             [
@@ -145,8 +153,9 @@ def write_channel_archive(
     schemas = {
         RADAR_SCHEMA_NAME: radar_schema,
         TRUTH_SCHEMA_NAME: truth_schema,
-        FAULT_SCHEMA_NAME: fault_schema,
     }
+    if faults.height:
+        schemas[FAULT_SCHEMA_NAME] = fault_schema
     paths: list[Path] = []
     for (file_index,), df in messages.group_by(["file_index"], maintain_order=True):
         period_start = int(file_index) * period_ns

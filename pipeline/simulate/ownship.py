@@ -33,7 +33,6 @@ encoding ``nmea0183``, channel metadata ``platform_id``), a JSON channel of gyro
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass
 from datetime import UTC, datetime
@@ -46,8 +45,8 @@ from pipeline import frames
 from pipeline.filters import kalman
 from pipeline.filters.gyro_gnss_log import EARTH_RATE_RADPS, G_MPS2, GyroModel, RollModel
 from pipeline.io.mcap_write import write_mcap_file
+from pipeline.messages import message_layout
 from pipeline.nav.config import OwnshipScenarioConfig
-from pipeline.resources import resource_path
 from pipeline.simulate.channel_faults import FAULT_TRUTH_SCHEMA
 from pipeline.units import KNOT_MPS, NS
 
@@ -428,8 +427,9 @@ def _json_payloads(df: pl.DataFrame, fields: list[str]) -> pl.Series:
 
 
 def _schema(file_name: str) -> tuple[bytes, list[str]]:
-    data = (resource_path("schemas") / file_name).read_bytes()
-    return data, list(json.loads(data)["properties"])
+    """The schema's bytes (the channel's MCAP schema) and its fields in order."""
+    layout = message_layout(file_name)
+    return layout.data, layout.names
 
 
 def ownship_messages(sc: OwnshipScenario, sample_period_s: float) -> pl.DataFrame:

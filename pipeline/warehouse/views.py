@@ -14,10 +14,11 @@ commit that changed the table), and ``main.<table>`` (``SELECT * FROM snapshot.<
 carrying the table's doc as its comment and every column's ``[unit] meaning`` from
 ``schemas/`` as a column comment (``duckdb_columns()``, ``FROM describe_table('x')``):
 writing ~550 comments costs ~0.5 s, so they sit on views that change only when the
-schemas' docs do. The copy is
-attached to one in-memory DuckDB instance per process (:func:`warm_up` creates it in the
-background: building DuckDB's function catalog costs ~40 ms per instance, and a job
-would otherwise pay it at its very end, after the last write). Each view carries
+schemas' docs do. The copy is attached to an in-memory DuckDB instance
+(:class:`ViewsEngine`: the ingest's context owns one; other callers share a module
+default). :meth:`ViewsEngine.warm_up` creates it in the background: building DuckDB's
+function catalog costs ~40 ms per instance, and a job would otherwise pay it at its very
+end, after the last write. Each view carries
 the digest of its statement as its comment (``duckdb_views().comment``), so an update
 rewrites only the views whose table changed since the file was written (an ingest changes
 three or four of ~30 tables); a missing or unreadable file is built from scratch.
@@ -46,9 +47,6 @@ VIEWS_FILE = "surveil.duckdb"
 SNAPSHOT_SCHEMA = "snapshot"  # views over each table's current files, in surveil.duckdb
 DESCRIBE_MACRO = "describe_table"  # FROM describe_table('radar_tracks'): columns, types, comments
 _ATTACHED = "views_file"  # the name the temporary copy is attached under
-
-_engine: duckdb.DuckDBPyConnection | None = None
-_engine_lock = threading.Lock()  # guards _engine: its creation and every use
 
 _DUCKDB_TYPES: dict[pa.DataType, str] = {
     pa.int16(): "SMALLINT",
@@ -183,76 +181,113 @@ def register_tables(
     return list(statements)
 
 
-def warm_up(warehouse: Path | None = None) -> None:
-    """Create the DuckDB instance :func:`rebuild_views_file` works through, in a daemon
-    thread (DuckDB does it without the GIL), so that a job's decoding hides its cost.
-    Given a ``warehouse`` without a views file yet, also the documented views a new file
-    copies (~1 s of CPU: only then is it worth spending while the job works)."""
-    new_file = warehouse is not None and not (Path(warehouse) / VIEWS_FILE).exists()
-    threading.Thread(target=_warm, args=(new_file,), name="duckdb-warm-up",
-                     daemon=True).start()
-
-
-def _warm(with_template: bool = False) -> None:
-    with _engine_lock:
-        con = _engine_locked()
-        if with_template:
-            _docs_template_locked(con)
-
-
 _TEMPLATE = "views_template"  # in-memory database: the documented views of a new file
-_template_digest: str | None = None
 
 
-def _docs_template_locked(con: duckdb.DuckDBPyConnection) -> str:
-    """Build (once per process) the in-memory database holding what every views file
-    shares: the ``snapshot`` schema with typed empty views, the ``main`` views with their
-    ~550 comments and the describe macro. Writing those comments one by one costs ~1 s
-    here; a new file copies them in ~25 ms (``COPY FROM DATABASE``), and
-    :func:`warm_up` builds this while the job decodes. Returns the docs digest."""
-    global _template_digest
-    if _template_digest is None:
-        digest = _docs_digest()
-        con.execute(f"ATTACH ':memory:' AS {_TEMPLATE}")
-        try:
-            con.execute(f"USE {_TEMPLATE}")
-            script = [f"CREATE SCHEMA {_ident(SNAPSHOT_SCHEMA)}"]
-            for name in table_specs():
-                empty = view_sql(name, [], SNAPSHOT_SCHEMA)
-                script.append(empty)  # digest as in a file: a table without files stays
-                script.append(f"COMMENT ON VIEW {_ident(SNAPSHOT_SCHEMA)}.{_ident(name)} "
-                              f"IS {sql_literal(_digest(empty))}")
-                script += doc_view_statements(name)
-            script.append(_DESCRIBE_SQL)
-            script.append(f"COMMENT ON MACRO TABLE main.{DESCRIBE_MACRO} IS {sql_literal(digest)}")
-            con.execute(";\n".join(["BEGIN", *script, "COMMIT"]))
-        except BaseException:
+class ViewsEngine:
+    """The in-memory DuckDB connection that writes views files (one thread: it only
+    writes views) and the template of a new file it holds, created on first use or by
+    :meth:`warm_up`; :meth:`close` closes them. Thread-safe: a lock guards the
+    connection's creation and every use."""
+
+    def __init__(self) -> None:
+        self._con: duckdb.DuckDBPyConnection | None = None
+        self._template_digest: str | None = None
+        self._lock = threading.Lock()
+        self._warming: threading.Thread | None = None
+
+    def warm_up(self, warehouse: Path | None = None) -> None:
+        """Create the connection in a thread (DuckDB does it without the GIL), so that a
+        job's decoding hides its cost. Given a ``warehouse`` without a views file yet,
+        also the documented views a new file copies (~1 s of CPU: only then is it worth
+        spending while the job works)."""
+        new_file = warehouse is not None and not (Path(warehouse) / VIEWS_FILE).exists()
+        self._warming = threading.Thread(
+            target=self._warm, args=(new_file,), name="duckdb-warm-up", daemon=True
+        )
+        self._warming.start()
+
+    def _warm(self, with_template: bool = False) -> None:
+        with self._lock:
+            con = self._connection()
+            if with_template:
+                self._docs_template(con)
+
+    def _connection(self) -> duckdb.DuckDBPyConnection:
+        """The connection (created now if need be); the caller holds ``_lock``."""
+        if self._con is None:
+            self._con = duckdb.connect(config={"threads": 1})
+        return self._con
+
+    def _docs_template(self, con: duckdb.DuckDBPyConnection) -> str:
+        """Build (once per engine) the in-memory database holding what every views file
+        shares: the ``snapshot`` schema with typed empty views, the ``main`` views with
+        their ~550 comments and the describe macro. Writing those comments one by one
+        costs ~1 s here; a new file copies them in ~25 ms (``COPY FROM DATABASE``), and
+        :meth:`warm_up` builds this while the job decodes. Returns the docs digest; the
+        caller holds ``_lock``."""
+        if self._template_digest is None:
+            digest = _docs_digest()
+            con.execute(f"ATTACH ':memory:' AS {_TEMPLATE}")
+            try:
+                con.execute(f"USE {_TEMPLATE}")
+                script = [f"CREATE SCHEMA {_ident(SNAPSHOT_SCHEMA)}"]
+                for name in table_specs():
+                    empty = view_sql(name, [], SNAPSHOT_SCHEMA)
+                    script.append(empty)  # digest as in a file: a table without files stays
+                    script.append(f"COMMENT ON VIEW {_ident(SNAPSHOT_SCHEMA)}.{_ident(name)} "
+                                  f"IS {sql_literal(_digest(empty))}")
+                    script += doc_view_statements(name)
+                script.append(_DESCRIBE_SQL)
+                script.append(
+                    f"COMMENT ON MACRO TABLE main.{DESCRIBE_MACRO} IS {sql_literal(digest)}"
+                )
+                con.execute(";\n".join(["BEGIN", *script, "COMMIT"]))
+            except BaseException:
+                con.execute("USE memory")
+                con.execute(f"DETACH DATABASE IF EXISTS {_TEMPLATE}")
+                raise
             con.execute("USE memory")
-            con.execute(f"DETACH DATABASE IF EXISTS {_TEMPLATE}")
-            raise
-        con.execute("USE memory")
-        _template_digest = digest
-    return _template_digest
+            self._template_digest = digest
+        return self._template_digest
+
+    def close(self) -> None:
+        """Wait for a warm-up still running, then close the connection."""
+        if self._warming is not None:
+            self._warming.join()
+            self._warming = None
+        with self._lock:
+            if self._con is not None:
+                self._con.close()
+                self._con, self._template_digest = None, None
+
+    def rebuild(self, warehouse: Path) -> Path:
+        """:func:`rebuild_views_file` through this engine."""
+        return _rebuild(self, Path(warehouse))
 
 
-def _engine_locked() -> duckdb.DuckDBPyConnection:
-    """The process's in-memory DuckDB connection (one thread: it only writes views);
-    the caller holds ``_engine_lock``."""
-    global _engine
-    if _engine is None:
-        _engine = duckdb.connect(config={"threads": 1})
-    return _engine
+_SHARED = ViewsEngine()  # for callers without an engine of their own (batch, calibrate)
 
 
-def rebuild_views_file(warehouse: Path) -> Path:
+def warm_up(warehouse: Path | None = None) -> None:
+    """:meth:`ViewsEngine.warm_up` of the engine shared by callers without their own."""
+    _SHARED.warm_up(warehouse)
+
+
+def rebuild_views_file(warehouse: Path, engine: ViewsEngine | None = None) -> Path:
     """Bring ``<warehouse>/surveil.duckdb`` up to date with the views of every table.
 
     The views whose statement changed (their table got new files, or the code a new
     schema) are rewritten in a temporary copy of the file, which then replaces it with
     ``os.replace``: an analyst opening the file sees the old or the new views. An
     unchanged file is left alone. The result equals a build from scratch
-    (tests/warehouse/test_views.py checks it).
+    (tests/warehouse/test_views.py checks it). ``engine``: the DuckDB instance to work
+    through (``None``: the shared one).
     """
+    return _rebuild(engine if engine is not None else _SHARED, Path(warehouse))
+
+
+def _rebuild(engine: ViewsEngine, warehouse: Path) -> Path:
     warehouse = Path(warehouse)
     warehouse.mkdir(parents=True, exist_ok=True)
     target = warehouse / VIEWS_FILE
@@ -260,13 +295,13 @@ def rebuild_views_file(warehouse: Path) -> Path:
                   for name in table_specs()}
     tmp = warehouse / f".{VIEWS_FILE}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}"
     try:
-        with _engine_lock:
-            con = _engine_locked()
+        with engine._lock:
+            con = engine._connection()
             copied = _attach_copy_or_new(con, target, tmp)
             try:
                 docs_digest = _docs_digest()
                 if not copied:  # a new file: the documented views from the template
-                    _docs_template_locked(con)
+                    engine._docs_template(con)
                     con.execute(f"COPY FROM DATABASE {_TEMPLATE} TO {_ATTACHED} (SCHEMA)")
                 written = _view_digests(con)  # (the query costs ~10 ms)
                 main = _main_comments(con)

@@ -22,7 +22,7 @@ from mcap_fixtures import (
     write_mcap,
 )
 
-import jobs.ingest
+import pipeline.ingest.worker
 import pipeline.warehouse.staged
 from jobs.ingest import IngestSummary, IngestUsageError, run_ingest
 from pipeline.decode import json_columns
@@ -232,14 +232,14 @@ def test_process_executor_end_to_end(tmp_path, cfg):
 
 
 def test_failed_commit_is_reported_not_raised(tmp_path, cfg, monkeypatch):
-    import jobs.ingest as job
+    import pipeline.ingest.commit as commit
 
     p = write_mcap(tmp_path / "x.mcap", radar_messages(5))
 
     def boom(*a, **k):
         raise RuntimeError("disk full")
 
-    monkeypatch.setattr(job, "replace_source_file", boom)
+    monkeypatch.setattr(commit, "replace_source_file", boom)
     s = ingest([p], cfg, tmp_path / "wh")
     assert s.exit_code == 1 and s.failed and "disk full" in s.failed[0][1]
     assert read_table(tmp_path / "wh", "ingest_ledger").num_rows == 0
@@ -310,7 +310,8 @@ def test_helper_threads_yield_the_cores_to_the_fetch_thread(tmp_path, cfg, monke
     if not _can_renice():
         pytest.skip("this system refuses setpriority (lower_thread_priority does nothing)")
     base, seen = _niceness(), {}
-    write, fingerprint = pipeline.warehouse.staged._write_group, jobs.ingest.file_fingerprint
+    write = pipeline.warehouse.staged._write_group
+    fingerprint = pipeline.ingest.worker.file_fingerprint
 
     def noted_write(f, group):
         seen["writer"] = _niceness()
@@ -321,10 +322,11 @@ def test_helper_threads_yield_the_cores_to_the_fetch_thread(tmp_path, cfg, monke
         return fingerprint(path)
 
     monkeypatch.setattr(pipeline.warehouse.staged, "_write_group", noted_write)
-    monkeypatch.setattr(jobs.ingest, "file_fingerprint", noted_fingerprint)
+    monkeypatch.setattr(pipeline.ingest.worker, "file_fingerprint", noted_fingerprint)
     src = write_mcap(tmp_path / "a.mcap", radar_messages(50))
     assert ingest([src], cfg, tmp_path / "wh").exit_code == 0
     assert seen == {"writer": min(19, base + WRITER_NICE), "hasher": min(19, base + HASHER_NICE)}
-    parser = json_columns._pool().submit(_niceness).result()
+    with json_columns.parser_pool() as pool:
+        parser = pool.submit(_niceness).result()
     assert parser == min(19, base + SECOND_PARSER_NICE)
     assert _niceness() == base

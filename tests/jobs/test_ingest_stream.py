@@ -23,10 +23,11 @@ from mcap_fixtures import (
     write_mcap,
 )
 
-from jobs.ingest import IngestUnit, ingest_file, run_ingest
+from jobs.ingest import run_ingest
 from pipeline.config import ValidationConfig
 from pipeline.decode import registry
 from pipeline.decode.registry import FileDecoder
+from pipeline.ingest import IngestContext, IngestUnit, ingest_file
 from pipeline.io.mcap_read import read_mcap_batches
 from pipeline.warehouse.delta import read_table, table_exists, table_path
 
@@ -224,29 +225,30 @@ def test_mcap_index_from_summary_and_from_scan(tmp_path, cfg):
 def test_windowed_unit_outside_the_file_reads_only_its_summary(tmp_path, cfg):
     p = write_mcap(tmp_path / "w.mcap", radar_messages(3000), chunk_size=8192)
     size = p.stat().st_size
-    unit = IngestUnit(
+    outside = IngestUnit(
         str(p), str(tmp_path / "wh"), str(tmp_path / "stage"), cfg.validation,
         T0_NS + 10**6 * NS, T0_NS + 10**6 * NS + NS,
     )  # fmt: skip
-    m = ingest_file(unit)
-    assert m.chunks_decompressed == 0 and m.message_count == 0
-    assert m.bytes_read < size / 10 and m.sha256 == ""  # not hashed: not read through
     inside = IngestUnit(
         str(p), str(tmp_path / "wh"), str(tmp_path / "stage"), cfg.validation,
         T0_NS + 1000 * NS, T0_NS + 1010 * NS,
     )  # fmt: skip
-    m2 = ingest_file(inside)
+    with IngestContext() as ctx:
+        m = ingest_file(outside, ctx)
+        m2 = ingest_file(inside, ctx)
+    assert m.chunks_decompressed == 0 and m.message_count == 0
+    assert m.bytes_read < size / 10 and m.sha256 == ""  # not hashed: not read through
     assert 1 <= m2.chunks_decompressed <= 12 and m2.bytes_read < size / 4
     assert m2.rows["radar_tracks"] == 10
 
 
 def test_failed_staged_commit_is_reported_and_ledger_not_written(tmp_path, cfg, monkeypatch):
-    import jobs.ingest as job
+    import pipeline.ingest.commit as commit
 
     def boom(*a, **k):
         raise RuntimeError("disk full")
 
-    monkeypatch.setattr(job, "commit_staged", boom)
+    monkeypatch.setattr(commit, "commit_staged", boom)
     p = write_mcap(tmp_path / "x.mcap", radar_messages(5))
     s = ingest([p], cfg, tmp_path / "wh")
     assert s.exit_code == 1 and "disk full" in s.failed[0][1]

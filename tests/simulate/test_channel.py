@@ -107,8 +107,9 @@ def test_archive_reads_back_with_schemas(tmp_path: Path, scenario: ChannelScenar
         reader = make_reader(f)
         summary = reader.get_summary()
         topics = {c.topic: c for c in summary.channels.values()}
+        # fault-free: no /truth/faults channel (tests/simulate/test_channel_faults.py)
         assert set(topics) == {"/radar/R1/tracks", "/radar/R2/tracks", "/ais/nmea",
-                               "/truth/vessels", "/truth/faults"}
+                               "/truth/vessels"}
         for topic in ("/radar/R1/tracks", "/radar/R2/tracks"):
             ch = topics[topic]
             schema = summary.schemas[ch.schema_id]

@@ -1,0 +1,60 @@
+"""The units of an ingest run: one :class:`~pipeline.ingest.worker.IngestUnit` per file."""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from pathlib import Path
+
+from pipeline.config import ValidationConfig
+from pipeline.errors import UsageError
+from pipeline.ingest.worker import IngestUnit
+
+
+class IngestUsageError(UsageError):
+    """Bad input paths (missing path, directory without MCAP files) or window: exit 2."""
+
+
+def expand_paths(paths: Iterable[Path | str]) -> list[Path]:
+    """Absolute file paths: directories expand to their ``*.mcap`` files (recursive,
+    sorted); an explicit file is taken as given. Raises :class:`IngestUsageError` for a
+    missing path, a directory without MCAP files, or no paths at all."""
+    out: list[Path] = []
+    for raw in paths:
+        p = Path(raw).expanduser()
+        if not p.exists():
+            raise IngestUsageError(f"input path does not exist: {p}")
+        if p.is_dir():
+            found = sorted(q for q in p.rglob("*.mcap") if q.is_file())
+            if not found:
+                raise IngestUsageError(f"no *.mcap files under directory: {p}")
+            out.extend(found)
+        else:
+            out.append(p)
+    if not out:
+        raise IngestUsageError("no input paths given")
+    return list(dict.fromkeys(q.resolve() for q in out))
+
+
+def plan_units(
+    paths: Iterable[Path | str],
+    *,
+    warehouse: Path,
+    staging: Path,
+    validation: ValidationConfig,
+    start_ns: int | None = None,
+    end_ns: int | None = None,
+    force: bool = False,
+    asterix_editions: tuple[tuple[int, str], ...] = (),
+) -> list[IngestUnit]:
+    """One unit per file of ``paths`` (:func:`expand_paths`), in path order, staging
+    under ``staging``. ``[start_ns, end_ns)``: both bounds or neither, a non-empty
+    window; :class:`IngestUsageError` otherwise."""
+    if (start_ns is None) != (end_ns is None):
+        raise IngestUsageError("give both start and end of the window, or neither")
+    if start_ns is not None and end_ns <= start_ns:  # type: ignore[operator]
+        raise IngestUsageError(f"empty window [{start_ns}, {end_ns})")
+    wh, stage = str(warehouse), str(staging)
+    return [
+        IngestUnit(str(f), wh, stage, validation, start_ns, end_ns, force, asterix_editions)
+        for f in expand_paths(paths)
+    ]

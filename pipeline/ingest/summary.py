@@ -1,0 +1,76 @@
+"""Counts of one ingest run, and their one screen of text."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from pipeline.decode.registry import RAW_TABLES
+from pipeline.ingest.worker import FileManifest
+
+
+@dataclass
+class IngestSummary:
+    """Counts of one ingest run; ``exit_code`` 0 when every file is ok or skipped."""
+
+    files_total: int = 0
+    files_ok: int = 0
+    files_partial: int = 0
+    files_quarantined: int = 0
+    files_skipped: int = 0
+    messages_read: int = 0
+    rows: dict[str, int] = field(default_factory=lambda: dict.fromkeys(RAW_TABLES, 0))
+    rejects: dict[str, int] = field(default_factory=dict)
+    not_stored: dict[str, int] = field(default_factory=dict)
+    failed: list[tuple[str, str]] = field(default_factory=list)
+    window: tuple[int, int] | None = None
+
+    @property
+    def exit_code(self) -> int:
+        """0: all files ok or skipped; 1: some file partial/quarantined or a unit failed."""
+        bad = self.files_partial or self.files_quarantined or self.failed
+        return 1 if bad else 0
+
+    def add(self, m: FileManifest) -> None:
+        if m.skipped:
+            self.files_skipped += 1
+            return
+        self.files_ok += m.status == "ok"
+        self.files_partial += m.status == "partial"
+        self.files_quarantined += m.status == "quarantined"
+        self.messages_read += m.message_count
+        for k, v in m.rows.items():
+            self.rows[k] = self.rows.get(k, 0) + v
+        _merge(self.rejects, m.rejects_by_reason)
+        _merge(self.not_stored, m.not_stored)
+
+    def render(self) -> str:
+        """One screen of text for the CLI."""
+        lines = [
+            f"ingest: {self.files_total} files: {self.files_ok} ok, {self.files_partial} "
+            f"partial, {self.files_quarantined} quarantined, {self.files_skipped} skipped "
+            f"(unchanged), {len(self.failed)} failed; {self.messages_read} messages read"
+        ]
+        if self.window:
+            lines.append(f"window: [{self.window[0]}, {self.window[1]}) ns")
+        lines.append("rows:    " + _fmt(self.rows))
+        lines.append("rejects: " + (_fmt(self.rejects) or "none"))
+        if self.not_stored:
+            lines.append("valid, not stored (by type): " + _fmt(self.not_stored))
+        if self.rejects.get("decoder_missing"):
+            lines.append("WARNING: ASTERIX channels not decoded: the ASTERIX decoder is not "
+                         "installed; pip install 'surveil-pipeline[asterix]'")  # fmt: skip
+        for path, err in self.failed[:10]:
+            lines.append(f"FAILED {path}: {err}")
+        if len(self.failed) > 10:
+            lines.append(f"... and {len(self.failed) - 10} more failed units")
+        lines.append(f"exit code {self.exit_code}")
+        return "\n".join(lines)
+
+
+def _merge(into: dict[str, int], counts: dict[str, int]) -> None:
+    for k, v in counts.items():
+        into[k] = into.get(k, 0) + v
+
+
+def _fmt(counts: dict[str, int]) -> str:
+    return ", ".join(f"{k} {v}" for k, v in sorted(counts.items()))

@@ -1,0 +1,241 @@
+"""The ingest worker: one MCAP file -> staged Parquet per table and a :class:`FileManifest`.
+
+:func:`ingest_file` runs in a worker (in the driver's process, a pool process or a Ray
+task) and commits nothing: the driver commits the manifest (:mod:`pipeline.ingest.commit`).
+It streams the file: the reader yields chunk by chunk (``pipeline.io.mcap_read``: chunk
+index walk, decompression in a background thread, no Python object per message), the
+decoder turns batches into Arrow rows (radar/truth JSON in bulk parses of up to 100k
+messages), and :class:`~pipeline.warehouse.staged.TableStager` appends those rows to
+staged Parquet files, one per (table, date), as they come. Memory holds a few chunks and
+row groups, not the file. Meanwhile a thread computes the file's SHA-256 (whole-file runs
+only).
+
+Ledger: a file whose size and SHA-256 match its ledger row (status ok/partial) is skipped
+(``FileManifest.skipped``), unless ``force``, or unless an optional decoder was missing
+when it was read (error "decoder not installed": it may be installed now); it is hashed
+first, before any decoding. Status: ``ok``; ``partial`` (chunks lost, file cut off,
+channels whose decoder is not installed); ``quarantined`` (not MCAP, or nothing
+readable: one rejects row says why).
+
+Time window ``[start_ns, end_ns)``: rows are kept when the table's time column is inside
+(``time_ns``; ``log_time_ns`` for rejects). Only the chunks whose index overlaps the
+window (widened by ``WINDOW_READ_MARGIN_NS`` of log time on each side, so that a report
+whose own time is in the window but was logged just outside it is not lost) are read; a
+file whose summary lies wholly outside is read no further than its footer and summary,
+and is not hashed. File-level rejects (not_mcap, corrupt_chunk, truncated,
+unknown_schema) are clipped into the window.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections import Counter
+from concurrent.futures import Future, wait
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.compute as pc
+
+from pipeline.config import ValidationConfig
+from pipeline.decode.registry import RAW_TABLES, FileDecoder, make_rejects
+from pipeline.ingest.context import IngestContext
+from pipeline.io.mcap_index import mcap_index_rows
+from pipeline.io.mcap_read import ReadStatus, read_mcap_batches
+from pipeline.tables import conform, empty, spec
+from pipeline.warehouse.ledger import file_fingerprint, lookup
+from pipeline.warehouse.staged import StagedFile, TableStager
+
+WINDOW_READ_MARGIN_NS = 60 * 10**9
+FILE_LEVEL_CODES = frozenset({"not_mcap", "corrupt_chunk", "truncated", "unknown_schema"})
+_MAGIC_SAMPLE = 64  # bytes of a not-MCAP file kept in its rejects row
+MISSING_DECODER = "decoder not installed"
+
+
+@dataclass(frozen=True)
+class IngestUnit:
+    """One source file to ingest (picklable; carries paths, not data)."""
+
+    path: str
+    warehouse: str
+    staging_dir: str
+    validation: ValidationConfig
+    start_ns: int | None = None
+    end_ns: int | None = None
+    force: bool = False
+    asterix_editions: tuple[tuple[int, str], ...] = ()  # config [asterix] editions
+
+    @property
+    def windowed(self) -> bool:
+        return self.start_ns is not None
+
+
+@dataclass(frozen=True)
+class FileManifest:
+    """What a worker made of one file: counts, status, the staged Parquet files per table,
+    the file's ``mcap_index`` rows (whole-file runs), and what was read (``bytes_read``,
+    ``chunks_decompressed``)."""
+
+    source_file: str
+    size_bytes: int
+    sha256: str
+    skipped: bool = False
+    status: str = "ok"
+    error: str | None = None
+    message_count: int = 0
+    rows: dict[str, int] = field(default_factory=dict)
+    rejects_by_reason: dict[str, int] = field(default_factory=dict)
+    not_stored: dict[str, int] = field(default_factory=dict)
+    start_time_ns: int | None = None
+    end_time_ns: int | None = None
+    staged: dict[str, list[StagedFile]] = field(default_factory=dict)
+    index_rows: pa.Table | None = None
+    bytes_read: int = 0
+    chunks_decompressed: int = 0
+
+
+def ingest_file(unit: IngestUnit, ctx: IngestContext) -> FileManifest:
+    """Decode one file and stage its rows (runs in a worker; commits nothing). ``ctx``:
+    the worker process's context (entered), whose buffers and threads it uses."""
+    path = Path(unit.path)
+    size = path.stat().st_size
+    sha: str | Future[str] = ""
+    if not unit.windowed:  # a windowed run never uses the hash: do not read the whole file
+        prior = None if unit.force else lookup(unit.warehouse, unit.path)
+        if (
+            prior is not None
+            and prior["status"] in ("ok", "partial")
+            and prior["size_bytes"] == size
+            and MISSING_DECODER not in (prior["error"] or "")  # a decoder may be there now
+        ):
+            sha = file_fingerprint(path)[1]
+            if sha == prior["sha256"]:
+                return FileManifest(unit.path, size, sha, skipped=True)
+        else:  # hash while decoding (hashlib releases the GIL)
+            sha = ctx.hasher.submit(lambda: file_fingerprint(path)[1])  # type: ignore[union-attr]
+    try:
+        return _decode_and_stage(unit, ctx, path, size, sha)
+    finally:
+        if isinstance(sha, Future) and not sha.cancel():
+            wait([sha])  # the file is not read any more once the unit returns
+
+
+def _decode_and_stage(
+    unit: IngestUnit, ctx: IngestContext, path: Path, size: int, sha: str | Future[str]
+) -> FileManifest:
+    lo, hi = _read_window(unit)
+    scan = read_mcap_batches(path, start_ns=lo, end_ns=hi, buffers=ctx.chunk_buffers)
+    decoder = FileDecoder(
+        source_file=unit.path,
+        validation=unit.validation,
+        asterix_editions=dict(unit.asterix_editions),
+        parse_pool=ctx.parse_pool,
+        strings=ctx.strings,
+    )
+    stager = TableStager(_stage_folder(unit))
+    reasons: Counter = Counter()
+
+    def stage(name: str, table: pa.Table) -> None:
+        if unit.windowed:
+            table = _in_window(name, table, unit.start_ns, unit.end_ns)  # type: ignore[arg-type]
+        if name == "rejects" and table.num_rows:
+            reasons.update(table["reason_code"].to_pylist())
+        stager.add(name, table)
+
+    try:
+        for batch in scan:
+            decoder.feed(batch, scan.chunks_left)
+            for name, parts in decoder.drain().items():
+                for part in parts:
+                    stage(name, part)
+        decoder.add_rejects(_status_rejects(unit, scan.status))
+        for name, table in decoder.finish().items():
+            stage(name, table)
+    finally:
+        staged = stager.close()
+    by_table: dict[str, list[StagedFile]] = {}
+    for sf in staged:
+        by_table.setdefault(sf.table, []).append(sf)
+    status = scan.status
+    index = None
+    if not unit.windowed:
+        index = mcap_index_rows(unit.path, size, scan.summary, scan.channels, status,
+                                decoder.not_stored_by_channel)  # fmt: skip
+    file_status, error = status.status, status.error
+    if decoder.missing_decoders:  # partly read: exit 1, and read again once installed
+        missing = f"{MISSING_DECODER}: {', '.join(sorted(decoder.missing_decoders))}"
+        file_status = "partial" if file_status == "ok" else file_status
+        error = missing if error is None else f"{error}; {missing}"
+    return FileManifest(
+        source_file=unit.path,
+        size_bytes=size,
+        sha256=sha if isinstance(sha, str) else sha.result(),
+        status=file_status,
+        error=error,
+        message_count=status.messages_read,
+        rows={n: stager.rows.get(n, 0) for n in (*RAW_TABLES, *stager.rows)},
+        rejects_by_reason=dict(reasons),
+        not_stored=dict(sorted(decoder.not_stored.items())),
+        start_time_ns=status.start_time_ns,
+        end_time_ns=status.end_time_ns,
+        staged=by_table,
+        index_rows=index,
+        bytes_read=status.bytes_read,
+        chunks_decompressed=status.chunks_decompressed,
+    )
+
+
+def _stage_folder(unit: IngestUnit) -> Path:
+    """``<staging>/<hash of path>``: deterministic per source file."""
+    return Path(unit.staging_dir) / hashlib.sha256(unit.path.encode()).hexdigest()[:24]
+
+
+def _read_window(unit: IngestUnit) -> tuple[int | None, int | None]:
+    if not unit.windowed:
+        return None, None
+    return unit.start_ns - WINDOW_READ_MARGIN_NS, unit.end_ns + WINDOW_READ_MARGIN_NS
+
+
+def _status_rejects(unit: IngestUnit, status: ReadStatus) -> pa.Table:
+    """One rejects row per problem the reader reported (not MCAP, lost chunk, cut-off)."""
+    if not status.problems:
+        return empty("rejects")
+    raw: list[bytes | None] = []
+    for p in status.problems:
+        if p.reason_code == "not_mcap":
+            with open(unit.path, "rb") as f:
+                raw.append(f.read(_MAGIC_SAMPLE))
+        else:
+            raw.append(None)
+    reasons = []
+    for p in status.problems:
+        lost = "" if p.messages_lost is None else f" ({p.messages_lost} messages lost)"
+        reasons.append(p.detail + lost)
+    return make_rejects(
+        [p.log_time_ns or 0 for p in status.problems],
+        source_file=unit.path,
+        topic=None,
+        reason_code=[p.reason_code for p in status.problems],
+        reason=reasons,
+        raw=raw,
+    )
+
+
+def _in_window(name: str, table: pa.Table, start_ns: int, end_ns: int) -> pa.Table:
+    """Rows of ``table`` whose time column is in ``[start_ns, end_ns)``; file-level
+    rejects are first clipped into the window so that they are kept."""
+    col = spec(name).time_column
+    if name == "rejects" and table.num_rows:
+        t = table[col].to_numpy(zero_copy_only=False)
+        file_level = np.isin(
+            table["reason_code"].to_numpy(zero_copy_only=False), list(FILE_LEVEL_CODES)
+        )
+        clipped = np.where(file_level, np.clip(t, start_ns, end_ns - 1), t)
+        table = conform(
+            name,
+            table.set_column(table.column_names.index(col), col, pa.array(clipped, pa.int64())),
+        )
+    t = table[col]
+    keep = pc.and_(pc.greater_equal(t, start_ns), pc.less(t, end_ns))
+    return table.filter(keep)
