@@ -39,9 +39,12 @@ def test_false_alarm_share_near_q(result):
     for row in fa.iter_rows(named=True):
         share = row["flagged"] / row["decisions"]
         if row["sensor_kind"] in ("radar", "ais"):
-            assert 0.3 * row["q"] <= share <= 3 * row["q"], row
+            # the goal (10 seeds: ~24 radar and ~380 AIS false alarms expected)
+            assert 0.5 * row["q"] <= share <= 2 * row["q"], row
         elif row["sensor_kind"] == "gnss_position":
-            assert share <= 3 * row["q"], row
+            # ~6 expected over 10 seeds: only the upper bound is a meaningful test here
+            assert share <= 2 * row["q"], row
+        # gnss_gate: the nav filter's eq. 3 gate, not this test (docs/integrity.md §8)
 
 
 @pytest.mark.slow
