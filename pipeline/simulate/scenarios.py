@@ -6,7 +6,10 @@ from collections.abc import Callable
 from pathlib import Path
 
 from pipeline.simulate.airfield_mcap import simulate_airfield_archive
-from pipeline.simulate.channel_mcap import simulate_channel_archive
+from pipeline.simulate.channel_mcap import (
+    simulate_channel_archive,
+    simulate_channel_clean_archive,
+)
 from pipeline.simulate.gaps_mcap import write_gaps_archive
 from pipeline.simulate.ownship import simulate_ownship_archive
 from pipeline.simulate.region_mcap import DEFAULT_DURATION_S as REGION_DURATION_S
@@ -19,6 +22,7 @@ order; ``options`` are the scenario's own (SCENARIO_OPTIONS)."""
 # One entry per scenario; each sensor family adds its own line.
 SCENARIOS: dict[str, ScenarioWriter] = {
     "channel": simulate_channel_archive,
+    "channel-clean": simulate_channel_clean_archive,
     "airfield": simulate_airfield_archive,
     "gaps": write_gaps_archive,
     "ownship": simulate_ownship_archive,

@@ -178,9 +178,11 @@ def replace_rows(warehouse: Path, name: str, table: pa.Table, *, predicate_sql: 
     of ``table`` outside the predicate makes Delta reject the whole write (``DeltaError``);
     nothing is committed then. An empty ``table`` deletes the matching rows. A nullable
     column added to the canonical schema after the table was created is added to the
-    table by this write (``schema_mode="merge"``; older rows read as null).
+    table by this write (``schema_mode="merge"``; older rows read as null). Column docs
+    edited in ``schemas/`` since the table was created keep the table's (delta-rs refuses
+    a write whose column metadata differs from the table's, merge or not).
     """
-    data = conform(name, table)
+    data = _with_table_metadata(warehouse, name, conform(name, table))
     s = spec(name)
     write_deltalake(
         str(table_path(warehouse, name)),
@@ -191,6 +193,18 @@ def replace_rows(warehouse: Path, name: str, table: pa.Table, *, predicate_sql: 
         writer_properties=_writer_properties(),
         schema_mode="merge",
     )
+
+
+def _with_table_metadata(warehouse: Path, name: str, data: pa.Table) -> pa.Table:
+    """``data`` with the column metadata the existing table stores (zero-copy)."""
+    if not table_exists(warehouse, name):
+        return data
+    have = pa.schema(DeltaTable(str(table_path(warehouse, name))).schema().to_arrow())
+    fields = [f.with_metadata(have.field(f.name).metadata) if f.name in have.names else f
+              for f in data.schema]
+    if all(f.equals(g, check_metadata=True) for f, g in zip(fields, data.schema, strict=True)):
+        return data
+    return pa.Table.from_arrays(data.columns, schema=pa.schema(fields, data.schema.metadata))
 
 
 def replace_window(
@@ -229,10 +243,17 @@ def replace_source_file(
 
 def table_files(warehouse: Path, name: str) -> list[str]:
     """Absolute paths of the Parquet files of the current snapshot (empty if no table)."""
+    return table_snapshot(warehouse, name)[0]
+
+
+def table_snapshot(warehouse: Path, name: str) -> tuple[list[str], frozenset[str]]:
+    """``(files, column names)`` of the current snapshot (``([], {})`` if no table): a
+    table written before its canonical schema gained a column lacks it."""
     if not table_exists(warehouse, name):
-        return []
-    uris = DeltaTable(str(table_path(warehouse, name))).file_uris()
-    return [u.removeprefix("file://") for u in uris]
+        return [], frozenset()
+    t = DeltaTable(str(table_path(warehouse, name)))
+    files = [u.removeprefix("file://") for u in t.file_uris()]
+    return files, frozenset(f.name for f in t.schema().fields)
 
 
 def empty_table(name: str) -> pa.Table:
