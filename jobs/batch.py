@@ -4,10 +4,15 @@ A *batch family* (maritime radar + AIS here; own-ship navigation and airfield su
 surveillance plug in the same way) reads its inputs from the warehouse for a sub-window
 and returns its derived tables. The window is cut into work units (family, sub-window:
 one per UTC hour, or the whole window for families whose filters need continuity); each
-unit writes its outputs as staged Parquet files under a deterministic name. Only when
-every unit of the window has succeeded does the driver commit, one atomic Delta
-overwrite per derived table whose predicate is the window; a failure or a crash before
-that leaves the previous data of the window untouched.
+unit writes its outputs once, as the tables' final Parquet data files (sorted row groups,
+Delta statistics) in a staging folder, and returns a small manifest (the files and the
+family's unit seam). Only when every unit of the window has succeeded does the driver
+join the units (a family's ``join_units`` over the seams; units whose ids must be
+relabelled are rewritten by the workers) and commit: one Delta transaction per derived
+table that removes the window's old files and adds the staged ones (a file that also
+holds rows outside the window is rewritten without them), so no row passes through the
+driver and its memory does not grow with the window. A failure or a crash before the
+commit leaves the previous data of the window untouched.
 """
 
 from __future__ import annotations
@@ -23,16 +28,17 @@ from typing import Any
 
 import numpy as np
 import polars as pl
-import pyarrow.parquet as pq
+import pyarrow as pa
 
 from pipeline import tables
 from pipeline.config import Config
 from pipeline.executors import make_executor
 from pipeline.families import FAMILIES, family
-from pipeline.family import Family, Window
+from pipeline.family import Family, Relabel, Window, relabel
 from pipeline.signals import deferred_interrupts
 from pipeline.units import NS
-from pipeline.warehouse.delta import read_table, replace_rows, replace_window
+from pipeline.warehouse.delta import read_table, replace_rows, volume_cuts, volume_profile
+from pipeline.warehouse.staged import StagedFile, TableStager, commit_window, read_staged
 from pipeline.warehouse.views import rebuild_views_file, warm_up
 
 log = logging.getLogger(__name__)
@@ -90,26 +96,32 @@ def read_inputs(fam: Family, warehouse: Path, cfg: Config, window: Window
     for spec in fam.inputs(cfg):
         columns = list(spec.columns) if spec.columns else None
         if spec.whole_table:
-            table = read_table(warehouse, spec.table, columns=columns)
+            table = read_table(warehouse, spec.table, columns=columns, sort=spec.sorted)
         else:
             lo, hi = spec.span_ns(window)
-            table = read_table(warehouse, spec.table, start_ns=lo, end_ns=hi, columns=columns)
+            table = read_table(warehouse, spec.table, start_ns=lo, end_ns=hi, columns=columns,
+                               sort=spec.sorted)
         out[spec.table] = pl.from_arrow(table)
     return out
 
 
 @dataclass(frozen=True)
 class UnitManifest:
-    """What a worker staged: {table: parquet path} for one family's sub-window."""
+    """What a worker staged: {table: data files ready to commit} for one family's
+    sub-window, and the family's ``unit_seam`` of it (small)."""
 
     family: str
     start_ns: int
-    files: dict[str, str]
-    elapsed_s: float = 0.0
+    files: dict[str, list]  # IPC paths after the unit, StagedFile after finalize_unit
+    seam: Any = None
+    staging_dir: str = ""
+    elapsed_s: float = 0.0  # the unit's wall time (read, compute, IPC)
 
 
 def run_unit(unit: BatchUnit) -> UnitManifest:
-    """Worker: read, compute, stage."""
+    """Worker: read, compute, keep the outputs as Arrow IPC files (lz4: cheap to write and
+    to read back) until the window's units are joined; return the manifest. The stage
+    returns its frames sorted by the tables' sort keys (its contract)."""
     t0 = time.perf_counter()
     fam = family(unit.family)
     window = Window(unit.start_ns, unit.end_ns)
@@ -117,32 +129,76 @@ def run_unit(unit: BatchUnit) -> UnitManifest:
     unknown = set(out) - set(fam.outputs) - {"rejects"}
     if unknown:
         raise ValueError(f"family {fam.name} returned tables it does not own: {unknown}")
-    manifest = {}
+    seam = fam.unit_seam(out) if fam.unit_seam is not None else None
+    folder = Path(unit.staging_dir) / f"{unit.family}-{unit.start_ns}"
+    shutil.rmtree(folder, ignore_errors=True)
+    folder.mkdir(parents=True)
+    files: dict[str, list[str]] = {}
     for name, frame in out.items():
-        if name == "rejects" and frame.height == 0:
-            continue
-        table = tables.conform(name, frame)
-        path = Path(unit.staging_dir) / name / f"{unit.family}-{unit.start_ns}.parquet"
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_suffix(".tmp")
-        pq.write_table(table, tmp)
-        tmp.replace(path)
-        manifest[name] = str(path)
-    return UnitManifest(unit.family, unit.start_ns, manifest, time.perf_counter() - t0)
+        if frame.height:
+            ordered = fam.sorted_outputs and name != "rejects"
+            table = tables.shape(name, frame) if ordered else tables.conform(name, frame)
+            path = folder / f"{name}.arrow"
+            options = pa.ipc.IpcWriteOptions(compression="lz4")
+            with pa.OSFile(str(path), "wb") as sink, pa.ipc.new_file(
+                sink, table.schema, options=options
+            ) as w:
+                w.write_table(table)
+            files[name] = [str(path)]
+    return UnitManifest(unit.family, unit.start_ns, files, seam, str(folder),
+                        time.perf_counter() - t0)
+
+
+@dataclass(frozen=True)
+class FinalizeTask:
+    """Write a unit's outputs as the tables' Parquet data files, a
+    :data:`~pipeline.family.Relabel` applied first (``None``: as they are)."""
+
+    manifest: UnitManifest
+    mapping: Relabel | None
+
+
+def finalize_unit(task: FinalizeTask) -> UnitManifest:
+    """Worker: a unit's outputs (Arrow IPC) relabelled if its family's join asks for it
+    and written once as final Parquet data files (``TableStager``: sorted row groups,
+    Delta statistics); the manifest then lists those files."""
+    m = task.manifest
+    folder = Path(m.staging_dir + "-parquet")
+    shutil.rmtree(folder, ignore_errors=True)
+    stager = TableStager(folder, threaded=False, presorted=True)
+    for name, paths in m.files.items():
+        for path in paths:
+            with pa.memory_map(path) as source:
+                table = pa.ipc.open_file(source).read_all()
+            if task.mapping:
+                table = tables.shape(name, relabel(pl.from_arrow(table), task.mapping))
+            stager.add(name, table)
+            del table
+    files: dict[str, list[StagedFile]] = {}
+    for f in stager.close():
+        files.setdefault(f.table, []).append(f)
+    shutil.rmtree(m.staging_dir, ignore_errors=True)
+    return UnitManifest(m.family, m.start_ns, files, m.seam, str(folder), m.elapsed_s)
 
 
 def plan_units(
-    warehouse: Path, cfg: Config, start_ns: int, end_ns: int, staging_dir: Path
+    warehouse: Path, cfg: Config, start_ns: int, end_ns: int, staging_dir: Path,
+    families: tuple[Family, ...] = FAMILIES,
 ) -> list[BatchUnit]:
-    """Cut [start_ns, end_ns) into each family's work units (at UTC multiples of its
-    ``unit_s``, or one unit for the whole window)."""
+    """Cut [start_ns, end_ns) into each family's work units: at UTC multiples of its
+    ``unit_s`` (or one unit for the whole window), and, for a family with
+    ``unit_rows``, wherever the volume of its ``unit_table`` calls for more cuts."""
     units = []
-    for fam in FAMILIES:
+    for fam in families:
         if fam.unit_s is None:
             cuts = [start_ns, end_ns]
         else:
             step = fam.unit_s * NS
             cuts = [start_ns, *range((start_ns // step + 1) * step, end_ns, step), end_ns]
+        if fam.unit_rows is not None and fam.unit_table:
+            first, last, rows = volume_profile(warehouse, fam.unit_table, start_ns, end_ns)
+            extra = volume_cuts(first, last, rows, start_ns, end_ns, fam.unit_rows)
+            cuts = sorted(set(cuts) | set(extra))
         units += [
             BatchUnit(str(warehouse), str(staging_dir), a, b, cfg, fam.name)
             for a, b in itertools.pairwise(cuts)
@@ -158,35 +214,37 @@ def run_batch(
     start_ns: int,
     end_ns: int,
     executor_kind: str | None = None,
+    families: tuple[str, ...] | None = None,
     progress: Any = None,
 ) -> BatchSummary:
     """Run the batch for [start_ns, end_ns) and commit it atomically per table.
+
+    ``families``: names of the families to run (default: every registered family);
     ``progress``: the CLI's :class:`~jobs.progress.TerminalProgress` (or None)."""
     if end_ns <= start_ns:
         raise ValueError("--to must be after --from")
+    fams = FAMILIES if families is None else tuple(family(name) for name in families)
     warm_up(warehouse)  # the views file's DuckDB instance, built while the batch runs
     staging = warehouse / "_staging" / f"batch-{start_ns}-{end_ns}"
     shutil.rmtree(staging, ignore_errors=True)
-    units = plan_units(warehouse, cfg, start_ns, end_ns, staging)
+    units = plan_units(warehouse, cfg, start_ns, end_ns, staging, fams)
     summary = BatchSummary(start_ns=start_ns, end_ns=end_ns, units_total=len(units))
     ex = cfg.execution
     executor = make_executor(
         executor_kind or ex.executor, min(ex.max_workers, len(units)), ex.threads_per_worker
     )
-    if progress is not None:
-        progress.batch_units(len(units))
-    results = executor.map_units(run_unit, units)
     try:
-        manifests = _collect(results, summary, progress)
-    except BaseException:  # interrupted: nothing was committed; no staging left behind
-        results.close()
+        with executor:  # one pool for the units and their finalisation
+            manifests = _run_units(executor, units, fams, summary, progress)
+    except BaseException:  # interrupted: the pool is stopped, nothing was committed
         shutil.rmtree(staging, ignore_errors=True)
         raise
     if summary.failed_units:
+        shutil.rmtree(staging, ignore_errors=True)
         return summary
     t0 = time.perf_counter()
     with deferred_interrupts():  # the window's commit is whole or not begun
-        _commit(warehouse, manifests, summary)
+        _commit(warehouse, manifests, summary, fams)
     summary.commit_s = time.perf_counter() - t0
     shutil.rmtree(staging, ignore_errors=True)
     with contextlib.suppress(OSError):  # only when empty: another job may be staging
@@ -196,10 +254,12 @@ def run_batch(
     return summary
 
 
-def _collect(results: Any, summary: BatchSummary, progress: Any) -> list[UnitManifest]:
-    """The manifests of the units that succeeded; failures are noted in ``summary``."""
+def _run_units(executor, units: list[BatchUnit], fams: tuple[Family, ...],
+               summary: BatchSummary, progress: Any = None) -> list[UnitManifest]:
     manifests = []
-    for result in results:
+    if progress is not None:
+        progress.batch_units(len(units))
+    for result in executor.map_units(run_unit, units):
         if progress is not None:
             progress.batch_result(result)
         if result.ok:
@@ -211,27 +271,45 @@ def _collect(results: Any, summary: BatchSummary, progress: Any) -> list[UnitMan
             label = f"{u.family} [{_iso(u.start_ns)}, {_iso(u.end_ns)}): {result.error}"
             summary.failed_units.append(label)
             log.error("batch unit failed %s", label)
-    return manifests
+    if summary.failed_units:
+        return manifests
+    return _finalize_units(executor, manifests, fams, summary)
 
 
-def _commit(warehouse: Path, manifests: list[UnitManifest], summary: BatchSummary) -> None:
-    """Stitch ids across unit seams, then one atomic overwrite per derived table whose
-    predicate is the window. Only the driver commits."""
-    for fam in FAMILIES:
+def _finalize_units(executor, manifests: list[UnitManifest], families: tuple[Family, ...],
+                    summary: BatchSummary) -> list[UnitManifest]:
+    """Each family's ``join_units`` over its units' seams, then every unit written as
+    Parquet data files by the executor's workers (relabelled where the join asks)."""
+    tasks: list[FinalizeTask] = []
+    for fam in families:
         ours = sorted((m for m in manifests if m.family == fam.name), key=lambda m: m.start_ns)
-        parts = {name: [pl.read_parquet(m.files[name]) for m in ours if name in m.files]
-                 for name in fam.outputs}
-        if fam.join_units is not None:
-            parts = fam.join_units(parts)
+        maps = (fam.join_units([m.seam for m in ours])
+                if fam.join_units is not None and len(ours) > 1 else [None] * len(ours))
+        tasks += [FinalizeTask(m, mapping) for m, mapping in zip(ours, maps, strict=True)]
+    out: list[UnitManifest] = []
+    for result in executor.map_units(finalize_unit, tasks):
+        if result.ok:
+            out.append(result.value)
+        else:
+            m = result.unit.manifest
+            summary.failed_units.append(f"{m.family} {_iso(m.start_ns)} write: {result.error}")
+    return out
+
+
+def _commit(warehouse: Path, manifests: list[UnitManifest], summary: BatchSummary,
+            families: tuple[Family, ...] = FAMILIES) -> None:
+    """One Delta commit per derived table replacing the window's rows by the units'
+    staged files (``commit_window``: no row passes through the driver). Only the driver
+    commits."""
+    for fam in families:
+        ours = [m for m in manifests if m.family == fam.name]
         for name in fam.outputs:
-            frames = parts[name]
-            table = tables.conform(name, pl.concat(frames) if frames else tables.empty(name))
-            replace_window(
-                warehouse, name, table, start_ns=summary.start_ns, end_ns=summary.end_ns
-            )
-            summary.rows[name] = table.num_rows
-    frames = [pl.read_parquet(m.files["rejects"]) for m in manifests if "rejects" in m.files]
-    rejects = tables.conform("rejects", pl.concat(frames) if frames else tables.empty("rejects"))
+            staged = [f for m in ours for f in m.files.get(name, [])]
+            commit_window(warehouse, name, staged, start_ns=summary.start_ns,
+                          end_ns=summary.end_ns)
+            summary.rows[name] = sum(f.rows for f in staged)
+    staged = [f for m in manifests for f in m.files.get("rejects", [])]
+    rejects = read_staged("rejects", staged) if staged else tables.empty("rejects")
     replace_rows(
         warehouse,
         "rejects",
