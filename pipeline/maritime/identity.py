@@ -158,6 +158,8 @@ def _match(tracks: pl.DataFrame, ais: pl.DataFrame, gate: float) -> pl.DataFrame
 
 def _in_epochs(t: np.ndarray, epochs: np.ndarray) -> np.ndarray:
     """Indices of the rows whose time is one of ``epochs`` (sorted)."""
+    if epochs.size == 0:  # no epoch at all (radar without AIS in the window)
+        return np.empty(0, dtype=np.int64)
     pos = np.searchsorted(epochs, t)
     return np.flatnonzero((pos < epochs.size) & (epochs[np.minimum(pos, epochs.size - 1)] == t))
 

@@ -135,3 +135,13 @@ def test_vote_needs_mutual_support():
     assert got.filter(pl.col("system_track_id") == 2).height == 0
     few = vote_identity(points, matches.head(2), window_s=300.0, min_matches=3)
     assert few.height == 0
+
+
+def test_in_epochs_without_any_epoch():
+    """Radar tracks and no AIS in the window: no epoch to match (an IndexError failed
+    the whole maritime unit before; found by bench/hostile.py)."""
+    import numpy as np
+
+    from pipeline.maritime.identity import _in_epochs
+
+    assert _in_epochs(np.array([5, 6], dtype=np.int64), np.empty(0, dtype=np.int64)).size == 0
