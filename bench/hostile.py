@@ -33,6 +33,7 @@ HOUR_NS = 3600 * NS
 N_RADAR = 2000  # good radar reports per MCAP case
 N_AST = 9832  # ASTERIX records (as in the damaged .ast)
 N_PCAP = 7576  # ASTERIX records in the pcap cases (as in the pcap)
+N_GNSS = 252  # nmea_fixes(120): RMC + GGA each second, ZDA every 10 s: a nav_gnss row each
 RADAR_T = "radar_tracks"
 AST_T = "airfield_obs"
 
@@ -177,9 +178,9 @@ CASES = [
     Case("pcapng_bad_block", f"pcapng, {N_PCAP} records, one block length broken", AST_T,
          N_PCAP - _records_in([], 33), 1, lambda d: _pcap(d, True), imported=True),
     Case("gpzda_2digit_year", "NMEA log, one $GPZDA with a two-digit year", "nav_gnss",
-         240, 1, _nmea(_zda_lines()), imported=True),
+         N_GNSS, 1, _nmea(_zda_lines()), imported=True),
     Case("vendor_#_lines", "NMEA log with '#' vendor lines (counted, not messages)",
-         "nav_gnss", 240, 0, _nmea(_vendor_lines()), imported=True),
+         "nav_gnss", N_GNSS, 0, _nmea(_vendor_lines()), imported=True),
     Case("concatenated_mcap", "cat a.mcap b.mcap > c.mcap (1,000 + 1,000 reports)", RADAR_T,
          2000, 0, _concat),
     Case("duplicate_content", "the same file under two names", RADAR_T, N_RADAR, 0,

@@ -285,7 +285,7 @@ def table_snapshot(warehouse: Path, name: str) -> tuple[list[str], frozenset[str
     if not table_exists(warehouse, name):
         return [], frozenset()
     t = DeltaTable(str(table_path(warehouse, name)))
-    files = [u.removeprefix("file://") for u in t.file_uris()]
+    files = [unquote(u.removeprefix("file://")) for u in t.file_uris()]  # %23 -> '#'...
     return files, frozenset(f.name for f in t.schema().fields)
 
 

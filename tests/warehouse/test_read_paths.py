@@ -23,3 +23,15 @@ def test_read_table_under_odd_paths(tmp_path, name):
     replace_window(wh, "truth", rows, start_ns=T0, end_ns=T0 + 2 * NS)
     assert read_table(wh, "truth").num_rows == 2
     assert read_table(wh, "truth", start_ns=T0 + NS, end_ns=T0 + 2 * NS).num_rows == 1
+
+
+@pytest.mark.parametrize("name", ["a b", "a#b", "a%b"])
+def test_snapshot_files_exist_under_odd_paths(tmp_path, name):
+    """The DuckDB views read ``table_snapshot``'s files: they must be real paths."""
+    from pathlib import Path
+
+    from pipeline.warehouse.delta import table_snapshot
+
+    test_read_table_under_odd_paths(tmp_path, name)
+    files, _ = table_snapshot(tmp_path / name, "truth")
+    assert files and all(Path(f).is_file() for f in files)
