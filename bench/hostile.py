@@ -240,7 +240,7 @@ def run_case(case: Case, root: Path, batch: bool) -> dict:
         tb |= t
     for extra in case.extra:
         args = [a.replace("{in}", str(src)) for a in extra] + ["--executor", "serial"]
-        codes[extra[0]], t, _ = _run(args, wh)
+        codes[f"{extra[0]}(abuse)"], t, _ = _run(args, wh)
         tb |= t
     from pipeline.warehouse.delta import read_table
 
@@ -256,14 +256,14 @@ def run_case(case: Case, root: Path, batch: bool) -> dict:
 
 
 def render(rows: list[dict]) -> str:
-    head = (f"| {'case':<20} | {'exit codes':<44} | tb | {'kept / expected':<15} | "
+    head = (f"| {'case':<20} | {'exit codes':<70} | tb | {'kept / expected':<15} | "
             f"rejects rows (bad items) |")  # fmt: skip
     out = [head, "|" + "|".join("-" * (len(c)) for c in head.split("|")[1:-1]) + "|"]
     for r in rows:
         codes = " ".join(f"{k} {v}" for k, v in r["codes"].items())
         exp = "all" if r["expected"] < 0 else str(r["expected"])
         rej = ", ".join(f"{k} {v}" for k, v in sorted(r["rejects"].items())) or "none"
-        out.append(f"| {r['case']:<20} | {codes:<44} | {'YES' if r['traceback'] else 'no':<2} "
+        out.append(f"| {r['case']:<20} | {codes:<70} | {'YES' if r['traceback'] else 'no':<2} "
                    f"| {r['kept']:>6} / {exp:<6} | {rej} ({r['bad']}) |")  # fmt: skip
     return "\n".join(out)
 

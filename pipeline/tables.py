@@ -220,14 +220,18 @@ def column_comment(field: pa.Field) -> str:
 
 @dataclass(frozen=True)
 class Validity:
-    """``ranges``: column name or unit suffix (``_ns``) -> closed ``(lo, hi)``;
+    """``ranges``: ``table.column``, column name or unit suffix (``_ns``) -> closed
+    ``(lo, hi)``;
     ``string_max_bytes``: longest string kept, except in ``long_strings``."""
 
     ranges: dict[str, tuple[float, float]]
     string_max_bytes: int
     long_strings: frozenset[str]
 
-    def range_of(self, column: str) -> tuple[float, float] | None:
+    def range_of(self, column: str, table: str = "") -> tuple[float, float] | None:
+        """By ``table.column``, else ``column``, else the unit suffix (``_ns``)."""
+        if f"{table}.{column}" in self.ranges:
+            return self.ranges[f"{table}.{column}"]
         if column in self.ranges:
             return self.ranges[column]
         suffix = "_" + column.rsplit("_", 1)[-1] if "_" in column else None
@@ -264,7 +268,7 @@ def invalid_rows(name: str, table: pa.Table) -> tuple[np.ndarray, list[str]] | N
                 why.setdefault(i, f"{f.name} is {int(lengths[i])} bytes long "
                                   f"(at most {v.string_max_bytes})")  # fmt: skip
             continue
-        rng = v.range_of(f.name)
+        rng = v.range_of(f.name, name)
         if rng is None or not (pa.types.is_integer(f.type) or pa.types.is_floating(f.type)):
             continue
         lo, hi = rng
