@@ -29,6 +29,7 @@ from jobs.common import (
     UsageError,
     parse_duration,
     parse_time_ns,
+    require_warehouse,
     setup_logging,
 )
 from pipeline.config import Config, ConfigError
@@ -58,7 +59,14 @@ class _State:
 
     @property
     def warehouse(self) -> Path:
+        """The warehouse a command writes (``ingest``, ``run``, ``demo`` create it)."""
         return Path(self.warehouse_option or self.cfg.warehouse_path).resolve()
+
+    @property
+    def existing_warehouse(self) -> Path:
+        """The warehouse a command reads: exit 2 naming it when it does not exist (a
+        typo in ``--warehouse`` must not read as an empty warehouse, nor create one)."""
+        return require_warehouse(self.warehouse)
 
     def sector(self, name: str | None) -> str | None:
         """``--sector``, checked against the config's sectors (maritime and airfield)."""
@@ -267,7 +275,7 @@ def batch(st: _State, from_, to, executor) -> None:
     start, end = _window(from_, to, required=True)
     progress = terminal_progress()
     with progress or contextlib.nullcontext():
-        summary = run_batch(st.cfg, st.warehouse, start_ns=start, end_ns=end,
+        summary = run_batch(st.cfg, st.existing_warehouse, start_ns=start, end_ns=end,
                             executor_kind=executor, progress=progress)
     click.echo(summary.render())
     sys.exit(summary.exit_code)
@@ -286,7 +294,7 @@ def reprocess(st: _State, from_, to, executor) -> None:
     start, end = _window(from_, to, required=True)
     progress = terminal_progress()
     with progress or contextlib.nullcontext():
-        summary = run_reprocess(st.cfg, st.warehouse, start_ns=start, end_ns=end,
+        summary = run_reprocess(st.cfg, st.existing_warehouse, start_ns=start, end_ns=end,
                                 executor_kind=executor, progress=progress)
     click.echo(summary.render())
     sys.exit(summary.exit_code)
@@ -346,16 +354,16 @@ def report(st: _State, name, from_, to, sector, fmt, params, list_) -> None:
     start, end = _window(from_, to, required=False)
     sector = st.sector(sector)
     try:
-        table = run_named_report(st.warehouse, name, start_ns=start, end_ns=end, sector=sector,
-                                 cfg=st.cfg, params=_params(params))
+        table = run_named_report(st.existing_warehouse, name, start_ns=start, end_ns=end,
+                                 sector=sector, cfg=st.cfg, params=_params(params))
     except UnknownReportError as exc:
         raise UsageError(f"no report {name!r}; available: {', '.join(list_reports(dirs))}"
                          ) from exc
     except ReportError as exc:
         raise UsageError(str(exc)) from exc
     if table.num_rows == 0:
-        why = explain_empty(st.warehouse, load_report(name, dirs), start_ns=start, end_ns=end,
-                            sector=sector, cfg=st.cfg)
+        why = explain_empty(st.existing_warehouse, load_report(name, dirs), start_ns=start,
+                            end_ns=end, sector=sector, cfg=st.cfg)
         click.echo(f"{name}: no rows. {why}", err=True)
     click.echo(format_report(table, fmt, title=name), nl=fmt != "table")
 
@@ -398,7 +406,7 @@ def audit(st: _State, from_, to, sector, out_dir, pdf) -> None:
     from jobs.audit import run_audit
 
     start, end = _window(from_, to, required=True)
-    result = run_audit(st.cfg, st.warehouse, Path(out_dir), start_ns=start, end_ns=end,
+    result = run_audit(st.cfg, st.existing_warehouse, Path(out_dir), start_ns=start, end_ns=end,
                        sector=st.sector(sector), pdf=pdf)
     click.echo(result.render())
     sys.exit(EXIT_USAGE if pdf and result.pdf is None else 0)
@@ -416,7 +424,8 @@ def export(st: _State, from_, to, out_path) -> None:
     from jobs.export import run_export
 
     start, end = _window(from_, to, required=True)
-    summary = run_export(st.cfg, st.warehouse, Path(out_path), start_ns=start, end_ns=end)
+    summary = run_export(st.cfg, st.existing_warehouse, Path(out_path), start_ns=start,
+                         end_ns=end)
     click.echo(summary.render())
 
 
@@ -433,7 +442,7 @@ def sql(st: _State, query, fmt) -> None:
 
     from jobs.report import format_report, open_warehouse
 
-    con = open_warehouse(st.warehouse)
+    con = open_warehouse(st.existing_warehouse)
     try:
         if query is not None:
             try:
@@ -514,7 +523,7 @@ def calibrate(st: _State, from_, to, max_order, min_speed) -> None:
     from jobs.calibrate import run_calibrate
 
     start, end = _window(from_, to, required=True)
-    summary = run_calibrate(st.cfg, st.warehouse, start_ns=start, end_ns=end,
+    summary = run_calibrate(st.cfg, st.existing_warehouse, start_ns=start, end_ns=end,
                             max_order=max_order, min_speed_mps=min_speed)
     click.echo(summary.render())
 
@@ -531,7 +540,7 @@ def calibrate_radars(st: _State, from_, to, fmt) -> None:
     from jobs.calibrate import render, run_calibration
 
     start, end = _window(from_, to, required=True)
-    est = run_calibration(st.cfg, st.warehouse, start_ns=start, end_ns=end)
+    est = run_calibration(st.cfg, st.existing_warehouse, start_ns=start, end_ns=end)
     click.echo(est.write_json() if fmt == "json" else render(est))
 
 

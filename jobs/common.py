@@ -7,6 +7,7 @@ import logging
 import re
 import sys
 from datetime import UTC, datetime
+from pathlib import Path
 
 from pipeline.errors import UsageError
 
@@ -16,6 +17,19 @@ EXIT_OK = 0
 EXIT_UNITS_FAILED = 1
 EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130
+
+
+def require_warehouse(warehouse: Path) -> Path:
+    """``warehouse`` when it is one (a folder holding ``tables/``, what ``ingest``, ``run``
+    and ``demo`` create), else :class:`UsageError` naming it: a command that reads a
+    warehouse must not read a mistyped path as an empty one, nor create it."""
+    path = Path(warehouse)
+    if not (path / "tables").is_dir():
+        why = "does not exist" if not path.exists() else "is not a warehouse (no tables/ in it)"
+        raise UsageError(
+            f"warehouse {path} {why}; `surveil ingest ARCHIVE --warehouse {path}` (or "
+            "`surveil run`, `surveil demo`) creates one")
+    return path
 
 
 def parse_time_ns(text: str) -> int:
