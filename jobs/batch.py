@@ -8,6 +8,18 @@ unit writes its outputs as staged Parquet files under a deterministic name. Only
 every unit of the window has succeeded does the driver commit, one atomic Delta
 overwrite per derived table whose predicate is the window; a failure or a crash before
 that leaves the previous data of the window untouched.
+
+**Units own rows.** Every committed unit is recorded in ``batch_units`` (family, start,
+end). A batch whose window overlaps committed units is widened to cover them whole
+(:func:`owned_window`, repeated until no unit straddles an edge), and each family's units
+inside are cut as a single pass cuts them: at its unit grid, and, for a family without a
+grid (one unit per window), at the edges of its committed units. So a reprocess of any
+sub-window re-runs exactly the units that own it, with the same inputs, and replaces
+their rows: an aggregate row keyed by its unit (``siap_by_sector``) is replaced, never
+left beside a new one, and every table equals the single-pass result. A family with a
+``join_units`` (system track ids stitched across seams) also joins the window's first
+unit to the rows committed just before the window (``stitch_lookback_s``), so ids
+continue across the window's leading edge as they do across unit seams.
 """
 
 from __future__ import annotations
@@ -53,6 +65,7 @@ class BatchUnit:
 class BatchSummary:
     start_ns: int
     end_ns: int
+    requested: tuple[int, int] | None = None  # the window asked for, when widened
     units_total: int = 0
     failed_units: list[str] = field(default_factory=list)
     rows: dict[str, int] = field(default_factory=dict)
@@ -71,6 +84,9 @@ class BatchSummary:
             f"{self.units_total} unit(s), {len(self.failed_units)} failed, "
             f"{'committed' if self.committed else 'NOT committed (previous data kept)'}"
         ]
+        if self.requested is not None:
+            lines.append(f"  (asked for [{_iso(self.requested[0])}, {_iso(self.requested[1])}): "
+                         "widened to the committed units it overlaps, re-run whole)")
         lines += [f"  {name:<16} {n:>9} rows" for name, n in self.rows.items()]
         if self.family_s:
             lines.append("  time: " + ", ".join(f"{fam} {s:.1f} s" for fam, s in
@@ -130,15 +146,44 @@ def run_unit(unit: BatchUnit) -> UnitManifest:
     return UnitManifest(unit.family, unit.start_ns, manifest, time.perf_counter() - t0)
 
 
+def owned_window(warehouse: Path, start_ns: int, end_ns: int
+                 ) -> tuple[int, int, dict[str, list[int]]]:
+    """``[start_ns, end_ns)`` widened until no committed unit (``batch_units``) of any
+    family straddles its edges, and per family the edges of its committed units inside
+    the widened window: (start, end, {family: cuts})."""
+    units = pl.from_arrow(read_table(warehouse, "batch_units",
+                                     columns=["family", "start_ns", "end_ns"]))
+    lo, hi = start_ns, end_ns
+    while True:
+        touched = units.filter((pl.col("start_ns") < hi) & (pl.col("end_ns") > lo))
+        if touched.height == 0:
+            break
+        new_lo = min(lo, int(touched["start_ns"].min()))
+        new_hi = max(hi, int(touched["end_ns"].max()))
+        if (new_lo, new_hi) == (lo, hi):
+            break
+        lo, hi = new_lo, new_hi
+    inside = units.filter((pl.col("start_ns") >= lo) & (pl.col("end_ns") <= hi))
+    cuts: dict[str, list[int]] = {}
+    for (name,), rows in inside.group_by(["family"]):
+        edges = set(rows["start_ns"].to_list()) | set(rows["end_ns"].to_list())
+        cuts[str(name)] = sorted(t for t in edges if lo < t < hi)
+    return lo, hi, cuts
+
+
 def plan_units(
-    warehouse: Path, cfg: Config, start_ns: int, end_ns: int, staging_dir: Path
+    warehouse: Path, cfg: Config, start_ns: int, end_ns: int, staging_dir: Path,
+    committed_cuts: dict[str, list[int]] | None = None,
 ) -> list[BatchUnit]:
     """Cut [start_ns, end_ns) into each family's work units (at UTC multiples of its
-    ``unit_s``, or one unit for the whole window)."""
+    ``unit_s``, or one unit for the whole window); a family without a grid is also cut
+    at ``committed_cuts`` (the edges of its committed units inside the window, from
+    :func:`owned_window`), so that its units stay the ones a single pass made."""
     units = []
     for fam in FAMILIES:
         if fam.unit_s is None:
-            cuts = [start_ns, end_ns]
+            kept = (committed_cuts or {}).get(fam.name, [])
+            cuts = sorted({start_ns, end_ns, *kept})
         else:
             step = fam.unit_s * NS
             cuts = [start_ns, *range((start_ns // step + 1) * step, end_ns, step), end_ns]
@@ -164,10 +209,13 @@ def run_batch(
     if end_ns <= start_ns:
         raise ValueError("--to must be after --from")
     warm_up(warehouse)  # the views file's DuckDB instance, built while the batch runs
+    requested = (start_ns, end_ns)
+    start_ns, end_ns, committed_cuts = owned_window(warehouse, start_ns, end_ns)
     staging = warehouse / "_staging" / f"batch-{start_ns}-{end_ns}"
     shutil.rmtree(staging, ignore_errors=True)
-    units = plan_units(warehouse, cfg, start_ns, end_ns, staging)
-    summary = BatchSummary(start_ns=start_ns, end_ns=end_ns, units_total=len(units))
+    units = plan_units(warehouse, cfg, start_ns, end_ns, staging, committed_cuts)
+    summary = BatchSummary(start_ns=start_ns, end_ns=end_ns, units_total=len(units),
+                           requested=None if requested == (start_ns, end_ns) else requested)
     ex = cfg.execution
     executor = make_executor(
         executor_kind or ex.executor, min(ex.max_workers, len(units)), ex.threads_per_worker
@@ -190,7 +238,7 @@ def run_batch(
     if summary.failed_units:
         return summary
     t0 = time.perf_counter()
-    _commit(warehouse, manifests, summary)
+    _commit(warehouse, manifests, summary, units)
     summary.commit_s = time.perf_counter() - t0
     shutil.rmtree(staging, ignore_errors=True)
     with contextlib.suppress(OSError):  # only when empty: another job may be staging
@@ -199,15 +247,32 @@ def run_batch(
     return summary
 
 
-def _commit(warehouse: Path, manifests: list[UnitManifest], summary: BatchSummary) -> None:
-    """Stitch ids across unit seams, then one atomic overwrite per derived table whose
-    predicate is the window. Only the driver commits."""
+def _stored_before(warehouse: Path, fam: Family, start_ns: int) -> dict[str, pl.DataFrame]:
+    """``fam``'s committed outputs in the ``stitch_lookback_s`` before ``start_ns``: the
+    unit before the window as its ``join_units`` sees a unit (a pseudo-unit)."""
+    lo = start_ns - round(fam.stitch_lookback_s * NS)
+    return {name: pl.from_arrow(read_table(warehouse, name, start_ns=lo, end_ns=start_ns))
+            for name in fam.outputs}
+
+
+def _commit(warehouse: Path, manifests: list[UnitManifest], summary: BatchSummary,
+            units: list[BatchUnit] | None = None) -> None:
+    """Stitch ids across unit seams (and to the rows committed just before the window),
+    then one atomic overwrite per derived table whose predicate is the window, then the
+    window's units in ``batch_units``. Only the driver commits."""
     for fam in FAMILIES:
         ours = sorted((m for m in manifests if m.family == fam.name), key=lambda m: m.start_ns)
         parts = {name: [pl.read_parquet(m.files[name]) for m in ours if name in m.files]
                  for name in fam.outputs}
         if fam.join_units is not None:
-            parts = fam.join_units(parts)
+            before = _stored_before(warehouse, fam, summary.start_ns)
+            if fam.stitch_lookback_s and any(f.height for f in before.values()):
+                # the stored rows lead, as a unit of their own; they are not written again
+                joined = fam.join_units({name: [before[name], *frames]
+                                         for name, frames in parts.items()})
+                parts = {name: frames[1:] for name, frames in joined.items()}
+            else:
+                parts = fam.join_units(parts)
         for name in fam.outputs:
             frames = parts[name]
             table = tables.conform(name, pl.concat(frames) if frames else tables.empty(name))
@@ -227,7 +292,23 @@ def _commit(warehouse: Path, manifests: list[UnitManifest], summary: BatchSummar
         ),
     )
     summary.rejects = rejects.num_rows
+    if units is not None:
+        _record_units(warehouse, units, summary)
     summary.committed = True
+
+
+def _record_units(warehouse: Path, units: list[BatchUnit], summary: BatchSummary) -> None:
+    """The window's units replace those of ``batch_units`` inside it (one commit)."""
+    now = time.time_ns()
+    rows = pl.DataFrame(
+        {"start_ns": [u.start_ns for u in units], "end_ns": [u.end_ns for u in units],
+         "family": [u.family for u in units]},
+        schema={"start_ns": pl.Int64, "end_ns": pl.Int64, "family": pl.String},
+    ).with_columns(window_start_ns=pl.lit(summary.start_ns, pl.Int64),
+                   window_end_ns=pl.lit(summary.end_ns, pl.Int64),
+                   committed_at_ns=pl.lit(now, pl.Int64))
+    replace_window(warehouse, "batch_units", tables.conform("batch_units", rows),
+                   start_ns=summary.start_ns, end_ns=summary.end_ns)
 
 
 def _iso(t_ns: int) -> str:

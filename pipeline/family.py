@@ -18,7 +18,10 @@ A family (``pipeline.maritime``, ``pipeline.airfield``, ``pipeline.nav``,
 - ``unit_s``: the work unit length (the window is cut at UTC multiples of it), or
   ``None`` for one unit per window (filters that need continuity);
 - ``join_units``: how the staged parts of consecutive units join into the window's
-  tables (e.g. system track ids stitched across unit seams), or ``None`` to concatenate.
+  tables (e.g. system track ids stitched across unit seams), or ``None`` to concatenate;
+- ``stitch_lookback_s``: how far before a window the batch reads the family's committed
+  outputs, given to ``join_units`` as the unit before the window's first (ids continue
+  across the window's leading edge); 0: the window's units are joined alone.
 
 Nothing here reads files: the job reads the inputs, runs the stage in a worker and
 commits what it returns.
@@ -84,4 +87,5 @@ class Family:
     stage: Stage
     unit_s: int | None = 3600
     join_units: Callable[[UnitParts], UnitParts] | None = None
+    stitch_lookback_s: float = 0.0
 

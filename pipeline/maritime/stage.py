@@ -119,4 +119,5 @@ FAMILY = Family(
     stage=stage,
     unit_s=3600,
     join_units=join_units,
+    stitch_lookback_s=600.0,  # the unit before a window: its last epoch lies in these 10 min
 )
