@@ -79,6 +79,15 @@ class _State:
         return name
 
 
+def _locked(st: _State, wait: bool = False) -> contextlib.AbstractContextManager:
+    """The warehouse's writer lock for a command that commits (exit 2 naming the holder
+    when another job has it)."""
+    from jobs.lock import warehouse_lock
+
+    return warehouse_lock(st.warehouse, command=" ".join(["surveil", *sys.argv[1:]]),
+                          wait=wait)
+
+
 def sector_names(cfg: Config) -> list[str]:
     """Every sector a --sector may name: maritime sectors, then airfield sectors."""
     names = [s.name for s in cfg.sectors]
@@ -172,6 +181,9 @@ _TO_REQUIRED = click.option("--to", required=True, metavar="TIME", help=_TO_HELP
 _SECTOR = click.option("--sector", default=None, shell_complete=_complete_sectors,
                        help="one sector of the config (default: every sector); an unknown "
                             "name lists them")
+_WAIT = click.option("--wait", is_flag=True,
+                     help="wait for another job holding the warehouse (default: exit 2 "
+                          "naming it)")
 _EXECUTOR = click.option(
     "--executor", type=click.Choice(["serial", "process", "ray"]), default=None,
     help="How work units run (default from config: process pool).",
@@ -241,15 +253,16 @@ def import_command(st: _State, paths, out_dir, base_time) -> None:
 @_TO
 @click.option("--force", is_flag=True, help="re-ingest files the ledger says are unchanged")
 @_EXECUTOR
+@_WAIT
 @click.pass_obj
-def ingest(st: _State, paths, from_, to, force, executor) -> None:
+def ingest(st: _State, paths, from_, to, force, executor, wait) -> None:
     """Decode MCAP files into the warehouse's raw tables."""
     from jobs.ingest import expand_paths, run_ingest
     from jobs.progress import terminal_progress
 
     start, end = _window(from_, to, required=False)
     progress = terminal_progress()
-    with progress or contextlib.nullcontext():
+    with _locked(st, wait), progress or contextlib.nullcontext():
         if progress is not None:
             progress.ingest_total(expand_paths([Path(p) for p in paths]))
         summary = run_ingest([Path(p) for p in paths], st.cfg, st.warehouse,
@@ -266,16 +279,18 @@ def ingest(st: _State, paths, from_, to, force, executor) -> None:
 @_FROM_REQUIRED
 @_TO_REQUIRED
 @_EXECUTOR
+@_WAIT
 @click.pass_obj
-def batch(st: _State, from_, to, executor) -> None:
+def batch(st: _State, from_, to, executor, wait) -> None:
     """Run every sensor family's batch over one window; commit it atomically."""
     from jobs.batch import run_batch
     from jobs.progress import terminal_progress
 
     start, end = _window(from_, to, required=True)
+    warehouse = st.existing_warehouse
     progress = terminal_progress()
-    with progress or contextlib.nullcontext():
-        summary = run_batch(st.cfg, st.existing_warehouse, start_ns=start, end_ns=end,
+    with _locked(st, wait), progress or contextlib.nullcontext():
+        summary = run_batch(st.cfg, warehouse, start_ns=start, end_ns=end,
                             executor_kind=executor, progress=progress)
     click.echo(summary.render())
     sys.exit(summary.exit_code)
@@ -285,17 +300,40 @@ def batch(st: _State, from_, to, executor) -> None:
 @_FROM_REQUIRED
 @_TO_REQUIRED
 @_EXECUTOR
+@_WAIT
 @click.pass_obj
-def reprocess(st: _State, from_, to, executor) -> None:
+def reprocess(st: _State, from_, to, executor, wait) -> None:
     """Re-ingest the archived files overlapping a window and re-run its batch."""
     from jobs.progress import terminal_progress
     from jobs.reprocess import run_reprocess
 
     start, end = _window(from_, to, required=True)
+    warehouse = st.existing_warehouse
     progress = terminal_progress()
-    with progress or contextlib.nullcontext():
-        summary = run_reprocess(st.cfg, st.existing_warehouse, start_ns=start, end_ns=end,
+    with _locked(st, wait), progress or contextlib.nullcontext():
+        summary = run_reprocess(st.cfg, warehouse, start_ns=start, end_ns=end,
                                 executor_kind=executor, progress=progress)
+    click.echo(summary.render())
+    sys.exit(summary.exit_code)
+
+
+@cli.command("run")
+@click.argument("folders", nargs=-1, type=click.Path())
+@_EXECUTOR
+@_WAIT
+@click.pass_obj
+def run_command(st: _State, folders, executor, wait) -> None:
+    """The nightly job: scan the archive folders (FOLDERS, default [archive] folders),
+    ingest new and changed MCAP files, batch the windows they touch (and any a failed
+    run left), record the run in the `runs` table. Nothing new: does nothing, says so."""
+    from jobs.progress import terminal_progress
+    from jobs.run import run_nightly
+
+    progress = terminal_progress()
+    with _locked(st, wait), progress or contextlib.nullcontext():
+        summary = run_nightly(st.cfg, st.warehouse, folders=list(folders),
+                              executor_kind=executor, progress=progress,
+                              command=" ".join(["surveil", *sys.argv[1:]]))
     click.echo(summary.render())
     sys.exit(summary.exit_code)
 

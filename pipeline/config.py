@@ -105,6 +105,9 @@ class Config:
     fairway_legs: tuple[FairwayLeg, ...] = setting([], file_only=True)
     sectors: tuple[Sector, ...] = setting([], file_only=True)
     warehouse_path: str = text("warehouse", key=("warehouse", "path"))
+    # folders `surveil run` scans for MCAP files (absolute, or relative to the working
+    # folder); empty: `surveil run FOLDER...` names them
+    archive_folders: tuple[str, ...] = setting([], key=("archive", "folders"))
     execution: ExecutionConfig = setting({}, factory=ExecutionConfig)
     source: str = ""
     # The whole parsed TOML (raw), and each sensor family's section parsed into its own
