@@ -29,12 +29,13 @@ import itertools
 import logging
 import shutil
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import polars as pl
+import pyarrow as pa
 import pyarrow.parquet as pq
 
 from pipeline import tables
@@ -43,6 +44,7 @@ from pipeline.executors import make_executor
 from pipeline.families import FAMILIES, family
 from pipeline.family import Family, Window
 from pipeline.units import NS
+from pipeline.warehouse import pending
 from pipeline.warehouse.delta import read_table, replace_rows, replace_window
 from pipeline.warehouse.views import rebuild_views_file, warm_up
 
@@ -59,6 +61,10 @@ class BatchUnit:
     end_ns: int
     cfg: Config
     family: str = "maritime"
+    # {table: parquet path}: this run's rows of another family's output for the whole
+    # window (joined), read instead of the warehouse's rows inside the window
+    overrides: tuple[tuple[str, str], ...] = ()
+    window: tuple[int, int] | None = None  # the batch window the overrides cover
 
 
 @dataclass
@@ -98,19 +104,48 @@ class BatchSummary:
         return "\n".join(lines)
 
 
-def read_inputs(fam: Family, warehouse: Path, cfg: Config, window: Window
-                ) -> dict[str, pl.DataFrame]:
-    """The tables ``fam``'s stage declares, each over its own span around ``window``."""
+def read_inputs(fam: Family, warehouse: Path, cfg: Config, window: Window,
+                overrides: dict[str, str] | None = None,
+                batch_window: tuple[int, int] | None = None) -> dict[str, pl.DataFrame]:
+    """The tables ``fam``'s stage declares, each over its own span around ``window``. A
+    table in ``overrides`` (another family's output of this same batch) is read from that
+    file inside ``batch_window`` and from the warehouse outside it."""
     out = {}
     for spec in fam.inputs(cfg):
         columns = list(spec.columns) if spec.columns else None
-        if spec.whole_table:
-            table = read_table(warehouse, spec.table, columns=columns)
-        else:
-            lo, hi = spec.span_ns(window)
-            table = read_table(warehouse, spec.table, start_ns=lo, end_ns=hi, columns=columns)
+        lo, hi = (None, None) if spec.whole_table else spec.span_ns(window)
+        if overrides and spec.table in overrides and batch_window is not None:
+            out[spec.table] = _overridden(warehouse, spec.table, overrides[spec.table],
+                                          batch_window, lo, hi, columns)
+            continue
+        table = read_table(warehouse, spec.table, start_ns=lo, end_ns=hi, columns=columns)
         out[spec.table] = pl.from_arrow(table)
     return out
+
+
+def _overridden(warehouse: Path, name: str, path: str, batch_window: tuple[int, int],
+                lo: int | None, hi: int | None, columns: list[str] | None) -> pl.DataFrame:
+    """Rows of ``name`` in [lo, hi): this batch's (``path``) inside ``batch_window``, the
+    warehouse's outside it, sorted by the table's sort key."""
+    w_lo, w_hi = batch_window
+    time_col = tables.spec(name).time_column
+    parts = []
+    if lo is None or lo < w_lo:  # the warehouse's rows before the batch window
+        parts.append(pl.from_arrow(read_table(warehouse, name, start_ns=lo, end_ns=w_lo,
+                                              columns=columns)))
+    if hi is None or hi > w_hi:  # and after it
+        parts.append(pl.from_arrow(read_table(warehouse, name, start_ns=w_hi, end_ns=hi,
+                                              columns=columns)))
+    mine = pl.read_parquet(path, columns=columns)
+    keep = pl.lit(True)
+    if lo is not None:
+        keep = keep & (pl.col(time_col) >= max(lo, w_lo))
+    if hi is not None:
+        keep = keep & (pl.col(time_col) < min(hi, w_hi))
+    parts.append(mine.filter(keep))
+    frame = pl.concat([p for p in parts if p.width], how="vertical_relaxed")
+    keys = [k for k in tables.spec(name).sort_by if k in frame.columns]
+    return frame.sort(keys) if keys else frame
 
 
 @dataclass(frozen=True)
@@ -128,7 +163,9 @@ def run_unit(unit: BatchUnit) -> UnitManifest:
     t0 = time.perf_counter()
     fam = family(unit.family)
     window = Window(unit.start_ns, unit.end_ns)
-    out = fam.stage(read_inputs(fam, Path(unit.warehouse), unit.cfg, window), window, unit.cfg)
+    inputs = read_inputs(fam, Path(unit.warehouse), unit.cfg, window, dict(unit.overrides),
+                         unit.window)
+    out = fam.stage(inputs, window, unit.cfg)
     unknown = set(out) - set(fam.outputs) - {"rejects"}
     if unknown:
         raise ValueError(f"family {fam.name} returned tables it does not own: {unknown}")
@@ -220,25 +257,21 @@ def run_batch(
     executor = make_executor(
         executor_kind or ex.executor, min(ex.max_workers, len(units)), ex.threads_per_worker
     )
-    manifests = []
     if progress is not None:
         progress.batch_units(len(units))
-    for result in executor.map_units(run_unit, units):
-        if progress is not None:
-            progress.batch_result(result)
-        if result.ok:
-            manifests.append(result.value)
-            m = result.value
-            summary.family_s[m.family] = summary.family_s.get(m.family, 0.0) + m.elapsed_s
-        else:
-            u = result.unit
-            label = f"{u.family} [{_iso(u.start_ns)}, {_iso(u.end_ns)}): {result.error}"
-            summary.failed_units.append(label)
-            log.error("batch unit failed %s", label)
-    if summary.failed_units:
-        return summary
+    joined: dict[str, pa.Table] = {}  # table -> the window's joined rows
+    for wave in family_waves(FAMILIES, cfg):
+        # a family reading another family's output reads this batch's rows of it
+        overrides = tuple((name, _write_joined(staging, name, table))
+                          for name, table in joined.items())
+        ours = [replace(u, overrides=overrides, window=(start_ns, end_ns))
+                for u in units if u.family in {f.name for f in wave}]
+        manifests = _run_units(executor, ours, summary, progress)
+        if summary.failed_units:
+            return summary
+        joined |= _join(warehouse, wave, manifests, summary)
     t0 = time.perf_counter()
-    _commit(warehouse, manifests, summary, units)
+    _commit(warehouse, joined, summary, units)
     summary.commit_s = time.perf_counter() - t0
     shutil.rmtree(staging, ignore_errors=True)
     with contextlib.suppress(OSError):  # only when empty: another job may be staging
@@ -255,12 +288,63 @@ def _stored_before(warehouse: Path, fam: Family, start_ns: int) -> dict[str, pl.
             for name in fam.outputs}
 
 
-def _commit(warehouse: Path, manifests: list[UnitManifest], summary: BatchSummary,
-            units: list[BatchUnit] | None = None) -> None:
-    """Stitch ids across unit seams (and to the rows committed just before the window),
-    then one atomic overwrite per derived table whose predicate is the window, then the
-    window's units in ``batch_units``. Only the driver commits."""
-    for fam in FAMILIES:
+def _run_units(executor: Any, units: list[BatchUnit], summary: BatchSummary,
+               progress: Any) -> list[UnitManifest]:
+    manifests = []
+    for result in executor.map_units(run_unit, units):
+        if progress is not None:
+            progress.batch_result(result)
+        if result.ok:
+            manifests.append(result.value)
+            m = result.value
+            summary.family_s[m.family] = summary.family_s.get(m.family, 0.0) + m.elapsed_s
+        else:
+            u = result.unit
+            label = f"{u.family} [{_iso(u.start_ns)}, {_iso(u.end_ns)}): {result.error}"
+            summary.failed_units.append(label)
+            log.error("batch unit failed %s", label)
+    return manifests
+
+
+def family_waves(families: tuple[Family, ...], cfg: Config) -> list[list[Family]]:
+    """The families in waves: a family that reads another family's output (gaps reads
+    maritime's system_tracks) runs in a wave after it, on this batch's rows of it."""
+    owner = {name: f.name for f in families for name in f.outputs}
+    needs = {f.name: {owner[i.table] for i in f.inputs(cfg) if i.table in owner} - {f.name}
+             for f in families}
+    waves: list[list[Family]] = []
+    done: set[str] = set()
+    while len(done) < len(families):
+        wave = [f for f in families if f.name not in done and needs[f.name] <= done]
+        if not wave:
+            raise ValueError(f"families read each other's outputs in a cycle: {needs}")
+        waves.append(wave)
+        done |= {f.name for f in wave}
+    return waves
+
+
+def _write_joined(staging: Path, name: str, table: pa.Table) -> str:
+    path = staging / "joined" / f"{name}.parquet"
+    if not path.exists():
+        path.parent.mkdir(parents=True, exist_ok=True)
+        pq.write_table(table, path)
+    return str(path)
+
+
+def _stored_before(warehouse: Path, fam: Family, start_ns: int) -> dict[str, pl.DataFrame]:
+    """``fam``'s committed outputs in the ``stitch_lookback_s`` before ``start_ns``: the
+    unit before the window as its ``join_units`` sees a unit (a pseudo-unit)."""
+    lo = start_ns - round(fam.stitch_lookback_s * NS)
+    return {name: pl.from_arrow(read_table(warehouse, name, start_ns=lo, end_ns=start_ns))
+            for name in fam.outputs}
+
+
+def _join(warehouse: Path, families: list[Family], manifests: list[UnitManifest],
+          summary: BatchSummary) -> dict[str, pa.Table]:
+    """Each family's units joined into the window's tables: ids stitched across unit
+    seams (and to the rows committed just before the window); ``rejects`` gathered."""
+    out: dict[str, pa.Table] = {}
+    for fam in families:
         ours = sorted((m for m in manifests if m.family == fam.name), key=lambda m: m.start_ns)
         parts = {name: [pl.read_parquet(m.files[name]) for m in ours if name in m.files]
                  for name in fam.outputs}
@@ -275,12 +359,30 @@ def _commit(warehouse: Path, manifests: list[UnitManifest], summary: BatchSummar
                 parts = fam.join_units(parts)
         for name in fam.outputs:
             frames = parts[name]
-            table = tables.conform(name, pl.concat(frames) if frames else tables.empty(name))
-            replace_window(
-                warehouse, name, table, start_ns=summary.start_ns, end_ns=summary.end_ns
-            )
-            summary.rows[name] = table.num_rows
-    frames = [pl.read_parquet(m.files["rejects"]) for m in manifests if "rejects" in m.files]
+            out[name] = tables.conform(name, pl.concat(frames) if frames
+                                       else tables.empty(name))
+        rejects = [pl.read_parquet(m.files["rejects"]) for m in ours if "rejects" in m.files]
+        if rejects:
+            out[f"rejects:{fam.name}"] = tables.conform("rejects", pl.concat(rejects))
+    return out
+
+
+def _commit(warehouse: Path, joined: dict[str, pa.Table], summary: BatchSummary,
+            units: list[BatchUnit] | None = None) -> None:
+    """One atomic overwrite per derived table whose predicate is the window, then the
+    window's batch rejects and units (``batch_units``). Readers see none of them until
+    all are made (a pending marker pins the tables: ``pipeline.warehouse.pending``); a
+    crash in between leaves the marker, and readers the previous rows of every table,
+    until a batch covering this window finishes. Only the driver commits."""
+    derived = [name for fam in FAMILIES for name in fam.outputs]
+    marker = pending.begin(warehouse, [*derived, "rejects", "batch_units"], job="batch",
+                           window=[summary.start_ns, summary.end_ns])
+    for name in derived:
+        table = joined.get(name, tables.empty(name))
+        replace_window(warehouse, name, table, start_ns=summary.start_ns,
+                       end_ns=summary.end_ns)
+        summary.rows[name] = table.num_rows
+    frames = [pl.from_arrow(t) for k, t in joined.items() if k.startswith("rejects:")]
     rejects = tables.conform("rejects", pl.concat(frames) if frames else tables.empty("rejects"))
     replace_rows(
         warehouse,
@@ -294,6 +396,9 @@ def _commit(warehouse: Path, manifests: list[UnitManifest], summary: BatchSummar
     summary.rejects = rejects.num_rows
     if units is not None:
         _record_units(warehouse, units, summary)
+    lo, hi = summary.start_ns, summary.end_ns
+    pending.finish(warehouse, marker, supersedes=lambda doc: doc.get("job") == "batch"
+                   and lo <= doc["window"][0] and doc["window"][1] <= hi)
     summary.committed = True
 
 

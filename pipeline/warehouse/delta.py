@@ -26,6 +26,7 @@ import pyarrow.dataset as pds
 from deltalake import DeltaTable, WriterProperties, write_deltalake
 
 from pipeline.tables import conform, empty, spec
+from pipeline.warehouse.pending import pinned_versions
 
 NS_PER_DAY = 86_400 * 10**9
 _EPOCH = dt.date(1970, 1, 1)
@@ -126,6 +127,19 @@ def window_filter(name: str, start_ns: int | None, end_ns: int | None) -> pc.Exp
     return expr
 
 
+def _reader_table(warehouse: Path, name: str) -> DeltaTable | None:
+    """The table as readers see it: at its pinned version while a job is committing it
+    (``pipeline.warehouse.pending``), else its latest; None when readers see no table."""
+    if not table_exists(warehouse, name):
+        return None
+    pinned = pinned_versions(warehouse).get(name)
+    if pinned is None:
+        return DeltaTable(str(table_path(warehouse, name)))
+    if pinned < 0:
+        return None
+    return DeltaTable(str(table_path(warehouse, name)), version=pinned)
+
+
 def read_table(
     warehouse: Path,
     name: str,
@@ -145,12 +159,13 @@ def read_table(
     target = spec(name).schema
     if columns is not None:
         target = pa.schema([target.field(c) for c in columns])
-    if not table_exists(warehouse, name):
+    delta_table = _reader_table(warehouse, name)
+    if delta_table is None:
         return target.empty_table()
     expr = window_filter(name, start_ns, end_ns)
     if predicate is not None:
         expr = predicate if expr is None else expr & predicate
-    dataset = DeltaTable(str(table_path(warehouse, name))).to_pyarrow_dataset()
+    dataset = delta_table.to_pyarrow_dataset()
     have = set(dataset.schema.names)
     table = dataset.to_table(columns=[c for c in target.names if c in have], filter=expr)
     for i, f in enumerate(target):  # a nullable column added to the schema after the table
@@ -225,10 +240,12 @@ def replace_source_file(
 
 
 def table_files(warehouse: Path, name: str) -> list[str]:
-    """Absolute paths of the Parquet files of the current snapshot (empty if no table)."""
-    if not table_exists(warehouse, name):
+    """Absolute paths of the Parquet files of the snapshot readers see (the current one,
+    or the pinned one while a job commits the table); empty if no table."""
+    delta_table = _reader_table(warehouse, name)
+    if delta_table is None:
         return []
-    uris = DeltaTable(str(table_path(warehouse, name))).file_uris()
+    uris = delta_table.file_uris()
     return [u.removeprefix("file://") for u in uris]
 
 
