@@ -2,28 +2,64 @@
 config loader that parses each family's sections when the file loads.
 
 To add a family: a package under ``pipeline/`` exporting a :class:`~pipeline.family.Family`
-(``stage.FAMILY``), and one line here.
+(``stage.FAMILY``), one line in ``_STAGES`` and one in ``FAMILY_SECTIONS``.
+
+Loading a config needs only each family's config module (``FAMILY_SECTIONS``); the stage
+modules (scipy.stats, the filters: ~1 s of imports on this machine) are imported when
+``FAMILIES`` is first used, so commands that never run a stage (ingest, report, sql,
+config check) do not pay for them.
 """
 
 from __future__ import annotations
 
+import importlib
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from pipeline import config as _config
-from pipeline.airfield.stage import FAMILY as AIRFIELD
+from pipeline.airfield.config import parse_airfield
 from pipeline.config import Config
 from pipeline.configspec import Document
 from pipeline.convert.config import IMPORT_SECTION
-from pipeline.family import Family
-from pipeline.gaps.stage import FAMILY as GAPS
-from pipeline.maritime.stage import FAMILY as MARITIME
-from pipeline.nav.stage import FAMILY as NAV
+from pipeline.gaps.config import parse_gaps
+from pipeline.maritime.config import SECTIONS as MARITIME_SECTIONS
+from pipeline.maritime.config import parse_maritime
+from pipeline.nav.config import parse_ownship
 from pipeline.reports import REPORTS_SECTION
 from pipeline.requirements import REQUIREMENTS_SECTION, ConfigSection
 
-FAMILIES: tuple[Family, ...] = (MARITIME, AIRFIELD, GAPS, NAV)
+if TYPE_CHECKING:
+    from pipeline.family import Family
+
+    FAMILIES: tuple[Family, ...]
+
+_STAGES = ("pipeline.maritime.stage", "pipeline.airfield.stage", "pipeline.gaps.stage",
+           "pipeline.nav.stage")  # fmt: skip
+"""The modules whose ``FAMILY`` the batch runs, in this order (``FAMILIES``)."""
+
+FAMILY_SECTIONS: tuple[ConfigSection, ...] = (
+    ConfigSection("maritime", MARITIME_SECTIONS, parse_maritime),
+    ConfigSection("airfield", ("airfield",), parse_airfield),
+    ConfigSection("gaps", ("gaps",), parse_gaps),
+    ConfigSection("nav", ("ownship",), parse_ownship),
+)
+"""What loading a config needs of each family: its sections and their parser (the same
+as its ``Family``'s; a test checks)."""
+
+
+def _families() -> tuple[Family, ...]:
+    if "FAMILIES" not in globals():
+        globals()["FAMILIES"] = tuple(importlib.import_module(m).FAMILY for m in _STAGES)
+    return globals()["FAMILIES"]
+
+
+def __getattr__(name: str) -> Any:
+    """``FAMILIES``, imported on first use (PEP 562; see the module docstring)."""
+    if name == "FAMILIES":
+        return _families()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 # Sections read at load like a family's that belong to no family: what reports are
 # judged against ([requirements]), the user's report folders ([reports]), and what
@@ -33,7 +69,7 @@ SECTIONS: tuple[ConfigSection, ...] = (REQUIREMENTS_SECTION, REPORTS_SECTION, IM
 
 def family(name: str) -> Family:
     """The registered family called ``name`` (KeyError when there is none)."""
-    for f in FAMILIES:
+    for f in _families():
         if f.name == name:
             return f
     raise KeyError(name)
@@ -42,15 +78,15 @@ def family(name: str) -> Family:
 def load_config(path: str | Path | None = None) -> Config:
     """Load a TOML config (``None``: the shipped default) with every family's sections
     parsed and validated; :class:`~pipeline.config.ConfigError` on any problem."""
-    return _config.load_config(path, (*FAMILIES, *SECTIONS))
+    return _config.load_config(path, (*FAMILY_SECTIONS, *SECTIONS))
 
 
 def config_from_mapping(raw: Mapping[str, Any], source: str = "(in memory)") -> Config:
     """The same as :func:`load_config` for an already parsed TOML document."""
-    return _config.config_from_mapping(raw, source, (*FAMILIES, *SECTIONS))
+    return _config.config_from_mapping(raw, source, (*FAMILY_SECTIONS, *SECTIONS))
 
 
 def read_config(path: str | Path | None = None) -> tuple[Config | None, Document]:
     """The config and the document it was read from, problems not yet raised (for
     ``surveil config check``: ``Document.finish``, then ``Document.resolved``)."""
-    return _config.read_config(path, (*FAMILIES, *SECTIONS))
+    return _config.read_config(path, (*FAMILY_SECTIONS, *SECTIONS))

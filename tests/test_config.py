@@ -349,3 +349,20 @@ def test_families_claim_their_sections():
     claimed = [s for f in FAMILIES for s in f.sections]
     assert len(claimed) == len(set(claimed))
     assert {"sync", "airfield", "gaps", "ownship"} <= set(claimed)
+
+
+def test_config_sections_are_the_families_own():
+    """Loading a config uses FAMILY_SECTIONS (no stage imported); the batch uses FAMILIES:
+    the same sections and parsers, in the same order."""
+    from pipeline.families import FAMILY_SECTIONS
+
+    assert [(s.name, s.sections, s.parse_config) for s in FAMILY_SECTIONS] == [
+        (f.name, f.sections, f.parse_config) for f in FAMILIES
+    ]
+
+
+def test_loading_a_config_imports_no_stage():
+    code = ("import sys; from pipeline.families import load_config; load_config(); "
+            "print(sorted(m for m in sys.modules if m.endswith('.stage') or m == 'scipy.stats'))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]", out.stdout

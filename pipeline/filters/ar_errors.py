@@ -42,7 +42,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import linalg, stats
+from scipy import linalg
 
 Z_95 = 1.959963984540054
 
@@ -206,6 +206,8 @@ def _gamma_ci(
     """95% interval of Γ = chol(Σ_ε − correction): Σ_ε is drawn from Wishart(n, Σ_ε/n)
     (the residual covariance is what the data estimate; the white-noise correction is
     known), each draw corrected and factorised."""
+    from scipy import stats  # ~1 s of imports: only calibration needs it, not every command
+
     d = Sigma_eps.shape[0]
     df = max(n, d + 1)
     sims = stats.wishart(df=df, scale=Sigma_eps / df).rvs(size=draws, random_state=seed)
