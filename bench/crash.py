@@ -126,6 +126,10 @@ def main() -> None:
     ap.add_argument("--workdir", type=Path, default=None)
     ap.add_argument("--commands", default="ingest,batch,reprocess,run")
     ap.add_argument("--executor", default="serial", choices=["serial", "process"])
+    ap.add_argument("--at", default="random", choices=["random", "commit", "both"],
+                    help="kill points: uniform over the command's duration (random), in "
+                         "the first 0.3 s after a pending marker appears, i.e. between "
+                         "table commits (commit), or alternately (both)")
     a = ap.parse_args()
     work = a.workdir or Path(tempfile.mkdtemp(prefix="surveil-crash-"))
     work.mkdir(parents=True, exist_ok=True)
@@ -173,11 +177,21 @@ def main() -> None:
         shutil.rmtree(wh, ignore_errors=True)
         if start is not None:
             shutil.copytree(start, wh)
+        mode = a.at if a.at != "both" else ("random", "commit")[trial % 2]
         at = rng.uniform(0.02, 1.0) * duration[name]
+        delay = rng.uniform(0.0, 0.3)
+        t0 = time.monotonic()
         proc = subprocess.Popen(cli(config, wh, *args, executor=a.executor), cwd=REPO,
                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                                 start_new_session=True)
-        time.sleep(at)
+        if mode == "random":
+            time.sleep(at)
+        else:  # wait for a job to start committing (its pending marker), then a moment
+            marker_dir = wh / "_pending"
+            while proc.poll() is None and not marker_dir.exists():
+                time.sleep(0.002)
+            time.sleep(delay)
+            at = time.monotonic() - t0
         killed = proc.poll() is None
         if killed:
             os.killpg(proc.pid, signal.SIGKILL)
@@ -222,7 +236,7 @@ def main() -> None:
         totals["mixed across tables"] += label.startswith("mixed")
         totals["reports failing"] += not reports_ok
         totals["re-runs not converged"] += not converged
-        print(f"trial {trial + 1:>3} {name:<10} kill at {at:5.1f} s "
+        print(f"trial {trial + 1:>3} {name:<10} {mode:<6} kill at {at:5.1f} s "
               f"{'(killed)' if killed else '(done)  '} state {label:<10} "
               f"neither {neither} lost {lost} dup {dup} reports "
               f"{'ok' if reports_ok else 'FAIL'} re-run {'ok' if converged else 'DIFF'}",
