@@ -3,6 +3,7 @@ what readers see.
 
     .venv/bin/python bench/crash.py [--trials 50] [--seed 1] [--workdir DIR]
                                     [--commands ingest,batch,reprocess,run]
+                                    [--at random|commit|both]
 
 Setup: a 10-minute `channel` archive (one file: ingest commits file by file, so one
 file makes its old and new states the only two), a warehouse made by `surveil run` over
@@ -21,8 +22,10 @@ reprocess   base                            a sub-window reprocessed, changed co
 ==========  ==============================  ========================================
 
 A trial copies the old state, starts the command in its own process group, SIGKILLs the
-group at a uniform random point of the command's measured duration, then checks, as a
-reader sees them (``read_table``: pending markers honoured):
+group at a uniform random point of the command's measured duration (``--at random``) or
+in the 0.3 s after the command's first pending marker appears, i.e. while it commits
+table after table (``--at commit``; ``both`` alternates), then checks, as a reader sees
+them (``read_table``: pending markers honoured):
 
 - each table equals exactly its old or its new rows (as multisets; wall-clock columns
   dropped); otherwise the rows missing from the nearer state are *lost* and rows present
