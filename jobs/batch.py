@@ -63,7 +63,7 @@ class BatchUnit:
     family: str = "maritime"
     # {table: parquet path}: this run's rows of another family's output for the whole
     # window (joined), read instead of the warehouse's rows inside the window
-    overrides: tuple[tuple[str, str], ...] = ()
+    overrides: tuple[tuple[str, tuple[str, ...]], ...] = ()
     window: tuple[int, int] | None = None  # the batch window the overrides cover
 
 
@@ -105,7 +105,7 @@ class BatchSummary:
 
 
 def read_inputs(fam: Family, warehouse: Path, cfg: Config, window: Window,
-                overrides: dict[str, str] | None = None,
+                overrides: dict[str, tuple[str, ...]] | None = None,
                 batch_window: tuple[int, int] | None = None) -> dict[str, pl.DataFrame]:
     """The tables ``fam``'s stage declares, each over its own span around ``window``. A
     table in ``overrides`` (another family's output of this same batch) is read from that
@@ -123,9 +123,10 @@ def read_inputs(fam: Family, warehouse: Path, cfg: Config, window: Window,
     return out
 
 
-def _overridden(warehouse: Path, name: str, path: str, batch_window: tuple[int, int],
+def _overridden(warehouse: Path, name: str, paths: tuple[str, ...],
+                batch_window: tuple[int, int],
                 lo: int | None, hi: int | None, columns: list[str] | None) -> pl.DataFrame:
-    """Rows of ``name`` in [lo, hi): this batch's (``path``) inside ``batch_window``, the
+    """Rows of ``name`` in [lo, hi): this batch's (``paths``) inside ``batch_window``, the
     warehouse's outside it, sorted by the table's sort key."""
     w_lo, w_hi = batch_window
     time_col = tables.spec(name).time_column
@@ -136,7 +137,8 @@ def _overridden(warehouse: Path, name: str, path: str, batch_window: tuple[int, 
     if hi is None or hi > w_hi:  # and after it
         parts.append(pl.from_arrow(read_table(warehouse, name, start_ns=w_hi, end_ns=hi,
                                               columns=columns)))
-    mine = pl.read_parquet(path, columns=columns)
+    mine = (pl.read_parquet(list(paths), columns=columns) if paths
+            else pl.from_arrow(tables.empty(name)).select(columns or pl.all()))
     keep = pl.lit(True)
     if lo is not None:
         keep = keep & (pl.col(time_col) >= max(lo, w_lo))
@@ -323,12 +325,12 @@ def family_waves(families: tuple[Family, ...], cfg: Config) -> list[list[Family]
     return waves
 
 
-def _write_joined(staging: Path, name: str, table: pa.Table) -> str:
+def _write_joined(staging: Path, name: str, table: pa.Table) -> tuple[str, ...]:
     path = staging / "joined" / f"{name}.parquet"
     if not path.exists():
         path.parent.mkdir(parents=True, exist_ok=True)
         pq.write_table(table, path)
-    return str(path)
+    return (str(path),)
 
 
 def _stored_before(warehouse: Path, fam: Family, start_ns: int) -> dict[str, pl.DataFrame]:

@@ -98,7 +98,7 @@ def test_a_later_wave_reads_this_batchs_rows_inside_the_window(e2e, tmp_path):
     replace_window(wh, "system_tracks", outside, start_ns=e2e.start_ns, end_ns=mid)
     gaps = family("gaps")
     window = Window(mid, e2e.end_ns)
-    got = read_inputs(gaps, wh, e2e.cfg, window, {"system_tracks": str(joined)},
+    got = read_inputs(gaps, wh, e2e.cfg, window, {"system_tracks": (str(joined),)},
                       (mid, e2e.end_ns))["system_tracks"]
     spec = next(i for i in gaps.inputs(e2e.cfg) if i.table == "system_tracks")
     lo, hi = spec.span_ns(window)
