@@ -32,7 +32,10 @@ them (``read_table``: pending markers honoured):
   more often than in either state are *duplicated*;
 - whether the tables of the trial are all old, all new, or a mix across tables;
 - that the reports run (``accuracy_by_sector``, ``siap_by_sector``);
-- that re-running the command to completion converges to the new state exactly.
+- that re-running the command to completion converges to the new state exactly;
+- for comparison, what a reader that ignores the pending markers would see (each
+  table's latest Delta version: how readers read before the markers): whether that is
+  a mix across tables.
 
 Prints one line per trial and the totals: trials, kills, states seen, tables neither
 old nor new, rows lost, rows duplicated, reports failing, re-runs not converged.
@@ -224,6 +227,14 @@ def main() -> None:
                 dup += min(xo, xn)
             label = "mixed(" + ",".join(sorted(kinds)) + ")"
         states[f"{name}:{label}"] += 1
+        unpinned = work / "unpinned"  # the same warehouse read without its markers
+        shutil.rmtree(unpinned, ignore_errors=True)
+        if wh.exists():
+            shutil.copytree(wh, unpinned)
+        shutil.rmtree(unpinned / "_pending", ignore_errors=True)
+        raw = state(unpinned)
+        totals["mixed without markers"] += not any(
+            all(_same(r, st[t]) for t, r in raw.items()) for st in candidates.values())
         reports_ok = True
         for report in ("accuracy_by_sector", "siap_by_sector"):
             try:
@@ -246,6 +257,7 @@ def main() -> None:
               flush=True)
     print("\ntotals:")
     for key in ("trials", "kills", "tables neither old nor new", "mixed across tables",
+                "mixed without markers",
                 "rows lost", "rows duplicated", "reports failing", "re-runs not converged"):
         print(f"  {key:<28} {totals[key]}")
     print("  states seen (command:state, all tables of a trial):")
