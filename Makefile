@@ -5,7 +5,8 @@ BIN    := $(VENV)/bin
 
 .PHONY: demo test setup lint bench clean
 
-NATIVE := pipeline/decode/_json_columns.c pipeline/decode/_pow5_128.h pipeline/io/_mcap_records.c
+NATIVE := pipeline/decode/_json_columns.c pipeline/decode/_pow5_128.h pipeline/io/_mcap_records.c \
+          pipeline/maritime/_associate.c
 
 # pip builds the two C extensions (optional: skipped without a C compiler)
 $(BIN)/surveil: pyproject.toml $(NATIVE)
@@ -27,6 +28,8 @@ test: setup
 bench: setup
 	$(BIN)/python bench/pipeline.py
 	$(BIN)/python bench/ingest.py
+	$(BIN)/python bench/batch.py --json bench-batch.json
+	$(BIN)/python bench/region_day.py --json bench-region-day.json
 
 clean:
 	rm -rf $(VENV) warehouse/tables warehouse/*.duckdb

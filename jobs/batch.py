@@ -4,10 +4,15 @@ A *batch family* (maritime radar + AIS here; own-ship navigation and airfield su
 surveillance plug in the same way) reads its inputs from the warehouse for a sub-window
 and returns its derived tables. The window is cut into work units (family, sub-window:
 one per UTC hour, or the whole window for families whose filters need continuity); each
-unit writes its outputs as staged Parquet files under a deterministic name. Only when
-every unit of the window has succeeded does the driver commit, one atomic Delta
-overwrite per derived table whose predicate is the window; a failure or a crash before
-that leaves the previous data of the window untouched.
+unit writes its outputs once, as the tables' final Parquet data files (sorted row groups,
+Delta statistics) in a staging folder, and returns a small manifest (the files and the
+family's unit seam). Only when every unit of the window has succeeded does the driver
+join the units (a family's ``join_units`` over the seams; units whose ids must be
+relabelled are rewritten by the workers) and commit: one Delta transaction per derived
+table that removes the window's old files and adds the staged ones (a file that also
+holds rows outside the window is rewritten without them), so no row passes through the
+driver and its memory does not grow with the window. A failure or a crash before the
+commit leaves the previous data of the window untouched.
 
 **Units own rows.** Every committed unit is recorded in ``batch_units`` (family, start,
 end). A batch whose window overlaps committed units is widened to cover them whole
@@ -20,6 +25,11 @@ left beside a new one, and every table equals the single-pass result. A family w
 ``join_units`` (system track ids stitched across seams) also joins the window's first
 unit to the rows committed just before the window (``stitch_lookback_s``), so ids
 continue across the window's leading edge as they do across unit seams.
+
+**One commit for readers.** Families that read another family's output run in a later
+wave (``family_waves``: gaps after maritime) and read this batch's staged rows of it
+inside the window. The commits of a window sit between a pending marker and its removal
+(``pipeline.warehouse.pending``): readers see every table of the window old or new.
 """
 
 from __future__ import annotations
@@ -36,16 +46,22 @@ from typing import Any
 import numpy as np
 import polars as pl
 import pyarrow as pa
-import pyarrow.parquet as pq
 
 from pipeline import tables
 from pipeline.config import Config
 from pipeline.executors import make_executor
 from pipeline.families import FAMILIES, family
-from pipeline.family import Family, Window
+from pipeline.family import Family, Relabel, Window, relabel
 from pipeline.units import NS
 from pipeline.warehouse import pending
-from pipeline.warehouse.delta import read_table, replace_rows, replace_window
+from pipeline.warehouse.delta import (
+    read_table,
+    replace_rows,
+    replace_window,
+    volume_cuts,
+    volume_profile,
+)
+from pipeline.warehouse.staged import StagedFile, TableStager, commit_window, read_staged
 from pipeline.warehouse.views import rebuild_views_file, warm_up
 
 log = logging.getLogger(__name__)
@@ -61,8 +77,8 @@ class BatchUnit:
     end_ns: int
     cfg: Config
     family: str = "maritime"
-    # {table: parquet path}: this run's rows of another family's output for the whole
-    # window (joined), read instead of the warehouse's rows inside the window
+    # {table: staged Parquet files}: this batch's rows of another family's output for
+    # the whole window, read instead of the warehouse's rows inside the window
     overrides: tuple[tuple[str, tuple[str, ...]], ...] = ()
     window: tuple[int, int] | None = None  # the batch window the overrides cover
 
@@ -108,23 +124,27 @@ def read_inputs(fam: Family, warehouse: Path, cfg: Config, window: Window,
                 overrides: dict[str, tuple[str, ...]] | None = None,
                 batch_window: tuple[int, int] | None = None) -> dict[str, pl.DataFrame]:
     """The tables ``fam``'s stage declares, each over its own span around ``window``. A
-    table in ``overrides`` (another family's output of this same batch) is read from that
-    file inside ``batch_window`` and from the warehouse outside it."""
+    table in ``overrides`` (another family's output of this same batch) is read from
+    those files inside ``batch_window`` and from the warehouse outside it."""
     out = {}
     for spec in fam.inputs(cfg):
         columns = list(spec.columns) if spec.columns else None
-        lo, hi = (None, None) if spec.whole_table else spec.span_ns(window)
         if overrides and spec.table in overrides and batch_window is not None:
+            lo, hi = (None, None) if spec.whole_table else spec.span_ns(window)
             out[spec.table] = _overridden(warehouse, spec.table, overrides[spec.table],
                                           batch_window, lo, hi, columns)
             continue
-        table = read_table(warehouse, spec.table, start_ns=lo, end_ns=hi, columns=columns)
+        if spec.whole_table:
+            table = read_table(warehouse, spec.table, columns=columns, sort=spec.sorted)
+        else:
+            lo, hi = spec.span_ns(window)
+            table = read_table(warehouse, spec.table, start_ns=lo, end_ns=hi, columns=columns,
+                               sort=spec.sorted)
         out[spec.table] = pl.from_arrow(table)
     return out
 
 
-def _overridden(warehouse: Path, name: str, paths: tuple[str, ...],
-                batch_window: tuple[int, int],
+def _overridden(warehouse: Path, name: str, paths: tuple[str, ...], batch_window: tuple[int, int],
                 lo: int | None, hi: int | None, columns: list[str] | None) -> pl.DataFrame:
     """Rows of ``name`` in [lo, hi): this batch's (``paths``) inside ``batch_window``, the
     warehouse's outside it, sorted by the table's sort key."""
@@ -152,16 +172,21 @@ def _overridden(warehouse: Path, name: str, paths: tuple[str, ...],
 
 @dataclass(frozen=True)
 class UnitManifest:
-    """What a worker staged: {table: parquet path} for one family's sub-window."""
+    """What a worker staged: {table: data files ready to commit} for one family's
+    sub-window, and the family's ``unit_seam`` of it (small)."""
 
     family: str
     start_ns: int
-    files: dict[str, str]
-    elapsed_s: float = 0.0
+    files: dict[str, list]  # IPC paths after the unit, StagedFile after finalize_unit
+    seam: Any = None
+    staging_dir: str = ""
+    elapsed_s: float = 0.0  # the unit's wall time (read, compute, IPC)
 
 
 def run_unit(unit: BatchUnit) -> UnitManifest:
-    """Worker: read, compute, stage."""
+    """Worker: read, compute, keep the outputs as Arrow IPC files (lz4: cheap to write and
+    to read back) until the window's units are joined; return the manifest. The stage
+    returns its frames sorted by the tables' sort keys (its contract)."""
     t0 = time.perf_counter()
     fam = family(unit.family)
     window = Window(unit.start_ns, unit.end_ns)
@@ -171,18 +196,56 @@ def run_unit(unit: BatchUnit) -> UnitManifest:
     unknown = set(out) - set(fam.outputs) - {"rejects"}
     if unknown:
         raise ValueError(f"family {fam.name} returned tables it does not own: {unknown}")
-    manifest = {}
+    seam = fam.unit_seam(out) if fam.unit_seam is not None else None
+    folder = Path(unit.staging_dir) / f"{unit.family}-{unit.start_ns}"
+    shutil.rmtree(folder, ignore_errors=True)
+    folder.mkdir(parents=True)
+    files: dict[str, list[str]] = {}
     for name, frame in out.items():
-        if name == "rejects" and frame.height == 0:
-            continue
-        table = tables.conform(name, frame)
-        path = Path(unit.staging_dir) / name / f"{unit.family}-{unit.start_ns}.parquet"
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_suffix(".tmp")
-        pq.write_table(table, tmp)
-        tmp.replace(path)
-        manifest[name] = str(path)
-    return UnitManifest(unit.family, unit.start_ns, manifest, time.perf_counter() - t0)
+        if frame.height:
+            ordered = fam.sorted_outputs and name != "rejects"
+            table = tables.shape(name, frame) if ordered else tables.conform(name, frame)
+            path = folder / f"{name}.arrow"
+            options = pa.ipc.IpcWriteOptions(compression="lz4")
+            with pa.OSFile(str(path), "wb") as sink, pa.ipc.new_file(
+                sink, table.schema, options=options
+            ) as w:
+                w.write_table(table)
+            files[name] = [str(path)]
+    return UnitManifest(unit.family, unit.start_ns, files, seam, str(folder),
+                        time.perf_counter() - t0)
+
+
+@dataclass(frozen=True)
+class FinalizeTask:
+    """Write a unit's outputs as the tables' Parquet data files, a
+    :data:`~pipeline.family.Relabel` applied first (``None``: as they are)."""
+
+    manifest: UnitManifest
+    mapping: Relabel | None
+
+
+def finalize_unit(task: FinalizeTask) -> UnitManifest:
+    """Worker: a unit's outputs (Arrow IPC) relabelled if its family's join asks for it
+    and written once as final Parquet data files (``TableStager``: sorted row groups,
+    Delta statistics); the manifest then lists those files."""
+    m = task.manifest
+    folder = Path(m.staging_dir + "-parquet")
+    shutil.rmtree(folder, ignore_errors=True)
+    stager = TableStager(folder, threaded=False, presorted=True)
+    for name, paths in m.files.items():
+        for path in paths:
+            with pa.memory_map(path) as source:
+                table = pa.ipc.open_file(source).read_all()
+            if task.mapping:
+                table = tables.shape(name, relabel(pl.from_arrow(table), task.mapping))
+            stager.add(name, table)
+            del table
+    files: dict[str, list[StagedFile]] = {}
+    for f in stager.close():
+        files.setdefault(f.table, []).append(f)
+    shutil.rmtree(m.staging_dir, ignore_errors=True)
+    return UnitManifest(m.family, m.start_ns, files, m.seam, str(folder), m.elapsed_s)
 
 
 def owned_window(warehouse: Path, start_ns: int, end_ns: int
@@ -212,20 +275,24 @@ def owned_window(warehouse: Path, start_ns: int, end_ns: int
 
 def plan_units(
     warehouse: Path, cfg: Config, start_ns: int, end_ns: int, staging_dir: Path,
+    families: tuple[Family, ...] = FAMILIES,
     committed_cuts: dict[str, list[int]] | None = None,
 ) -> list[BatchUnit]:
-    """Cut [start_ns, end_ns) into each family's work units (at UTC multiples of its
-    ``unit_s``, or one unit for the whole window); a family without a grid is also cut
-    at ``committed_cuts`` (the edges of its committed units inside the window, from
-    :func:`owned_window`), so that its units stay the ones a single pass made."""
+    """Cut [start_ns, end_ns) into each family's work units: at UTC multiples of its
+    ``unit_s`` (or one unit for the whole window), and, for a family with
+    ``unit_rows``, wherever the volume of its ``unit_table`` calls for more cuts."""
     units = []
-    for fam in FAMILIES:
-        if fam.unit_s is None:
+    for fam in families:
+        if fam.unit_s is None:  # and the edges of its committed units (owned_window)
             kept = (committed_cuts or {}).get(fam.name, [])
             cuts = sorted({start_ns, end_ns, *kept})
         else:
             step = fam.unit_s * NS
             cuts = [start_ns, *range((start_ns // step + 1) * step, end_ns, step), end_ns]
+        if fam.unit_rows is not None and fam.unit_table:
+            first, last, rows = volume_profile(warehouse, fam.unit_table, start_ns, end_ns)
+            extra = volume_cuts(first, last, rows, start_ns, end_ns, fam.unit_rows)
+            cuts = sorted(set(cuts) | set(extra))
         units += [
             BatchUnit(str(warehouse), str(staging_dir), a, b, cfg, fam.name)
             for a, b in itertools.pairwise(cuts)
@@ -241,39 +308,50 @@ def run_batch(
     start_ns: int,
     end_ns: int,
     executor_kind: str | None = None,
+    families: tuple[str, ...] | None = None,
     progress: Any = None,
 ) -> BatchSummary:
     """Run the batch for [start_ns, end_ns) and commit it atomically per table.
+
+    ``families``: names of the families to run (default: every registered family);
     ``progress``: the CLI's :class:`~jobs.progress.TerminalProgress` (or None)."""
     if end_ns <= start_ns:
         raise ValueError("--to must be after --from")
+    fams = FAMILIES if families is None else tuple(family(name) for name in families)
     warm_up(warehouse)  # the views file's DuckDB instance, built while the batch runs
     requested = (start_ns, end_ns)
     start_ns, end_ns, committed_cuts = owned_window(warehouse, start_ns, end_ns)
     staging = warehouse / "_staging" / f"batch-{start_ns}-{end_ns}"
     shutil.rmtree(staging, ignore_errors=True)
-    units = plan_units(warehouse, cfg, start_ns, end_ns, staging, committed_cuts)
+    units = plan_units(warehouse, cfg, start_ns, end_ns, staging, fams, committed_cuts)
     summary = BatchSummary(start_ns=start_ns, end_ns=end_ns, units_total=len(units),
                            requested=None if requested == (start_ns, end_ns) else requested)
     ex = cfg.execution
     executor = make_executor(
         executor_kind or ex.executor, min(ex.max_workers, len(units)), ex.threads_per_worker
     )
+    manifests: list[UnitManifest] = []
     if progress is not None:
         progress.batch_units(len(units))
-    joined: dict[str, pa.Table] = {}  # table -> the window's joined rows
-    for wave in family_waves(FAMILIES, cfg):
-        # a family reading another family's output reads this batch's rows of it
-        overrides = tuple((name, _write_joined(staging, name, table))
-                          for name, table in joined.items())
-        ours = [replace(u, overrides=overrides, window=(start_ns, end_ns))
-                for u in units if u.family in {f.name for f in wave}]
-        manifests = _run_units(executor, ours, summary, progress)
-        if summary.failed_units:
-            return summary
-        joined |= _join(warehouse, wave, manifests, summary)
+    with executor:  # one pool for the units and their finalisation
+        for wave in family_waves(fams, cfg):
+            # a family reading another family's output reads this batch's rows of it
+            overrides = tuple(
+                (name, tuple(f.path for m in manifests for f in m.files.get(name, [])))
+                for fam in fams if fam.name in {m.family for m in manifests}
+                for name in fam.outputs)
+            names = {f.name for f in wave}
+            ours = [replace(u, overrides=overrides, window=(start_ns, end_ns))
+                    for u in units if u.family in names]
+            manifests += _run_units(executor, ours, tuple(wave), summary, progress,
+                                    warehouse)
+            if summary.failed_units:
+                break
+    if summary.failed_units:
+        shutil.rmtree(staging, ignore_errors=True)
+        return summary
     t0 = time.perf_counter()
-    _commit(warehouse, joined, summary, units)
+    _commit(warehouse, manifests, summary, fams, units)
     summary.commit_s = time.perf_counter() - t0
     shutil.rmtree(staging, ignore_errors=True)
     with contextlib.suppress(OSError):  # only when empty: another job may be staging
@@ -282,16 +360,9 @@ def run_batch(
     return summary
 
 
-def _stored_before(warehouse: Path, fam: Family, start_ns: int) -> dict[str, pl.DataFrame]:
-    """``fam``'s committed outputs in the ``stitch_lookback_s`` before ``start_ns``: the
-    unit before the window as its ``join_units`` sees a unit (a pseudo-unit)."""
-    lo = start_ns - round(fam.stitch_lookback_s * NS)
-    return {name: pl.from_arrow(read_table(warehouse, name, start_ns=lo, end_ns=start_ns))
-            for name in fam.outputs}
-
-
-def _run_units(executor: Any, units: list[BatchUnit], summary: BatchSummary,
-               progress: Any) -> list[UnitManifest]:
+def _run_units(executor, units: list[BatchUnit], fams: tuple[Family, ...],
+               summary: BatchSummary, progress: Any = None,
+               warehouse: Path | None = None) -> list[UnitManifest]:
     manifests = []
     for result in executor.map_units(run_unit, units):
         if progress is not None:
@@ -305,7 +376,9 @@ def _run_units(executor: Any, units: list[BatchUnit], summary: BatchSummary,
             label = f"{u.family} [{_iso(u.start_ns)}, {_iso(u.end_ns)}): {result.error}"
             summary.failed_units.append(label)
             log.error("batch unit failed %s", label)
-    return manifests
+    if summary.failed_units:
+        return manifests
+    return _finalize_units(executor, manifests, fams, summary, warehouse)
 
 
 def family_waves(families: tuple[Family, ...], cfg: Config) -> list[list[Family]]:
@@ -325,14 +398,6 @@ def family_waves(families: tuple[Family, ...], cfg: Config) -> list[list[Family]
     return waves
 
 
-def _write_joined(staging: Path, name: str, table: pa.Table) -> tuple[str, ...]:
-    path = staging / "joined" / f"{name}.parquet"
-    if not path.exists():
-        path.parent.mkdir(parents=True, exist_ok=True)
-        pq.write_table(table, path)
-    return (str(path),)
-
-
 def _stored_before(warehouse: Path, fam: Family, start_ns: int) -> dict[str, pl.DataFrame]:
     """``fam``'s committed outputs in the ``stitch_lookback_s`` before ``start_ns``: the
     unit before the window as its ``join_units`` sees a unit (a pseudo-unit)."""
@@ -341,51 +406,56 @@ def _stored_before(warehouse: Path, fam: Family, start_ns: int) -> dict[str, pl.
             for name in fam.outputs}
 
 
-def _join(warehouse: Path, families: list[Family], manifests: list[UnitManifest],
-          summary: BatchSummary) -> dict[str, pa.Table]:
-    """Each family's units joined into the window's tables: ids stitched across unit
-    seams (and to the rows committed just before the window); ``rejects`` gathered."""
-    out: dict[str, pa.Table] = {}
+def _finalize_units(executor, manifests: list[UnitManifest], families: tuple[Family, ...],
+                    summary: BatchSummary, warehouse: Path | None = None
+                    ) -> list[UnitManifest]:
+    """Each family's ``join_units`` over its units' seams (led by the seam of the rows
+    committed just before the window: ``stitch_lookback_s``), then every unit written as
+    Parquet data files by the executor's workers (relabelled where the join asks)."""
+    tasks: list[FinalizeTask] = []
     for fam in families:
         ours = sorted((m for m in manifests if m.family == fam.name), key=lambda m: m.start_ns)
-        parts = {name: [pl.read_parquet(m.files[name]) for m in ours if name in m.files]
-                 for name in fam.outputs}
-        if fam.join_units is not None:
+        seams = [m.seam for m in ours]
+        lead = 0
+        if (fam.join_units is not None and fam.unit_seam is not None
+                and fam.stitch_lookback_s and warehouse is not None):
             before = _stored_before(warehouse, fam, summary.start_ns)
-            if fam.stitch_lookback_s and any(f.height for f in before.values()):
-                # the stored rows lead, as a unit of their own; they are not written again
-                joined = fam.join_units({name: [before[name], *frames]
-                                         for name, frames in parts.items()})
-                parts = {name: frames[1:] for name, frames in joined.items()}
-            else:
-                parts = fam.join_units(parts)
-        for name in fam.outputs:
-            frames = parts[name]
-            out[name] = tables.conform(name, pl.concat(frames) if frames
-                                       else tables.empty(name))
-        rejects = [pl.read_parquet(m.files["rejects"]) for m in ours if "rejects" in m.files]
-        if rejects:
-            out[f"rejects:{fam.name}"] = tables.conform("rejects", pl.concat(rejects))
+            if any(f.height for f in before.values()):
+                seams, lead = [fam.unit_seam(before), *seams], 1
+        maps = (fam.join_units(seams)[lead:]
+                if fam.join_units is not None and len(seams) > 1 else [None] * len(ours))
+        tasks += [FinalizeTask(m, mapping) for m, mapping in zip(ours, maps, strict=True)]
+    out: list[UnitManifest] = []
+    for result in executor.map_units(finalize_unit, tasks):
+        if result.ok:
+            out.append(result.value)
+        else:
+            m = result.unit.manifest
+            summary.failed_units.append(f"{m.family} {_iso(m.start_ns)} write: {result.error}")
     return out
 
 
-def _commit(warehouse: Path, joined: dict[str, pa.Table], summary: BatchSummary,
-            units: list[BatchUnit] | None = None) -> None:
-    """One atomic overwrite per derived table whose predicate is the window, then the
-    window's batch rejects and units (``batch_units``). Readers see none of them until
-    all are made (a pending marker pins the tables: ``pipeline.warehouse.pending``); a
-    crash in between leaves the marker, and readers the previous rows of every table,
-    until a batch covering this window finishes. Only the driver commits."""
-    derived = [name for fam in FAMILIES for name in fam.outputs]
+def _commit(warehouse: Path, manifests: list[UnitManifest], summary: BatchSummary,
+            families: tuple[Family, ...] = FAMILIES, units: list[BatchUnit] | None = None
+            ) -> None:
+    """One Delta commit per derived table replacing the window's rows by the units'
+    staged files (``commit_window``: no row passes through the driver), then the batch
+    rejects and the window's units (``batch_units``). Readers see none of them until all
+    are made (a pending marker pins the tables: ``pipeline.warehouse.pending``); a crash
+    in between leaves the marker, and readers the previous rows of every table, until a
+    batch covering this window finishes. Only the driver commits."""
+    derived = [name for fam in families for name in fam.outputs]
     marker = pending.begin(warehouse, [*derived, "rejects", "batch_units"], job="batch",
                            window=[summary.start_ns, summary.end_ns])
-    for name in derived:
-        table = joined.get(name, tables.empty(name))
-        replace_window(warehouse, name, table, start_ns=summary.start_ns,
-                       end_ns=summary.end_ns)
-        summary.rows[name] = table.num_rows
-    frames = [pl.from_arrow(t) for k, t in joined.items() if k.startswith("rejects:")]
-    rejects = tables.conform("rejects", pl.concat(frames) if frames else tables.empty("rejects"))
+    for fam in families:
+        ours = [m for m in manifests if m.family == fam.name]
+        for name in fam.outputs:
+            staged = [f for m in ours for f in m.files.get(name, [])]
+            commit_window(warehouse, name, staged, start_ns=summary.start_ns,
+                          end_ns=summary.end_ns)
+            summary.rows[name] = sum(f.rows for f in staged)
+    staged = [f for m in manifests for f in m.files.get("rejects", [])]
+    rejects = read_staged("rejects", staged) if staged else tables.empty("rejects")
     replace_rows(
         warehouse,
         "rejects",

@@ -1,6 +1,8 @@
 """`surveil demo`: simulate one hour (the `channel`, `airfield` and `ownship` scenarios:
-every family's tables, so the audit page has every section) into an archive, ingest it,
-run the batch over the hour and print the accuracy and identification reports."""
+every family's tables, so the audit page has every section; with the config's fault
+schedules: ``[[channel_faults]]``, ``[[airfield.faults]]``, the own ship's GNSS outages
+and jump) into an archive, ingest it, run the batch over the hour and print the
+accuracy, identification and channel-fault reports."""
 
 from __future__ import annotations
 
@@ -15,7 +17,7 @@ from jobs.report import format_report, run_named_report
 from jobs.simulate import DEFAULT_START_NS, run_simulate
 from pipeline.config import Config
 
-DEMO_REPORTS = ("accuracy_by_sector", "identification_by_sector")
+DEMO_REPORTS = ("accuracy_by_sector", "identification_by_sector", "channel_faults_by_sector")
 DEMO_SCENARIOS = ("channel", "airfield", "ownship")
 
 
@@ -53,7 +55,8 @@ def run_demo(
     echo(ingest.render())
     start_ns = DEFAULT_START_NS
     end_ns = start_ns + int(duration_s * 1e9)
-    echo("3/4 batch: every sensor family (maritime: align, sync, associate, fuse, identify, score)")
+    echo("3/4 batch: every sensor family (maritime: align, sync, associate, channel integrity, "
+         "fuse, identify, score; nav: own-ship solution and GNSS integrity)")
     batch = run_batch(cfg, warehouse, start_ns=start_ns, end_ns=end_ns, executor_kind=executor_kind)
     echo(batch.render())
     echo("4/4 reports")

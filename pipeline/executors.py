@@ -10,7 +10,9 @@
   (``POLARS_MAX_THREADS``, ``OMP_NUM_THREADS``, BLAS, Arrow's CPU pool), so
   processes × threads do not oversubscribe the cores;
 - ``ray``: Ray tasks, only when the optional extra is installed (``surveil[ray]``); Ray
-  is imported here and nowhere in stage code.
+  is imported here and nowhere in stage code. A Ray session already started by the
+  caller is used as it is; else ``RAY_ADDRESS`` names an existing cluster to join; else
+  a local one with ``max_workers`` CPUs is started (docs/scale.md).
 
 A unit that raises is reported as ``UnitResult(ok=False, error=...)``; nothing raises past
 ``map_units``, so the caller can list failed units and re-run only those. Results arrive
@@ -22,6 +24,11 @@ as ``fn(unit, value)`` with what it entered to (e.g. the ingest's buffer pool an
 threads, :class:`pipeline.ingest.IngestContext`). Serial: entered once, in this process,
 around the whole map. Process pool: entered by each worker process's initializer (after
 the thread caps), left when that process exits. Ray: entered per task.
+
+Every executor is also a context manager: inside ``with executor:`` the process pool
+keeps one pool for every ``map_units`` call (workers start and import their libraries
+once: the batch's units, then their finalisation); a map given a ``context`` still gets a
+pool of its own (its workers enter that context in their initializer).
 """
 
 from __future__ import annotations
@@ -139,6 +146,12 @@ def _describe(exc: BaseException) -> str:
 class SerialExecutor:
     """Runs units one after the other in this process."""
 
+    def __enter__(self) -> SerialExecutor:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        return None
+
     def map_units(
         self, fn: Callable[..., V], units: Iterable[U], *, context: ContextFactory | None = None
     ) -> Iterator[UnitResult]:
@@ -152,12 +165,34 @@ class SerialExecutor:
                     yield UnitResult(unit, True, value=value)
 
 
-@dataclass(frozen=True)
+@dataclass
 class ProcessExecutor:
-    """A local process pool (``spawn``), library threads capped per worker."""
+    """A local process pool (``spawn``), library threads capped per worker.
+
+    Used as a context manager (``with executor: ...``), one pool serves every
+    ``map_units`` call inside the block (workers are started, and import their libraries,
+    once); otherwise each call starts and stops its own pool."""
 
     max_workers: int
     threads_per_worker: int = 1
+    _pool: ProcessPoolExecutor | None = None
+
+    def _new_pool(self, n: int, context: bytes | None = None) -> ProcessPoolExecutor:
+        return ProcessPoolExecutor(
+            max_workers=max(1, min(self.max_workers, n)),
+            mp_context=multiprocessing.get_context("spawn"),
+            initializer=_start_worker,
+            initargs=(self.threads_per_worker, context),
+        )
+
+    def __enter__(self) -> ProcessExecutor:
+        self._pool = self._new_pool(self.max_workers)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=True)
+            self._pool = None
 
     def map_units(
         self, fn: Callable[..., V], units: Iterable[U], *, context: ContextFactory | None = None
@@ -165,23 +200,26 @@ class ProcessExecutor:
         units = list(units)
         if not units:
             return
-        ctx = multiprocessing.get_context("spawn")
+        if self._pool is not None and context is None:
+            yield from self._map(self._pool, fn, units, None)
+            return
+        # a context is entered by each worker's initializer: a pool of its own
         blob = None if context is None else pickle.dumps(context)
-        with ProcessPoolExecutor(
-            max_workers=max(1, min(self.max_workers, len(units))),
-            mp_context=ctx,
-            initializer=_start_worker,
-            initargs=(self.threads_per_worker, blob),
-        ) as pool:
-            futures: dict[Future, Any] = {
-                (pool.submit(fn, u) if blob is None else pool.submit(_call_in_worker, fn, u)): u
-                for u in units
-            }
-            pending = set(futures)
-            while pending:
-                done, pending = wait(pending, return_when=FIRST_COMPLETED)
-                for fut in done:
-                    yield _result(futures[fut], fut)
+        with self._new_pool(len(units), blob) as pool:
+            yield from self._map(pool, fn, units, blob)
+
+    @staticmethod
+    def _map(pool: ProcessPoolExecutor, fn: Callable[..., V], units: list[U],
+             blob: bytes | None) -> Iterator[UnitResult]:
+        futures: dict[Future, Any] = {
+            (pool.submit(fn, u) if blob is None else pool.submit(_call_in_worker, fn, u)): u
+            for u in units
+        }
+        pending = set(futures)
+        while pending:
+            done, pending = wait(pending, return_when=FIRST_COMPLETED)
+            for fut in done:
+                yield _result(futures[fut], fut)
 
 
 def _result(unit: Any, fut: Future) -> UnitResult:
@@ -199,13 +237,22 @@ class RayExecutor:
     threads_per_worker: int = 1
     max_retries: int = 0
 
+    def __enter__(self) -> RayExecutor:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        return None
+
     def map_units(
         self, fn: Callable[..., V], units: Iterable[U], *, context: ContextFactory | None = None
     ) -> Iterator[UnitResult]:
         import ray
 
         if not ray.is_initialized():
-            ray.init(num_cpus=self.max_workers, include_dashboard=False)
+            if os.environ.get("RAY_ADDRESS"):  # an existing cluster: it has its own CPUs
+                ray.init(address=os.environ["RAY_ADDRESS"])
+            else:
+                ray.init(num_cpus=self.max_workers, include_dashboard=False)
         remote = ray.remote(
             num_cpus=1,
             max_retries=self.max_retries,

@@ -15,13 +15,22 @@ A family (``pipeline.maritime``, ``pipeline.airfield``, ``pipeline.nav``,
 - ``stage(inputs, window, cfg)``: a pure function of those tables, the window and the
   config, returning ``{table: frame}`` for the tables in ``outputs`` (plus ``rejects``);
 - ``outputs``: the derived tables it owns (no other family writes them);
+- ``unit_rows`` and ``unit_table``: units are also cut so that none reads more than about
+  ``unit_rows`` rows of ``unit_table`` (located from the Parquet footers, without
+  reading rows): memory per worker bounded by data volume, not by a fixed hour;
+- ``sorted_outputs``: the stage returns every frame sorted by its table's sort key (the
+  batch then writes it as it is instead of sorting it);
 - ``unit_s``: the work unit length (the window is cut at UTC multiples of it), or
   ``None`` for one unit per window (filters that need continuity);
-- ``join_units``: how the staged parts of consecutive units join into the window's
-  tables (e.g. system track ids stitched across unit seams), or ``None`` to concatenate;
+- ``unit_seam`` and ``join_units``: how consecutive units join into the window's tables
+  (e.g. system track ids stitched across unit seams), or ``None`` to concatenate. The
+  worker keeps ``unit_seam(outputs)``, something small (e.g. the rows of a unit's first
+  and last epochs); the driver gives the seams of a window's units, in time order, to
+  ``join_units``, which returns per unit ``None`` or a :data:`Relabel` to apply to every
+  output of that unit (the units' outputs themselves never travel to the driver).
 - ``stitch_lookback_s``: how far before a window the batch reads the family's committed
-  outputs, given to ``join_units`` as the unit before the window's first (ids continue
-  across the window's leading edge); 0: the window's units are joined alone.
+  outputs; their ``unit_seam`` leads the window's seams given to ``join_units`` (ids
+  continue across the window's leading edge); 0: the window's units are joined alone.
 
 Nothing here reads files: the job reads the inputs, runs the stage in a worker and
 commits what it returns.
@@ -63,6 +72,9 @@ class TableInput:
     after_s: float = 0.0
     columns: tuple[str, ...] | None = None
     whole_table: bool = False
+    sorted: bool = True
+    """False: the stage does not need the rows in the table's sort order (saves a sort
+    of every row read)."""
 
     def span_ns(self, window: Window) -> tuple[int, int]:
         return (window.start_ns - round(self.before_s * NS),
@@ -72,7 +84,16 @@ class TableInput:
 Inputs = Mapping[str, pl.DataFrame]
 Outputs = dict[str, pl.DataFrame]
 Stage = Callable[[Inputs, Window, Config], Outputs]
-UnitParts = dict[str, list[pl.DataFrame]]
+Relabel = Mapping[str, Mapping[Any, Any]]
+"""{column: {old value: new value}} to apply to a unit's outputs (columns it lacks are
+left alone)."""
+
+
+def relabel(frame: pl.DataFrame, mapping: Relabel) -> pl.DataFrame:
+    """Apply a :data:`Relabel` to ``frame``."""
+    cols = [pl.col(c).replace(dict(m)) for c, m in mapping.items()
+            if m and c in frame.columns]
+    return frame.with_columns(cols) if cols and frame.height else frame
 
 
 @dataclass(frozen=True)
@@ -86,6 +107,9 @@ class Family:
     outputs: tuple[str, ...]
     stage: Stage
     unit_s: int | None = 3600
-    join_units: Callable[[UnitParts], UnitParts] | None = None
+    unit_rows: int | None = None
+    unit_table: str = ""
+    sorted_outputs: bool = False
+    unit_seam: Callable[[Outputs], Any] | None = None
+    join_units: Callable[[list[Any]], list[Relabel | None]] | None = None
     stitch_lookback_s: float = 0.0
-

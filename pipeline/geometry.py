@@ -80,7 +80,10 @@ def assign_sectors(
     x, y = df["x_enu_m"].to_numpy(), df["y_enu_m"].to_numpy()
     idx = np.full(x.size, -1)
     for k, poly in enumerate(sector_polygons(sectors, region)):
-        idx[(idx < 0) & shapely.contains_xy(poly, x, y)] = k
+        # only the points inside the polygon's bounding box go to GEOS (same answer)
+        x0, y0, x1, y1 = poly.bounds
+        cand = np.flatnonzero((idx < 0) & (x >= x0) & (x <= x1) & (y >= y0) & (y <= y1))
+        idx[cand[shapely.contains_xy(poly, x[cand], y[cand])]] = k
     names = np.array([s.name for s in sectors] + [None], dtype=object)
     return df.with_columns(pl.Series("sector", names[idx].tolist(), dtype=pl.String))
 

@@ -62,8 +62,8 @@ def test_ros2_msg_agrees_with_the_schema():
 
 def _python_field_lists() -> list[tuple[str, dict, str, tuple[str, ...]]]:
     """(what, field dict, schema file, fields the dict leaves out on purpose)."""
-    from pipeline.decode import ais_json, ownship, radar, truth, vasn
-    from pipeline.simulate import channel
+    from pipeline.decode import ais_json, fault_truth, ownship, radar, truth, vasn
+    from pipeline.simulate import channel, channel_faults
 
     sim_radar = {k: v for k, v in channel.RADAR_REPORT_SCHEMA.items() if k != "log_time_ns"}
     return [
@@ -76,6 +76,9 @@ def _python_field_lists() -> list[tuple[str, dict, str, tuple[str, ...]]]:
         ("decode.ownship.GYRO_FIELDS", ownship.GYRO_FIELDS, "gyro_signals.schema.json", ()),
         ("decode.ownship.TRUTH_FIELDS", ownship.TRUTH_FIELDS, "ownship_truth.schema.json", ()),
         ("decode.ais_json.SCHEMA", ais_json.SCHEMA, "ais_report.schema.json", ()),
+        ("decode.fault_truth.FIELDS", fault_truth.FIELDS, "fault_truth.schema.json", ()),
+        ("simulate.channel_faults.FAULT_TRUTH_SCHEMA", channel_faults.FAULT_TRUTH_SCHEMA,
+         "fault_truth.schema.json", ()),
     ]
 
 

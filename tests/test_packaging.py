@@ -74,7 +74,8 @@ def test_package_data_keys_are_listed_packages(setuptools_cfg):
 def test_extension_sources_exist(setuptools_cfg):
     exts = setuptools_cfg["ext-modules"]
     names = {e["name"] for e in exts}
-    assert names == {"pipeline.decode._json_columns", "pipeline.io._mcap_records"}
+    assert names == {"pipeline.decode._json_columns", "pipeline.io._mcap_records",
+                     "pipeline.maritime._associate"}
     for ext in exts:
         assert ext["sources"], ext["name"]
         for src in [*ext["sources"], *ext.get("depends", [])]:

@@ -165,9 +165,15 @@ def _position_problem(lat: float | None, lon: float | None) -> tuple[str, str] |
 class _Decoder:
     """One pass over a batch of sentences (see module docstring)."""
 
-    def __init__(self, sentences: list[bytes], final: bool):
+    def __init__(self, sentences: list[bytes], final: bool, skip: np.ndarray | None = None):
         self.sentences = sentences
         self.final = final
+        # sentences decoded by the vectorised path: single-sentence position reports,
+        # which never join or break a fragment group; the others keep their indices, so
+        # fragment gaps count every sentence as before
+        self.skip = np.zeros(len(sentences), bool)
+        if skip is not None and skip.size:
+            self.skip[skip] = True
         self.parsed: list[AISSentence | None] = [None] * len(sentences)
         self.units: list[list[int]] = []
         self.rejects: list[tuple[list[int], str, str]] = []
@@ -175,12 +181,14 @@ class _Decoder:
 
     def run(self) -> int:
         """Parse and group every sentence; returns the index where the carry starts."""
-        for i, raw in enumerate(self.sentences):
+        n = len(self.sentences)
+        for i in np.flatnonzero(~self.skip).tolist():
             self._expire(i)
-            s = self._parse(i, raw)
+            s = self._parse(i, self.sentences[i])
             if s is not None:
                 self._group(i, s)
-        n = len(self.sentences)
+        if n:
+            self._expire(n - 1)  # skipped sentences at the end count as gap too
         if self.final or not self.open:
             for g in self.open.values():
                 self._reject_group(g, "group never completed")
@@ -269,12 +277,15 @@ def decode_ais(
     """
     times = np.asarray(log_time_ns, dtype=np.int64)
     recv = times if time_ns is None else np.asarray(time_ns, dtype=np.int64)
-    dec = _Decoder(list(sentences), final)
+    sentences = list(sentences)
+    fast = fast_positions(sentences) if FAST else None
+    dec = _Decoder(sentences, final, skip=None if fast is None else fast.index)
     carry_at = dec.run()
     reports: dict[str, list] = {}
     static: dict[str, list] = {}
     rejects = [r for r in dec.rejects if max(r[0]) < carry_at]
     not_stored: Counter = Counter()
+    report_key: list[int] = []  # index of the last sentence of each report row
     for idx in dec.units:
         if max(idx) >= carry_at:
             continue
@@ -288,10 +299,16 @@ def decode_ais(
         prov = _provenance(idx, sentences, times, recv)
         if position is not None:
             _append(reports, {**position, **prov})
+            report_key.append(max(idx))
         if static_row is not None:
             _append(static, {**static_row, **prov})
+    if fast is not None and fast.index.size:
+        table = _merge_fast(reports, report_key, fast, fast.index < carry_at, sentences,
+                            times, recv, source_file, topic)
+    else:
+        table = _table("ais_reports", reports, source_file, topic)
     return AisDecoded(
-        reports=_table("ais_reports", reports, source_file, topic),
+        reports=table,
         static=_table("ais_static", static, source_file, topic),
         rejects=_rejects(rejects, sentences, times, source_file, topic),
         not_stored=dict(not_stored),
@@ -336,6 +353,168 @@ def _provenance(
     last = max(idx)
     text = "\n".join(sentences[j].decode("ascii", "replace").strip() for j in idx)
     return {"time_ns": int(recv[last]), "log_time_ns": int(times[last]), "nmea": text}
+
+
+# -- vectorised path: single-sentence position reports (types 1, 2, 3, 18) ----------------
+
+FAST = True
+"""Decode canonical single-sentence position reports without pyais (tests switch it off
+to compare with the reference path)."""
+_SENTENCE_LEN = 47  # "!AIVDM,1,1,,A," + 28 payload characters + ",0*HH"
+_HEX = np.frombuffer(b"0123456789ABCDEF", np.uint8)
+
+
+@dataclass(frozen=True)
+class FastPositions:
+    """Decoded fields of the sentences the vectorised path took (``index``: their
+    positions in the batch), one entry per sentence."""
+
+    index: np.ndarray
+    msg_type: np.ndarray
+    mmsi: np.ndarray
+    status: np.ndarray
+    speed: np.ndarray  # 0.1 kn units
+    accuracy: np.ndarray
+    lon: np.ndarray  # 1/10000 min units
+    lat: np.ndarray
+    course: np.ndarray  # 0.1 deg units
+    heading: np.ndarray
+    second: np.ndarray
+    channel: np.ndarray  # the channel byte
+
+
+def _bits(six: np.ndarray, start: int, width: int, signed: bool = False) -> np.ndarray:
+    """Bit field [start, start + width) of 6-bit rows (n, 28), as int64."""
+    first, last = start // 6, (start + width - 1) // 6
+    v = np.zeros(six.shape[0], np.int64)
+    for c in range(first, last + 1):
+        v = (v << 6) | six[:, c].astype(np.int64)
+    v >>= (last + 1) * 6 - (start + width)
+    v &= (1 << width) - 1
+    if signed:
+        v = np.where(v >= 1 << (width - 1), v - (1 << width), v)
+    return v
+
+
+def fast_positions(sentences: list[bytes]) -> FastPositions | None:
+    """The canonical single-sentence position reports of a batch, decoded with numpy.
+
+    Taken: exactly ``!AIVDM,1,1,,<A|B>,<28 payload characters>,0*<checksum>`` (or
+    ``!AIVDO``), checksum right, payload characters valid, message id 1, 2, 3 or 18,
+    latitude and longitude available and in range. Everything else (tag blocks,
+    multi-part, static data, anything unusual or faulty) is left to the pyais path,
+    which gives the exact reject reasons. For a taken sentence the row is the one the
+    pyais path writes: pyais's field layout and conversions (``to_lat_lon``,
+    ``to_speed``, ``to_10th``), then the same unit conversions and not-available codes.
+    ``tests/decode/test_ais_fast.py`` checks both paths give identical tables.
+    """
+    n = len(sentences)
+    if n == 0:
+        return None
+    lens = np.fromiter(map(len, sentences), np.int64, n)
+    cand = np.flatnonzero(lens == _SENTENCE_LEN)
+    if cand.size == 0:
+        return None
+    raw = np.frombuffer(b"".join(sentences[i] for i in cand.tolist()), np.uint8).reshape(
+        cand.size, _SENTENCE_LEN)
+    prefix_ok = (raw[:, :5] == np.frombuffer(b"!AIVD", np.uint8)).all(axis=1)
+    prefix_ok &= (raw[:, 5] == ord("M")) | (raw[:, 5] == ord("O"))
+    prefix_ok &= (raw[:, 6:12] == np.frombuffer(b",1,1,,", np.uint8)).all(axis=1)
+    prefix_ok &= (raw[:, 12] == ord("A")) | (raw[:, 12] == ord("B"))
+    prefix_ok &= (raw[:, 13] == ord(",")) & (raw[:, 42:45] == np.frombuffer(b",0*", np.uint8)
+                                             ).all(axis=1)
+    cs = np.bitwise_xor.reduce(raw[:, 1:44], axis=1)
+    prefix_ok &= (raw[:, 45] == _HEX[cs >> 4]) & (raw[:, 46] == _HEX[cs & 15])
+    pay = raw[:, 14:42].astype(np.int16)
+    valid = ((pay >= 48) & (pay <= 87)) | ((pay >= 96) & (pay <= 119))
+    prefix_ok &= valid.all(axis=1)
+    six = pay - 48
+    six = np.where(six > 40, six - 8, six)
+    msg = six[:, 0]
+    prefix_ok &= (msg == 1) | (msg == 2) | (msg == 3) | (msg == 18)
+    b18 = msg == 18
+    # field offsets: types 1-3 / type 18 (ITU-R M.1371, pyais's layout)
+    lon = np.where(b18, _bits(six, 57, 28, True), _bits(six, 61, 28, True))
+    lat = np.where(b18, _bits(six, 85, 27, True), _bits(six, 89, 27, True))
+    # pyais to_lat_lon: ((10 v + 3) // 6) / 1e6 (round(v / 600000, 6) exactly)
+    lon_deg = ((10 * lon + 3) // 6) / 1e6
+    lat_deg = ((10 * lat + 3) // 6) / 1e6
+    prefix_ok &= (lat_deg != LAT_NA_DEG) & (lon_deg != LON_NA_DEG)
+    prefix_ok &= (np.abs(lat_deg) <= 90.0) & (np.abs(lon_deg) <= 180.0)
+    k = np.flatnonzero(prefix_ok)
+    if k.size == 0:
+        return None
+    six, b18 = six[k], b18[k]
+    return FastPositions(
+        index=cand[k],
+        msg_type=msg[k].astype(np.int16),
+        mmsi=_bits(six, 8, 30),
+        status=np.where(b18, -1, _bits(six, 38, 4)),
+        speed=np.where(b18, _bits(six, 46, 10), _bits(six, 50, 10)),
+        accuracy=np.where(b18, _bits(six, 56, 1), _bits(six, 60, 1)).astype(bool),
+        lon=lon_deg[k],
+        lat=lat_deg[k],
+        course=np.where(b18, _bits(six, 112, 12), _bits(six, 116, 12)),
+        heading=np.where(b18, _bits(six, 124, 9), _bits(six, 128, 9)),
+        second=np.where(b18, _bits(six, 133, 6), _bits(six, 137, 6)),
+        channel=raw[k, 12],
+    )
+
+
+def _fast_table(f: FastPositions, keep: np.ndarray, sentences: list[bytes], times: np.ndarray,
+                recv: np.ndarray) -> pa.Table:
+    """The ais_reports columns of the kept fast rows (the conversions of _position_row,
+    vectorised)."""
+    i = f.index[keep]
+    speed = f.speed[keep] / 10.0  # pyais to_speed
+    course = f.course[keep] / 10.0  # pyais to_10th
+    heading = f.heading[keep]
+    second = f.second[keep]
+    status = f.status[keep]
+    b18 = f.msg_type[keep] == 18
+    sog = pa.array(speed * KNOT_MPS, pa.float64(), mask=speed >= 102.3 - 1e-6)
+    cog = pa.array(course * DEG, pa.float64(), mask=(course >= 360.0) | (course < 0.0))
+    hdg = pa.array(heading * DEG, pa.float64(), mask=heading > 359)
+    text = [sentences[j].decode("ascii", "replace").strip() for j in i.tolist()]
+    return pa.table({
+        "mmsi": pa.array(f.mmsi[keep], pa.int64()),
+        "msg_type": pa.array(f.msg_type[keep], pa.int16()),
+        "ais_class": pa.array(np.where(b18, "B", "A"), pa.string()),
+        "lat_deg": pa.array(f.lat[keep], pa.float64()),
+        "lon_deg": pa.array(f.lon[keep], pa.float64()),
+        "sog_mps": sog,
+        "cog_rad": cog,
+        "heading_rad": hdg,
+        "nav_status": pa.array(status, pa.int16(), mask=b18),
+        "position_accuracy": pa.array(f.accuracy[keep], pa.bool_()),
+        "utc_second": pa.array(second, pa.int16(), mask=second >= 60),
+        "radio_channel": pa.array(np.where(f.channel[keep] == ord("A"), "A", "B"), pa.string()),
+        "time_ns": pa.array(recv[i], pa.int64()),
+        "log_time_ns": pa.array(times[i], pa.int64()),
+        "nmea": pa.array(text, pa.string()),
+    })
+
+
+def _merge_fast(cols: dict[str, list], keys: list[int], f: FastPositions, keep: np.ndarray,
+                sentences: list[bytes], times: np.ndarray, recv: np.ndarray, source_file: str,
+                topic: str) -> pa.Table:
+    """Slow-path rows and fast rows in the order the reference makes them (by the index
+    of each message's last sentence), then conformed like :func:`_table`."""
+    fast = _fast_table(f, keep, sentences, times, recv)
+    parts, order = [fast], [f.index[keep]]
+    if cols.get("mmsi"):
+        types = {fd.name: fd.type for fd in schema("ais_reports")}
+        slow = pa.table({k: pa.array(v, type=types[k]) for k, v in cols.items()})
+        parts.append(slow.select(fast.column_names))
+        order.append(np.asarray(keys, np.int64))
+    table = pa.concat_tables(parts)
+    table = table.take(np.argsort(np.concatenate(order), kind="stable"))
+    n = table.num_rows
+    if n == 0:
+        return empty("ais_reports")
+    table = table.append_column("source_file", pa.array([source_file] * n, pa.string()))
+    table = table.append_column("topic", pa.array([topic] * n, pa.string()))
+    return conform("ais_reports", table)
 
 
 def _table(name: str, cols: dict[str, list], source_file: str, topic: str) -> pa.Table:

@@ -28,6 +28,7 @@ message encoding  schema encoding  schema name                 decoder -> tables
 ``json``          ``jsonschema``   ``surveil.AirfieldTruth``   airfield_truth -> airfield_truth
 ``json``          ``jsonschema``   ``surveil.GyroSignals``     ownship -> nav_gyro_signals
 ``json``          ``jsonschema``   ``surveil.OwnshipTruth``    ownship -> ownship_truth
+``json``          ``jsonschema``   ``surveil.FaultTruth``      fault_truth -> fault_truth
 ``json``          ``jsonschema``   ``surveil.ImportReject``    import_reject -> rejects
 ``protobuf``      ``protobuf``     ``surveil.RadarTrackReport``  radar_binary -> radar_tracks
 ``cdr``           ``ros2msg``      ``surveil_msgs/msg/RadarTrackReport``  radar_binary ->
@@ -73,7 +74,7 @@ RAW_TABLES = (
     "radar_tracks", "ais_reports", "ais_static", "truth", "rejects",
     "airfield_obs", "asterix_service", "nav_gnss", "nav_heading",
     "nav_speed_log", "arpa_targets", "arpa_own_ship", "airfield_truth",
-    "nav_gyro_signals", "ownship_truth",
+    "nav_gyro_signals", "ownship_truth", "fault_truth",
 )  # fmt: skip
 
 RADAR = ("json", "jsonschema", "surveil.RadarTrackReport")
@@ -111,6 +112,8 @@ CHANNEL_DECODERS["gyro_signals"] = "pipeline.decode.ownship:GyroSignalsChannelDe
 CHANNEL_DECODERS["ownship_truth"] = "pipeline.decode.ownship:OwnshipTruthChannelDecoder"
 _KINDS[("json", "jsonschema", "surveil.GyroSignals")] = "gyro_signals"
 _KINDS[("json", "jsonschema", "surveil.OwnshipTruth")] = "ownship_truth"
+CHANNEL_DECODERS["fault_truth"] = "pipeline.decode.fault_truth:FaultTruthChannelDecoder"
+_KINDS[("json", "jsonschema", "surveil.FaultTruth")] = "fault_truth"
 CHANNEL_DECODERS["import_reject"] = "pipeline.decode.import_reject:ImportRejectChannelDecoder"
 _KINDS[("json", "jsonschema", "surveil.ImportReject")] = "import_reject"
 JSON_BATCH = 100_000  # JSON messages per bulk parse (~44 MB of radar payload)

@@ -58,9 +58,20 @@ from scipy.stats import chi2
 
 from pipeline.frames import wrap_angle
 from pipeline.maritime.config import AssociationConfig
-from pipeline.maritime.fuse import Information, channel_information, channel_information_of_columns
+from pipeline.maritime.fuse import (
+    CHANNEL_COLUMNS,
+    Information,
+    channel_information,
+    channel_information_of_columns,
+    group_sums,
+)
 from pipeline.maritime.sync import extrapolate_position, extrapolation_covariance
 from pipeline.units import NS
+
+try:  # the epoch loop in C (optional: built when a C compiler is present)
+    from pipeline.maritime import _associate
+except ImportError:  # pragma: no cover - same ids, ~30-100x slower
+    _associate = None
 
 #: continuity bonus, in units of the gate: keeps gated persisting pairs whatever the sums
 _BONUS_GATES = 1000.0
@@ -183,6 +194,83 @@ def assign(cost: np.ndarray, miss_cost: np.ndarray | float) -> tuple[np.ndarray,
     return r[order], c[order]
 
 
+_STATE_FORM = 1
+"""How ``_associate.c`` turns the sums into a state: 1 = information form
+(:meth:`pipeline.maritime.fuse.Information.estimate`)."""
+
+
+def _channel_terms(rows: Kinematics, sv: np.ndarray, sc: np.ndarray) -> np.ndarray:
+    """Each channel's own eq. 14 terms (:func:`pipeline.maritime.fuse.channel_information`),
+    (n, 10) in the order of :class:`~pipeline.maritime.fuse.Information`'s fields: what a
+    candidate's sums accumulate."""
+    own = channel_information(rows.x_m, rows.y_m, rows.P_xx, rows.P_yy, rows.P_xy,
+                              rows.speed_mps, sv, rows.course_rad, sc)
+    return np.column_stack(own.terms())
+
+
+def assign_grouped(
+    rows: np.ndarray,
+    cols: np.ndarray,
+    cost: np.ndarray,
+    miss: np.ndarray,
+    group_of_row: np.ndarray,
+    n_cols: int,
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`assign` of many independent matrices at once, given as entries.
+
+    Rows and columns are global indices; each row belongs to one group
+    (``group_of_row``) and pairs only with columns of its group; entries not given are
+    +inf; ``miss``: each row's miss cost. The result is what :func:`assign` returns for
+    each group's matrix (rows and columns in ascending order), concatenated and sorted
+    by row: lone matches directly, then, per group that has any left, the same
+    ``linear_sum_assignment`` on the same augmented matrix. The loop runs over those
+    groups only (a handful where the gates overlap), never over rows.
+    """
+    rows = np.asarray(rows, np.int64)
+    cols = np.asarray(cols, np.int64)
+    cost = np.asarray(cost, float)
+    ok = np.isfinite(cost) & (cost < miss[rows])
+    rows, cols, cost = rows[ok], cols[ok], cost[ok]
+    if rows.size == 0:
+        return np.empty(0, np.int64), np.empty(0, np.int64)
+    order = np.lexsort((cols, rows))
+    rows, cols, cost = rows[order], cols[order], cost[order]
+    n_rows = group_of_row.size
+    row_n = np.bincount(rows, minlength=n_rows)
+    col_n = np.bincount(cols, minlength=n_cols)
+    first = np.flatnonzero(np.r_[True, rows[1:] != rows[:-1]])
+    col_of = np.full(n_rows, -1, np.int64)
+    col_of[rows[first]] = cols[first]
+    has = row_n > 0
+    lone = has & (row_n == 1) & (col_n[np.maximum(col_of, 0)] == 1)
+    r_out, c_out = [np.flatnonzero(lone)], [col_of[lone]]
+    rest = has & ~lone
+    sel = rest[rows]
+    e_rows, e_cols, e_cost = rows[sel], cols[sel], cost[sel]
+    if e_rows.size:
+        g = group_of_row[e_rows]
+        by_group = np.argsort(g, kind="stable")
+        g, e_rows, e_cols = g[by_group], e_rows[by_group], e_cols[by_group]
+        e_cost = e_cost[by_group]
+        bounds = np.flatnonzero(np.r_[True, g[1:] != g[:-1], True])
+        for a, b in pairwise(bounds):
+            rr, cc, vv = e_rows[a:b], e_cols[a:b], e_cost[a:b]
+            rest_r = np.unique(rr)
+            rest_c = np.unique(cc)
+            k, mc = rest_r.size, rest_c.size
+            aug = np.full((k, mc + k), np.inf)
+            aug[np.searchsorted(rest_r, rr), np.searchsorted(rest_c, cc)] = vv
+            aug[np.arange(k), mc + np.arange(k)] = miss[rest_r]
+            lr, lc = linear_sum_assignment(aug)
+            keep = lc < mc
+            r_out.append(rest_r[lr[keep]])
+            c_out.append(rest_c[lc[keep]])
+    r = np.concatenate(r_out)
+    c = np.concatenate(c_out)
+    order = np.argsort(r, kind="stable")
+    return r[order], c[order]
+
+
 class _Candidates:
     """Candidate system tracks of one epoch as running sums of eq. 14 in information
     form (multi-radar paper, eq. 14; :class:`pipeline.maritime.fuse.Information`, one
@@ -203,18 +291,7 @@ class _Candidates:
         prev: np.ndarray,
         site: int,
     ) -> None:
-        own = channel_information(
-            rows.x_m,
-            rows.y_m,
-            rows.P_xx,
-            rows.P_yy,
-            rows.P_xy,
-            rows.speed_mps,
-            sv,
-            rows.course_rad,
-            sc,
-        )
-        np.add.at(self.sums, clusters, np.column_stack(own.terms()))
+        np.add.at(self.sums, clusters, _channel_terms(rows, sv, sc))
         self.prev_ids[clusters, site] = prev
 
     def new(self, k: int) -> np.ndarray:
@@ -263,22 +340,151 @@ def associate_tracks(synced: pl.DataFrame, *, cfg: AssociationConfig, id_base: i
     the OTHER members of its system track at that epoch; null when alone), sorted by
     (time_ns, system_track_id, site_id).
     """
-    df = synced.sort("time_ns", "site_id", "local_track_id")
-    keys = df.select("site_id", "local_track_id").unique(maintain_order=True)
-    df = df.join(keys.with_row_index("_key"), on=["site_id", "local_track_id"], how="left")
-    sites = sorted(df["site_id"].unique().to_list())
-    site_idx = df["site_id"].replace_strict(sites, list(range(len(sites)))).to_numpy()
-    sys_idx = _assign_ids(df, site_idx, keys.height, len(sites), cfg)
+    df, site_idx, n_keys, n_sites = prepare_rows(synced)
+    sys_idx = _assign_ids(df, site_idx, n_keys, n_sites, cfg)
+    ids = sys_idx + int(id_base)
+    order = np.lexsort((site_idx, ids, df["time_ns"].to_numpy()))
+    out = df.drop("_key")[order].with_columns(pl.Series("system_track_id", ids[order],
+                                                        dtype=pl.Int64))
+    d2, alone = leave_one_out_d2(out)
+    return out.with_columns(
+        pl.when(pl.Series(alone)).then(None).otherwise(pl.Series(d2)).alias("mahalanobis_d2")
+    )
+
+
+def associate_tracks_reference(synced: pl.DataFrame, *, cfg: AssociationConfig, id_base: int
+                               ) -> pl.DataFrame:
+    """:func:`associate_tracks` with the numpy epoch loop and the polars leave-one-out
+    distance (the reference the fast path is tested against)."""
+    df, site_idx, n_keys, n_sites = prepare_rows(synced)
+    sys_idx = _assign_ids_reference(df, site_idx, n_keys, n_sites, cfg)
     out = df.drop("_key").with_columns(
         pl.Series("system_track_id", sys_idx + int(id_base), dtype=pl.Int64)
     )
     return _with_leave_one_out_d2(out).sort("time_ns", "system_track_id", "site_id")
 
 
+def prepare_rows(synced: pl.DataFrame) -> tuple[pl.DataFrame, np.ndarray, int, int]:
+    """The epoch loop's input: rows sorted by (time_ns, site_id, local_track_id) with a
+    ``_key`` column (index of the (site, local track) pair), each row's site index (sites
+    in sorted order), the number of keys and of sites. Rows that come sorted (as
+    ``synchronise`` returns them) are not sorted again."""
+    sites = sorted(synced["site_id"].unique().to_list())
+    code = synced["site_id"].replace_strict(sites, list(range(len(sites))),
+                                            return_dtype=pl.Int64).to_numpy()
+    t = synced["time_ns"].to_numpy()
+    track = synced["local_track_id"].to_numpy()
+    if not _lex_sorted(t, code, track):
+        order = np.lexsort((track, code, t))
+        synced, t, code, track = synced[order], t[order], code[order], track[order]
+    if track.size:
+        lo, span = int(track.min()), int(track.max()) - int(track.min()) + 1
+        if span * max(len(sites), 1) < 2**62:
+            _, key = np.unique(code * span + (track - lo), return_inverse=True)
+        else:  # pragma: no cover - absurd track ids
+            _, key = np.unique(np.column_stack([code, track]), axis=0, return_inverse=True)
+        n_keys = int(key.max()) + 1
+    else:
+        key, n_keys = np.zeros(0, np.int64), 0
+    df = synced.with_columns(pl.Series("_key", key.astype(np.int64).ravel(), dtype=pl.UInt32))
+    return df, code, n_keys, len(sites)
+
+
+def _lex_sorted(*keys: np.ndarray) -> bool:
+    """True when the rows are sorted by the keys (first key first)."""
+    n = keys[0].size
+    if n < 2:
+        return True
+    tied = np.ones(n - 1, bool)  # pairs not yet decided by an earlier key
+    for k in keys:
+        a, b = k[:-1], k[1:]
+        if np.any(tied & (b < a)):
+            return False
+        tied &= b == a
+    return True
+
+
+def leave_one_out_d2(df: pl.DataFrame) -> tuple[np.ndarray, np.ndarray]:
+    """(d2, alone): mahalanobis_d2 of each row to the eq. 14 fusion (matrix form,
+    :class:`~pipeline.maritime.fuse.Information`) of the OTHER members of its (time_ns,
+    system_track_id) group (the group's sums minus the row's own terms), and whether the
+    row is alone in its group (no distance). Rows sorted by (time_ns, system_track_id,
+    site_id); compensated group sums (:func:`~pipeline.maritime.fuse.group_sums`: the
+    sums of :func:`_with_leave_one_out_d2`'s window expressions, bit for bit)."""
+    n = df.height
+    if n == 0:
+        return np.empty(0), np.empty(0, bool)
+    c = {k: df[k].to_numpy().astype(float) for k in CHANNEL_COLUMNS}
+    t, sid = df["time_ns"].to_numpy(), df["system_track_id"].to_numpy()
+    new = np.r_[True, (t[1:] != t[:-1]) | (sid[1:] != sid[:-1])]
+    starts = np.flatnonzero(new)
+    group = np.cumsum(new) - 1
+    own = np.column_stack(channel_information(*c.values()).terms())
+    with np.errstate(divide="ignore", invalid="ignore"):  # rows alone: no others
+        o = Information(*(group_sums(own, starts)[group] - own).T).estimate()
+        d2 = _d2(c["x_enu_m"] - o.x_m, c["y_enu_m"] - o.y_m, c["P_xx"] + o.P_xx,
+                 c["P_yy"] + o.P_yy, c["P_xy"] + o.P_xy)
+    alone = np.diff(np.r_[starts, n])[group] == 1
+    return d2, alone
+
+
 def _assign_ids(
     df: pl.DataFrame, site_idx: np.ndarray, n_keys: int, n_sites: int, cfg: AssociationConfig
 ) -> np.ndarray:
-    """The epoch loop. Everything inside an epoch is array work (broadcast gates, one
+    """System index of every row: the compiled epoch loop (``_associate.c``: the same
+    gates, costs and assignments as :func:`_assign_ids_reference`, with spatial gating
+    and without a numpy call per site step), or the reference without a C compiler."""
+    if _associate is None:
+        return _assign_ids_reference(df, site_idx, n_keys, n_sites, cfg)
+    return _assign_ids_native(df, site_idx, n_keys, n_sites, cfg)
+
+
+def _lsa_columns(cost: bytes, k: int, m: int) -> bytes:
+    """The kernel's callback: scipy's assignment of a (k, m) cost matrix (k <= m), as
+    int64 column per row."""
+    _, cols = linear_sum_assignment(np.frombuffer(cost, np.float64).reshape(k, m))
+    return np.ascontiguousarray(cols, np.int64).tobytes()
+
+
+def _assign_ids_native(
+    df: pl.DataFrame, site_idx: np.ndarray, n_keys: int, n_sites: int, cfg: AssociationConfig
+) -> np.ndarray:
+    cols = [
+        np.ascontiguousarray(df[c].to_numpy(), np.float64)
+        for c in ("x_enu_m", "y_enu_m", "P_xx", "P_yy", "P_xy", "speed_mps", "course_rad",
+                  "sigma_speed_mps", "sigma_course_rad")
+    ]
+    kin = Kinematics(*cols)
+    terms = np.ascontiguousarray(_channel_terms(kin, kin.sigma_speed_mps, kin.sigma_course_rad))
+    out = np.empty(df.height, np.int64)
+    _associate.assign_ids(
+        np.ascontiguousarray(df["time_ns"].to_numpy(), np.int64),
+        np.ascontiguousarray(site_idx, np.int64),
+        np.ascontiguousarray(df["_key"].to_numpy(), np.int64),
+        *cols,
+        terms,
+        out,
+        int(n_keys),
+        int(n_sites),
+        association_gate(cfg),
+        gate_threshold(cfg.gate_probability, 2),
+        float(cfg.max_course_difference_rad),
+        float(cfg.max_speed_difference_mps),
+        float(cfg.course_gate_min_speed_mps),
+        float(_BONUS_GATES),
+        round(cfg.track_timeout_s * NS),
+        _STATE_FORM,
+        int(cfg.velocity_cost),
+        _lsa_columns,
+    )
+    return out
+
+
+def _assign_ids_reference(
+    df: pl.DataFrame, site_idx: np.ndarray, n_keys: int, n_sites: int, cfg: AssociationConfig
+) -> np.ndarray:
+    """The epoch loop in numpy (the reference the compiled loop is tested against).
+    Everything inside an epoch is array work (broadcast gates, one
     linear_sum_assignment per site and one for the ids); epochs must be processed in
     order because each epoch's ids depend on the previous ones, hence the loop."""
     t = df["time_ns"].to_numpy()

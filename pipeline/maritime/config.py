@@ -1,5 +1,6 @@
 """The maritime family's configuration: ``[sync]``, ``[association]``, ``[siap]``,
-``[radar_bias]`` and ``[fairway]`` (the geography it shares with the other families,
+``[radar_bias]``, ``[fairway]``, ``[channel_integrity]`` and the channel scenario's fault
+schedule ``[[channel_faults]]`` (the geography it shares with the other families,
 radar sites, AIS settings, legs and sectors, is in the core :class:`~pipeline.config.Config`).
 
 Degrees and seconds in the file; radians and seconds here. Each value's file key,
@@ -9,12 +10,22 @@ default and valid range are declared beside it (:func:`pipeline.configspec.setti
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from pipeline.config import Config
-from pipeline.configspec import Document, count, positive, probability, setting
+from pipeline.configspec import (
+    Document,
+    count,
+    latitude,
+    longitude,
+    positive,
+    probability,
+    setting,
+)
 
-SECTIONS = ("sync", "association", "siap", "radar_bias", "fairway")
+SECTIONS = (
+    "sync", "association", "siap", "radar_bias", "fairway", "channel_integrity", "channel_faults",
+)
 
 
 @dataclass(frozen=True)
@@ -77,6 +88,130 @@ class SiapConfig:
     swap_window_s: float = positive(60.0)
 
 
+def _name_or_empty(v: str) -> str | None:
+    """A radar site / sector name, or "" for none (its existence is checked by
+    :func:`parse_maritime`)."""
+    return None if v == v.strip() else "no blanks around a name"
+
+
+RADAR_FAULT_KINDS = (
+    "radar_outage", "radar_blank", "radar_range_bias", "radar_azimuth_bias",
+    "radar_time_offset", "radar_noise",
+)
+AIS_FAULT_KINDS = ("ais_offset", "ais_stuck", "ais_mmsi_swap", "ais_spoof")
+FAULT_KINDS = RADAR_FAULT_KINDS + AIS_FAULT_KINDS
+
+
+@dataclass(frozen=True)
+class ChannelFault:
+    """One fault the ``channel`` simulator injects (``[[channel_faults]]``), from
+    ``start_s`` for ``duration_s`` (s from the scenario start). Radar faults name a
+    ``site_id``: ``radar_outage`` (the site publishes no scans), ``radar_blank`` (no
+    detections in the azimuths [azimuth_from_deg, azimuth_to_deg), clockwise: the
+    tracker coasts, then drops its tracks there), ``radar_range_bias`` (``bias_m`` added
+    to ranges), ``radar_azimuth_bias`` (``bias_deg`` added to azimuths and courses),
+    ``radar_time_offset`` (``offset_s`` added to report times), ``radar_noise`` (range,
+    azimuth, course and speed noise x ``factor``; the reported sigmas unchanged). AIS
+    faults name a vessel (``vessel_id``, 1-based; 0 or absent: the simulator picks, with
+    the run's seed, a Class A vessel in the scene for the whole fault, in ``sector`` when
+    given):
+    ``ais_offset`` (positions moved ``east_m``, ``north_m``: an antenna/GNSS fault),
+    ``ais_stuck`` (position, SOG and COG frozen at the fault start), ``ais_mmsi_swap``
+    (the vessel and ``other_vessel_id`` transmit each other's MMSI), ``ais_spoof`` (a
+    transponder on no ship, ``mmsi``, sails a straight line from ``start`` = [lat, lon]
+    at ``course_deg``, ``speed_mps``)."""
+
+    kind: str = setting(choices=FAULT_KINDS)
+    start_s: float = setting(ge=0.0)
+    duration_s: float = positive()
+    site_id: str = setting("", check=_name_or_empty)
+    range_bias_m: float = setting(0.0, key="bias_m", ge=-1e4, le=1e4)
+    azimuth_bias_rad: float = setting(0.0, key="bias_deg", unit="deg", ge=-180.0, le=180.0)
+    time_offset_s: float = setting(0.0, key="offset_s", ge=-3600.0, le=3600.0)
+    factor: float = setting(1.0, ge=1.0, le=1000.0)
+    azimuth_from_rad: float = setting(0.0, unit="deg", ge=0.0, le=360.0)
+    azimuth_to_rad: float = setting(0.0, unit="deg", ge=0.0, le=360.0)
+    vessel_id: int = setting(0, ge=0)  # 0: chosen by the simulator
+    other_vessel_id: int = setting(0, ge=0)
+    sector: str = setting("", check=_name_or_empty)  # "": anywhere
+    east_m: float = setting(0.0, ge=-1e5, le=1e5)
+    north_m: float = setting(0.0, ge=-1e5, le=1e5)
+    mmsi: int = setting(0, ge=0, le=999_999_999)
+    start_lat_deg: float = latitude(0.0, key=("start", 0))
+    start_lon_deg: float = longitude(0.0, key=("start", 1))
+    course_rad: float = setting(0.0, unit="deg", ge=-360.0, le=360.0)
+    speed_mps: float = setting(0.0, ge=0.0, le=50.0)
+
+    @property
+    def end_s(self) -> float:
+        return self.start_s + self.duration_s
+
+    @property
+    def sensor_kind(self) -> str:
+        return "radar" if self.kind in RADAR_FAULT_KINDS else "ais"
+
+    @property
+    def value(self) -> float:
+        """The size of a radar fault (range bias m, azimuth bias rad, time offset s,
+        noise factor; 0 for the others)."""
+        return {
+            "radar_range_bias": self.range_bias_m,
+            "radar_azimuth_bias": self.azimuth_bias_rad,
+            "radar_time_offset": self.time_offset_s,
+            "radar_noise": self.factor,
+        }.get(self.kind, 0.0)
+
+
+@dataclass(frozen=True)
+class ChannelIntegrityConfig:
+    """``[channel_integrity]``: the maritime channel integrity test (airfield paper eq.
+    21-23 applied to radars and AIS, ``pipeline.maritime.integrity``).
+
+    - ``radar_q``, ``ais_q``: false-alarm probability of one radar decision (a radar in a
+      sector at an epoch) and of one AIS report (eq. 22). A radar excluded by a false
+      alarm takes its information out of the fused picture for ``readmit_run`` epochs; a
+      transponder only its reports out of the identification vote: the radars' q is the
+      smaller;
+    - ``readmit_run``: consecutive passing checks that readmit an excluded channel;
+    - ``radar_confirm``: epochs in a row a radar must fail (upper tail) before it is
+      excluded (1: at the first failure, the airfield rule; the flag is never delayed);
+    - ``exclusion``: false records every check but fuses and identifies with every channel;
+    - ``ais_sigma_position_m``: AIS position sigma the test assumes (the transponder's
+      GNSS), ``ais_max_age_s``: an AIS report is a reference this long after it was sent;
+    - ``ais_warmup_reports``: a transponder without a reference track is decided from its
+      report number ``ais_warmup_reports + 1`` on (a new ship's radar track needs ~3 scans);
+    - ``ais_jump_m``: a report this far from the transponder's previous one dead-reckoned
+      with its SOG/COG is a jump (another ship sends the MMSI, a position fault);
+    - ``ais_sigma_sog_mps``, ``ais_sigma_cog_deg``, ``ais_max_gap_s``: the transponder's
+      kinematic self-test (each report against the previous one, at most this old, moved
+      on by their SOG and COG): a stuck position;
+    - ``outlier_q``: a radar's per-track NIS above chi2_2(1 - outlier_q) marks the track an
+      outlier; outliers fewer than half of the channel's tracks in a sector are left out of
+      its test (an AIS fault of one ship, not the radar);
+    - ``coverage_min_targets``, ``coverage_miss_share``: a radar misses a sector when at
+      least ``coverage_min_targets`` ships that other channels see in its range there are
+      not detected by it, for more than ``coverage_miss_share`` of them;
+    - ``scan_gap_factor``: a site whose last scan ended more than this many scan periods
+      ago is in outage (missing scans)."""
+
+    radar_q: float = probability(0.001)
+    ais_q: float = probability(0.01)
+    readmit_run: int = count(5)
+    radar_confirm: int = count(2)
+    exclusion: bool = setting(True)
+    ais_sigma_position_m: float = positive(3.0)
+    ais_max_age_s: float = positive(10.0)
+    ais_warmup_reports: int = setting(2, ge=0)
+    ais_jump_m: float = positive(150.0)
+    ais_sigma_sog_mps: float = positive(0.1)
+    ais_sigma_cog_rad: float = positive(1.0, unit="deg")
+    ais_max_gap_s: float = positive(60.0)
+    outlier_q: float = probability(1e-4)
+    coverage_min_targets: int = count(2)
+    coverage_miss_share: float = probability(0.5)
+    scan_gap_factor: float = setting(1.5, gt=1.0)
+
+
 @dataclass(frozen=True)
 class MaritimeConfig:
     """Everything the maritime stage reads beyond the core config (one field per
@@ -87,11 +222,31 @@ class MaritimeConfig:
     siap: SiapConfig = setting({}, factory=SiapConfig)
     radar_bias: RadarBiasConfig = setting({}, factory=RadarBiasConfig)
     max_cross_track_m: float = positive(2000.0, key=("fairway", "max_cross_track_m"))
+    integrity: ChannelIntegrityConfig = setting({}, key="channel_integrity",
+                                                factory=ChannelIntegrityConfig)
+    faults: tuple[ChannelFault, ...] = setting([], key="channel_faults")
 
 
 def maritime_config(cfg: Config) -> MaritimeConfig:
     """The maritime family's config, parsed when ``cfg`` was loaded."""
     return cfg.family("maritime")
+
+
+def channel_faults(cfg: Config) -> tuple[ChannelFault, ...]:
+    """The channel scenario's fault schedule (``[[channel_faults]]``)."""
+    return maritime_config(cfg).faults
+
+
+def with_faults(cfg: Config, faults: tuple[ChannelFault, ...]) -> Config:
+    """``cfg`` with ``faults`` as the channel scenario's schedule."""
+    fam = dict(cfg.families)
+    fam["maritime"] = replace(maritime_config(cfg), faults=tuple(faults))
+    return replace(cfg, families=fam)
+
+
+def without_faults(cfg: Config) -> Config:
+    """``cfg`` with an empty ``[[channel_faults]]`` schedule (the fault-free scenario)."""
+    return with_faults(cfg, ())
 
 
 def radar_bias_config(cfg: Config) -> RadarBiasConfig:
@@ -113,4 +268,14 @@ def parse_maritime(doc: Document, core: Config | None) -> MaritimeConfig | None:
                 if site not in sites:
                     doc.problem(("radar_bias", part, site),
                                 f"no radar site {site!r} (sites: {', '.join(sorted(sites))})")
+        sectors = {s.name for s in core.sectors}
+        for i, f in enumerate(m.faults):
+            if f.sensor_kind == "radar" and f.site_id not in sites:
+                doc.problem(("channel_faults", i, "site_id"),
+                            f"{f.kind} needs a radar site (sites: {', '.join(sorted(sites))})")
+            if f.sector and f.sector not in sectors:
+                doc.problem(("channel_faults", i, "sector"), f"no sector {f.sector!r}")
+            if f.kind == "ais_spoof" and (f.mmsi == 0 or not doc.has("channel_faults", i,
+                                                                      "start")):
+                doc.problem(("channel_faults", i), "ais_spoof needs mmsi and start = [lat, lon]")
     return m

@@ -121,7 +121,167 @@ def cross_track_by_leg(
     sigma_y_m, cov_xy_m2, n_sources, leg_id, sector), associations (time_ns,
     system_track_id, site_id, x_enu_m, y_enu_m, P_xx/P_yy/P_xy or the sigma form) and
     track_errors (time_ns, system_track_id, source, reference, reference_id,
-    error_east_m, error_north_m). Sorted by (time_ns, system_track_id, source).
+    error_east_m, error_north_m), each sorted by its key. Sorted by (time_ns,
+    system_track_id, source).
+
+    Built on positions: points and error rows meet on one integer key (time rank,
+    track id, source rank) instead of string joins; the trailing RMS is polars'
+    ``rolling_mean_by`` over a narrow frame (integer group key); the same rows and values
+    as :func:`cross_track_by_leg_reference`.
+    """
+    if not legs or system_tracks.height == 0 or track_errors.height == 0:
+        return _empty()
+    on_leg = system_tracks.filter(pl.col("leg_id").is_not_null())
+    if on_leg.height == 0:
+        return _empty()
+    ft, fs = on_leg["time_ns"].to_numpy(), on_leg["system_track_id"].to_numpy()
+    at, as_ = associations["time_ns"].to_numpy(), associations["system_track_id"].to_numpy()
+    et, es = track_errors["time_ns"].to_numpy(), track_errors["system_track_id"].to_numpy()
+    times = np.unique(np.concatenate([ft, at, et]))
+    lo = int(min(fs.min(), as_.min() if as_.size else fs.min(), es.min()))
+    span = int(max(fs.max(), as_.max() if as_.size else fs.max(), es.max())) - lo + 1
+    names = sorted({"fused", *associations["site_id"].unique().to_list(),
+                    *track_errors["source"].unique().to_list()})
+    n_src = len(names)
+
+    def key(t: np.ndarray, sid: np.ndarray, src: np.ndarray) -> np.ndarray:
+        return (np.searchsorted(times, t) * span + (sid - lo)) * n_src + src
+
+    def rank(col: pl.Series) -> np.ndarray:
+        return col.replace_strict(names, list(range(n_src)), return_dtype=pl.Int64).to_numpy()
+
+    # radar points of the fused points on a leg
+    f_key2 = np.searchsorted(times, ft) * span + (fs - lo)
+    a_key2 = np.searchsorted(times, at) * span + (as_ - lo)
+    pos = np.searchsorted(f_key2, a_key2)
+    has = (pos < f_key2.size) & (f_key2[np.minimum(pos, f_key2.size - 1)] == a_key2)
+    ai = np.flatnonzero(has)
+    a_f = pos[ai]  # fused row of each radar point
+    fP = position_covariance(on_leg)
+    rP = position_covariance(associations)
+    fused_src = names.index("fused")
+    n_f = on_leg.height
+    src = np.r_[np.full(n_f, fused_src), rank(associations["site_id"])[ai]]
+    f_of = np.r_[np.arange(n_f), a_f]  # each point's fused row
+    t = ft[f_of]
+    sid = fs[f_of]
+    pk = key(t, sid, src)
+    ek = key(et, es, rank(track_errors["source"]))
+    e_order = np.argsort(ek, kind="stable")
+    ek_sorted = ek[e_order]
+    epos = np.searchsorted(ek_sorted, pk)
+    match = (epos < ek.size) & (ek_sorted[np.minimum(epos, ek.size - 1)] == pk)
+    pts = np.flatnonzero(match)
+    e_row = e_order[epos[pts]]
+    is_f = pts < n_f
+    r_row = ai[pts[~is_f] - n_f]
+    f_row = f_of[pts]
+
+    def both(fcol: np.ndarray, rcol: np.ndarray) -> np.ndarray:
+        out = np.empty(pts.size, np.result_type(fcol, rcol))
+        out[is_f] = fcol[pts[is_f]]
+        out[~is_f] = rcol[r_row]
+        return out
+
+    x = both(on_leg["x_enu_m"].to_numpy(), associations["x_enu_m"].to_numpy())
+    y = both(on_leg["y_enu_m"].to_numpy(), associations["y_enu_m"].to_numpy())
+    P_xx, P_yy, P_xy = (both(fp, rp) for fp, rp in zip(fP, rP, strict=True))
+    frames = leg_frames(legs, region)
+    leg_idx = on_leg["leg_id"].replace_strict(frames["leg_id"].to_list(),
+                                              list(range(frames.height)),
+                                              return_dtype=pl.Int64).to_numpy()[f_row]
+    sx, sy, ux, uy, nx, ny = (frames[c].to_numpy()[leg_idx]
+                              for c in ("sx", "sy", "ux", "uy", "nx", "ny"))
+    ex = track_errors["error_east_m"].to_numpy()[e_row]
+    ey = track_errors["error_north_m"].to_numpy()[e_row]
+    rx, ry = x - ex, y - ey
+    cross = (x - sx) * nx + (y - sy) * ny
+    ref_cross = (rx - sx) * nx + (ry - sy) * ny
+    along = (rx - sx) * ux + (ry - sy) * uy
+    sigma = np.sqrt(nx * nx * P_xx + 2.0 * nx * ny * P_xy + ny * ny * P_yy)
+    err = cross - ref_cross
+    # observation geometry of each radar point (null for fused points)
+    site_x, site_y = _site_positions(sites, region, names)
+    px_s, py_s = site_x[src[pts]], site_y[src[pts]]
+    lx, ly = x - px_s, y - py_s
+    rng = np.sqrt(lx * lx + ly * ly)
+    cos_aspect = np.clip(np.abs((lx * ux + ly * uy) / rng), 0.0, 1.0)
+    # trailing RMS per (track, source): rows sorted by (track, source, time) for polars
+    srcp = src[pts]
+    grp = (sid[pts] - lo) * n_src + srcp
+    o = np.lexsort((t[pts], grp))
+    win = f"{round(window_s * NS)}i"
+    narrow = pl.DataFrame({"g": grp[o], "time_ns": t[pts][o], "e": err[o],
+                           "c": cos_aspect[o]}).with_columns(
+        (pl.col("e") ** 2).rolling_mean_by("time_ns", window_size=win).over("g").sqrt()
+        .alias("rms"),
+        pl.col("e").is_not_null().cast(pl.Int32).rolling_sum_by("time_ns", window_size=win)
+        .over("g").alias("n"),
+        pl.col("c").arccos().degrees().alias("aspect"),
+    )
+    back = np.empty(o.size, np.int64)
+    back[o] = np.arange(o.size)
+    rms = narrow["rms"].gather(back)
+    samples = narrow["n"].gather(back)
+    aspect = narrow["aspect"].gather(back)
+    final = np.lexsort((srcp, sid[pts], t[pts]))
+    radar = ~is_f
+    out = pl.DataFrame({
+        "time_ns": t[pts],
+        "system_track_id": sid[pts],
+        "source": pl.Series(names, dtype=pl.String).gather(srcp),
+        "leg_id": on_leg["leg_id"].gather(f_row),
+        "sector": on_leg["sector"].gather(f_row),
+        "reference": track_errors["reference"].gather(e_row),
+        "reference_id": track_errors["reference_id"].gather(e_row),
+        "n_sources": np.where(is_f, on_leg["n_sources"].to_numpy()[f_row], 1).astype(np.int16),
+        "along_track_m": along,
+        "cross_track_m": cross,
+        "reference_cross_track_m": ref_cross,
+        "cross_track_error_m": err,
+        "sigma_cross_track_m": sigma,
+        "rms_error_60s_m": rms,
+        "samples_60s": samples,
+        "aspect_deg": aspect.set(pl.Series(~radar), None),
+        "range_m": pl.Series(rng).set(pl.Series(~radar), None),
+    }, schema_overrides={"time_ns": pl.Int64, "system_track_id": pl.Int64})
+    return out[final].select(CROSS_TRACK_COLUMNS)
+
+
+def _site_positions(sites: Sequence[RadarSite], region: RegionConfig, names: list[str]
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """Regional ENU position of each source name's radar site (NaN: fused, unknown)."""
+    x = np.full(len(names), np.nan)
+    y = np.full(len(names), np.nan)
+    if sites:
+        e, n = geodetic_to_enu(np.array([s.lat_deg for s in sites]),
+                               np.array([s.lon_deg for s in sites]),
+                               region.origin_lat_deg, region.origin_lon_deg)
+        for s, ee, nn in zip(sites, np.atleast_1d(e), np.atleast_1d(n), strict=True):
+            if s.site_id in names:
+                x[names.index(s.site_id)] = ee
+                y[names.index(s.site_id)] = nn
+    return x, y
+
+
+def cross_track_by_leg_reference(
+    system_tracks: pl.DataFrame,
+    associations: pl.DataFrame,
+    track_errors: pl.DataFrame,
+    *,
+    legs: Sequence[FairwayLeg],
+    region: RegionConfig,
+    sites: Sequence[RadarSite],
+    window_s: float = 60.0,
+) -> pl.DataFrame:
+    """Rows of the ``cross_track_by_leg`` table (columns CROSS_TRACK_COLUMNS).
+
+    Consumes system_tracks (time_ns, system_track_id, x_enu_m, y_enu_m, sigma_x_m,
+    sigma_y_m, cov_xy_m2, n_sources, leg_id, sector), associations (time_ns,
+    system_track_id, site_id, x_enu_m, y_enu_m, P_xx/P_yy/P_xy or the sigma form) and
+    track_errors (time_ns, system_track_id, source, reference, reference_id,
+    error_east_m, error_north_m). Sorted by (time_ns, system_track_id, source). The
+    polars reference of :func:`cross_track_by_leg`.
     """
     if not legs or system_tracks.height == 0 or track_errors.height == 0:
         return _empty()

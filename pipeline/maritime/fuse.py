@@ -214,6 +214,91 @@ def fuse(associated: pl.DataFrame) -> pl.DataFrame:
     (position in matrix form, see the module docstring): the sums of
     :class:`Information` per group, then :meth:`Information.estimate`.
 
+    Consumes the rows of ``associate_tracks``, sorted by (time_ns, system_track_id,
+    site_id): each group's sums are one ``numpy.add.reduceat`` over its consecutive rows
+    (the same terms, added in the same order, as :func:`fuse_reference`'s polars
+    aggregation); produces the same rows as it.
+    """
+    n = associated.height
+    if n == 0:
+        return fuse_reference(associated)
+    t = associated["time_ns"].to_numpy()
+    sid = associated["system_track_id"].to_numpy()
+    if not ((t[1:] > t[:-1]) | ((t[1:] == t[:-1]) & (sid[1:] >= sid[:-1]))).all():
+        return fuse_reference(associated)
+    own = channel_information(*(associated[k].to_numpy().astype(float) for k in CHANNEL_COLUMNS))
+    new = np.r_[True, (t[1:] != t[:-1]) | (sid[1:] != sid[:-1])]
+    starts = np.flatnonzero(new)
+    sums = Information(*group_sums(np.column_stack(own.terms()), starts).T)
+    f = sums.estimate()
+    # polars' pow, as the reference's ``w ** -0.5`` on expressions (numpy's differs in the
+    # last bit at times); np.arctan2 on an expression is numpy's, as here
+    polar = pl.DataFrame({"wc": sums.w_c, "wv": sums.w_v}).select(
+        pl.col("wc").pow(-0.5).alias("sc"),
+        pl.col("wv").pow(-0.5).alias("sv"),
+    )
+    return pl.DataFrame({
+        "time_ns": t[starts],
+        "system_track_id": sid[starts],
+        "x_enu_m": f.x_m,
+        "y_enu_m": f.y_m,
+        "sigma_x_m": np.sqrt(f.P_xx),
+        "sigma_y_m": np.sqrt(f.P_yy),
+        "cov_xy_m2": f.P_xy,
+        "course_rad": f.course_rad,
+        "speed_mps": f.speed_mps,
+        "sigma_course_rad": polar["sc"],
+        "sigma_speed_mps": polar["sv"],
+        "n_sources": np.diff(np.r_[starts, n]).astype(np.int16),
+        "sources": _sources(associated["site_id"], new, starts),
+    }, schema_overrides={"time_ns": pl.Int64, "system_track_id": pl.Int64})
+
+
+def group_sums(values: np.ndarray, starts: np.ndarray) -> np.ndarray:
+    """Sums of consecutive row groups (starting at ``starts``) of ``values`` (n, k), with
+    compensated (Kahan) summation in row order: the sums polars' group and window
+    aggregations compute, bit for bit. Vectorised over the groups; the loop runs over the
+    position in the group (a handful: one row per radar site)."""
+    n = values.shape[0]
+    size = np.diff(np.r_[starts, n])
+    # one or two terms: the compensated sum is the plain one (the first step adds to 0)
+    s = np.add.reduceat(values, starts, axis=0) if n else np.zeros((0, values.shape[1]))
+    big = np.flatnonzero(size > 2)
+    if big.size == 0:
+        return s
+    st, sz = starts[big], size[big]
+    acc = np.zeros((big.size, values.shape[1]))
+    c = np.zeros_like(acc)
+    for k in range(int(sz.max())):
+        g = np.flatnonzero(sz > k)
+        y = values[st[g] + k] - c[g]
+        t = acc[g] + y
+        c[g] = (t - acc[g]) - y
+        acc[g] = t
+    s[big] = acc
+    return s
+
+
+def _sources(site: pl.Series, new: np.ndarray, starts: np.ndarray) -> pl.Series:
+    """Comma-joined sorted distinct site ids of each group: a bit mask of the group's
+    sites, each distinct mask written once."""
+    names = sorted(site.unique().to_list())
+    if len(names) > 62:  # pragma: no cover - more sites than bits: the slow way
+        groups = np.cumsum(new) - 1
+        return (pl.DataFrame({"g": groups, "s": site})
+                .group_by("g", maintain_order=True)
+                .agg(pl.col("s").unique().sort().str.join(","))["s"])
+    code = site.replace_strict(names, list(range(len(names))), return_dtype=pl.Int64).to_numpy()
+    mask = np.bitwise_or.reduceat(np.left_shift(np.int64(1), code), starts)
+    masks, inverse = np.unique(mask, return_inverse=True)
+    text = [",".join(n for b, n in enumerate(names) if m >> b & 1) for m in masks.tolist()]
+    return pl.Series("sources", text, dtype=pl.String).gather(inverse.ravel())
+
+
+def fuse_reference(associated: pl.DataFrame) -> pl.DataFrame:
+    """:func:`fuse` as one polars ``group_by`` (the reference the numpy path is tested
+    against; also used for unsorted input).
+
     Consumes (from ``associate_tracks``): time_ns, system_track_id, site_id, x_enu_m,
     y_enu_m, P_xx, P_yy, P_xy (m^2), course_rad, speed_mps, sigma_course_rad,
     sigma_speed_mps.

@@ -27,6 +27,7 @@ from collections.abc import Sequence
 
 import numpy as np
 import polars as pl
+from scipy.spatial import cKDTree
 
 from pipeline.config import AisConfig, RegionConfig, Sector
 from pipeline.frames import geodetic_to_enu
@@ -81,21 +82,135 @@ def score_tracks(
     time_ns, system_track_id, site_id, x_enu_m, y_enu_m, P_xx/P_yy/P_xy (or the sigma
     form), optional sector; truth: time_ns, vessel_id, mmsi, lat_deg, lon_deg.
     """
-    fused = _with_sector(system_tracks, sectors, region).with_columns(
-        pl.lit("fused").alias("source")
-    )
-    radar = _with_sector(associations, sectors, region).rename({"site_id": "source"})
+    fused = _with_sector(system_tracks, sectors, region)
+    radar = _with_sector(associations, sectors, region)
     if truth is not None and truth.height:
-        ref = _truth_reference(
-            fused, truth, region, max_reference_distance_m, truth_extrapolation_s
-        )
-    else:
-        ref = _ais_reference(fused, ais_reports, region, max_ais_age_s)
+        return _truth_errors(fused, radar, truth, region, max_reference_distance_m,
+                             truth_extrapolation_s)
+    fused = fused.with_columns(pl.lit("fused").alias("source"))
+    radar = radar.rename({"site_id": "source"})
+    ref = _ais_reference(fused, ais_reports, region, max_ais_age_s)
     key = ["time_ns", "system_track_id"]
     parts = [_errors(pts.join(ref, on=key, how="inner")) for pts in (fused, radar) if pts.height]
     if not parts:
         return pl.DataFrame(schema=_ERROR_SCHEMA)
     return pl.concat(parts).sort("time_ns", "system_track_id", "source")
+
+
+def _truth_errors(
+    fused: pl.DataFrame,
+    radar: pl.DataFrame,
+    truth: pl.DataFrame,
+    region: RegionConfig,
+    max_dist_m: float,
+    extrapolate_s: float,
+) -> pl.DataFrame:
+    """track_errors rows against truth, built positionally: the nearest truth vessel of
+    each fused point (:func:`nearest_truth`) is also the reference of the radar points of
+    its (epoch, system track), found by ``searchsorted`` on the fused keys (associations
+    and system tracks are both sorted by (time_ns, system_track_id)); the rows come out
+    in (time_ns, system_track_id, source) order without a join."""
+    if fused.height == 0:
+        return pl.DataFrame(schema=_ERROR_SCHEMA)
+    fused = fused.sort("time_ns", "system_track_id")
+    ft = fused["time_ns"].to_numpy()
+    fs = fused["system_track_id"].to_numpy()
+    at = truth_at_epochs(truth, np.unique(ft), region, extrapolate_s=extrapolate_s)
+    ref_row = nearest_truth(ft, fused["x_enu_m"].to_numpy(), fused["y_enu_m"].to_numpy(),
+                            at, max_dist_m)
+    ref_x, ref_y = at["ref_x_m"].to_numpy(), at["ref_y_m"].to_numpy()
+    ref_id, ref_mmsi = at["vessel_id"], at["mmsi"]
+    # radar rows -> their fused row
+    rt = radar["time_ns"].to_numpy()
+    rs = radar["system_track_id"].to_numpy()
+    f_of_r = _row_of(ft, fs, rt, rs)
+    parts = []
+    for pts, f_rows, source in (
+        (fused, np.arange(fused.height), pl.lit("fused")),
+        (radar, f_of_r, pl.col("site_id")),
+    ):
+        if pts.height == 0:
+            continue
+        k = ref_row[f_rows]
+        sel = np.flatnonzero(k >= 0)
+        k = k[sel]
+        P_xx, P_yy, P_xy = (p[sel] for p in position_covariance(pts))
+        ex = pts["x_enu_m"].to_numpy()[sel] - ref_x[k]
+        ey = pts["y_enu_m"].to_numpy()[sel] - ref_y[k]
+        nees = (P_yy * ex * ex - 2.0 * P_xy * ex * ey + P_xx * ey * ey) / (P_xx * P_yy - P_xy**2)
+        rows = pts.select("time_ns", "system_track_id", source.alias("source"), "sector")[sel]
+        parts.append(rows.with_columns(
+            pl.lit("truth").alias("reference"),
+            ref_id.gather(k).alias("reference_id"),
+            ref_mmsi.gather(k).alias("reference_mmsi"),
+            pl.Series("error_east_m", ex),
+            pl.Series("error_north_m", ey),
+            pl.Series("error_m", np.hypot(ex, ey)),
+            pl.Series("nees", nees),
+        ))
+    if not parts:
+        return pl.DataFrame(schema=_ERROR_SCHEMA)
+    out = pl.concat(parts).cast(_ERROR_SCHEMA)
+    # (time, track) order is shared; within it sources sort as strings
+    sources = out["source"]
+    names = sorted(sources.unique().to_list())
+    rank = sources.replace_strict(names, list(range(len(names))), return_dtype=pl.Int32)
+    order = np.lexsort((rank.to_numpy(), out["system_track_id"].to_numpy(),
+                        out["time_ns"].to_numpy()))
+    return out[order].select(ERROR_COLUMNS)
+
+
+def _row_of(t: np.ndarray, s: np.ndarray, qt: np.ndarray, qs: np.ndarray) -> np.ndarray:
+    """Index of each (qt, qs) among the rows (t, s) sorted by (t, s) (all present): one
+    searchsorted on a combined key (time rank, track id offset)."""
+    if qt.size == 0:
+        return np.empty(0, np.int64)
+    times = np.unique(t)
+    lo = min(int(s.min()), int(qs.min()))
+    span = max(int(s.max()), int(qs.max())) - lo + 1
+    key = np.searchsorted(times, t) * span + (s - lo)
+    return np.searchsorted(key, np.searchsorted(times, qt) * span + (qs - lo))
+
+
+def nearest_truth(t: np.ndarray, x: np.ndarray, y: np.ndarray, at: pl.DataFrame,
+                  max_dist_m: float) -> np.ndarray:
+    """Row of ``at`` (truth at the epochs, :func:`truth_at_epochs`) nearest to each point
+    (t, x, y) at the same time within ``max_dist_m`` (ties: smaller vessel id); -1: none.
+
+    One k-d tree query for all points: epochs are stacked apart on a third axis (epoch
+    rank x 1e9 m), so a neighbour within ``max_dist_m`` is always of the same epoch. The
+    two nearest are asked for, and the distances recomputed as the reference computes
+    them, so that an exact tie goes to the smaller vessel id as there."""
+    out = np.full(t.size, -1, np.int64)
+    tt = at["time_ns"].to_numpy()
+    if t.size == 0 or tt.size == 0:
+        return out
+    epochs = np.unique(np.concatenate([t, tt]))
+    rx, ry = at["ref_x_m"].to_numpy(), at["ref_y_m"].to_numpy()
+    ok_b = np.isfinite(rx) & np.isfinite(ry)
+    jb = np.flatnonzero(ok_b)
+    ok_a = np.flatnonzero(np.isfinite(x) & np.isfinite(y))
+    if jb.size == 0 or ok_a.size == 0:
+        return out
+    tree = cKDTree(np.column_stack([rx[jb], ry[jb], np.searchsorted(epochs, tt[jb]) * 1e9]))
+    q = np.column_stack([x[ok_a], y[ok_a], np.searchsorted(epochs, t[ok_a]) * 1e9])
+    k = min(2, jb.size)
+    _, idx = tree.query(q, k=k, distance_upper_bound=max_dist_m * (1 + 1e-9) + 1e-6)
+    idx = idx.reshape(ok_a.size, k)
+    vessel = at["vessel_id"].to_numpy()
+    best = np.full(ok_a.size, -1, np.int64)
+    best_d = np.full(ok_a.size, np.inf)
+    for c in range(k):
+        found = idx[:, c] < jb.size
+        j = np.where(found, jb[np.minimum(idx[:, c], jb.size - 1)], -1)
+        d = np.where(found, np.sqrt((x[ok_a] - rx[j]) ** 2 + (y[ok_a] - ry[j]) ** 2), np.inf)
+        better = found & ((d < best_d) | ((d == best_d) & (best >= 0)
+                                         & (vessel[j] < vessel[np.maximum(best, 0)])))
+        best = np.where(better, j, best)
+        best_d = np.where(better, d, best_d)
+    keep = (best >= 0) & (best_d <= max_dist_m)
+    out[ok_a[keep]] = best[keep]
+    return out
 
 
 def _with_sector(df: pl.DataFrame, sectors: Sequence[Sector], region: RegionConfig) -> pl.DataFrame:
@@ -155,15 +270,16 @@ def truth_at_epochs(
     )
 
 
-def _truth_reference(
+def _truth_reference_reference(
     fused: pl.DataFrame,
     truth: pl.DataFrame,
     region: RegionConfig,
     max_dist_m: float,
     extrapolate_s: float,
 ) -> pl.DataFrame:
-    """Nearest truth vessel to each fused point (grid-cell join: the 3x3 cells of size
-    max_dist_m around the point hold every vessel within max_dist_m)."""
+    """Nearest truth vessel to each fused point (grid-cell join in polars: the 3x3 cells of
+    size max_dist_m around the point hold every vessel within max_dist_m): the
+    reference of :func:`nearest_truth` (tests)."""
     at = truth_at_epochs(
         truth, fused["time_ns"].unique().to_numpy(), region, extrapolate_s=extrapolate_s
     )

@@ -69,6 +69,7 @@ from pipeline.config import RegionConfig, Sector
 from pipeline.geometry import assign_sectors, position_covariance
 from pipeline.maritime.config import SiapConfig
 from pipeline.maritime.score import truth_at_epochs
+from pipeline.spatial import pairs_within
 from pipeline.units import NS
 
 SUM_COLUMNS = (
@@ -154,8 +155,50 @@ def _tracks(system_tracks: pl.DataFrame) -> pl.DataFrame:
 
 def candidate_pairs(tracks: pl.DataFrame, truths: pl.DataFrame, cfg: SiapConfig) -> pl.DataFrame:
     """Track-truth pairs of the same epoch within the gate: time_ns, system_track_id,
-    vessel_id, d2 (Mahalanobis, track covariance), dist_m. Grid-cell join: the 3 x 3
-    cells of size max_distance_m around a track hold every truth within that distance."""
+    vessel_id, d2 (Mahalanobis, track covariance), dist_m, and the rows of the track and
+    of the truth (``_i``, ``_j``: positions in ``tracks`` and ``truths``, which the sums
+    use instead of joins). A grid join (``pipeline.spatial``) of the points within
+    max_distance_m; the same pairs, values and order as :func:`candidate_pairs_reference`."""
+    cell = cfg.max_distance_m
+    gate = float(chi2.ppf(cfg.gate_probability, 2))
+    tt, rt = tracks["time_ns"].to_numpy(), truths["time_ns"].to_numpy()
+    epochs = np.unique(tt)
+    ok = np.isin(rt, epochs)
+    jr = np.flatnonzero(ok)
+    tx, ty = tracks["x_enu_m"].to_numpy(), tracks["y_enu_m"].to_numpy()
+    rx, ry = truths["ref_x_m"].to_numpy(), truths["ref_y_m"].to_numpy()
+    reach = cell * (1 + 1e-9) + 1e-6
+    i, j, _ = pairs_within(np.searchsorted(epochs, tt), tx, ty, reach,
+                           np.searchsorted(epochs, rt[jr]), rx[jr], ry[jr], cell_m=reach)
+    j = jr[j]
+    pxx, pyy, pxy = (tracks[c].to_numpy()[i] for c in ("P_xx", "P_yy", "P_xy"))
+    dx, dy = tx[i] - rx[j], ty[i] - ry[j]
+    det = pxx * pyy - pxy**2
+    d2 = (pyy * dx * dx - 2.0 * pxy * dx * dy + pxx * dy * dy) / det
+    dist = np.sqrt(dx * dx + dy * dy)
+    keep = (d2 < gate) & (dist <= cell)
+    i, j, d2, dist = i[keep], j[keep], d2[keep], dist[keep]
+    vessel = truths["vessel_id"].to_numpy()[j]
+    order = np.lexsort((vessel, i))  # tracks sorted by (time, track): (time, track, vessel)
+    i, j = i[order], j[order]
+    return pl.DataFrame({
+        "time_ns": tt[i],
+        "system_track_id": tracks["system_track_id"].to_numpy()[i],
+        "vessel_id": vessel[order],
+        "d2": d2[order],
+        "dist_m": dist[order],
+        "_i": i,
+        "_j": j,
+    }, schema_overrides={"time_ns": pl.Int64, "system_track_id": pl.Int64,
+                         "vessel_id": pl.Int64})
+
+
+def candidate_pairs_reference(
+    tracks: pl.DataFrame, truths: pl.DataFrame, cfg: SiapConfig
+) -> pl.DataFrame:
+    """:func:`candidate_pairs` as a polars grid-cell join (the 3 x 3 cells of size
+    max_distance_m around a track hold every truth within that distance): the reference
+    (without the ``_i``/``_j`` positions)."""
     cell = cfg.max_distance_m
     gate = float(chi2.ppf(cfg.gate_probability, 2))
     shifts = pl.DataFrame({"sx": np.repeat([-1, 0, 1], 3), "sy": np.tile([-1, 0, 1], 3)})
@@ -316,38 +359,52 @@ def siap_sums(
     vy_mps, mmsi, sector, x/y), truths (time_ns, vessel_id, mmsi, ref_x_m, ref_y_m,
     ref_vx_mps, ref_vy_mps, sector) and the association (associate_to_truth)."""
     key = ["time_ns", "vessel_id"]
-    a = (
-        assoc.join(
+    positional = "_i" in assoc.columns and "_j" in assoc.columns
+    if positional:  # rows of tracks and truths known: gathers instead of joins
+        i, j = assoc["_i"].to_numpy(), assoc["_j"].to_numpy()
+        a = assoc.with_columns(
+            truths["sector"].gather(j),
+            truths["mmsi"].gather(j).alias("truth_mmsi"),
+            truths["ref_vx_mps"].gather(j),
+            truths["ref_vy_mps"].gather(j),
+            tracks["vx_mps"].gather(i),
+            tracks["vy_mps"].gather(i),
+            tracks["mmsi"].gather(i),
+        )
+    else:
+        a = assoc.join(
             truths.select(
                 *key, "sector", pl.col("mmsi").alias("truth_mmsi"), "ref_vx_mps", "ref_vy_mps"
             ),
             on=key,
             how="left",
-        )
-        .join(
+        ).join(
             tracks.select("time_ns", "system_track_id", "vx_mps", "vy_mps", "mmsi"),
             on=["time_ns", "system_track_id"],
             how="left",
         )
-        .with_columns(
-            (
-                (pl.col("vx_mps") - pl.col("ref_vx_mps")) ** 2
-                + (pl.col("vy_mps") - pl.col("ref_vy_mps")) ** 2
-            )
-            .sqrt()
-            .alias("vel_err"),
+    a = a.with_columns(
+        (
+            (pl.col("vx_mps") - pl.col("ref_vx_mps")) ** 2
+            + (pl.col("vy_mps") - pl.col("ref_vy_mps")) ** 2
         )
+        .sqrt()
+        .alias("vel_err"),
     )
-    per_truth = a.group_by(key).agg(
-        pl.len().alias("n_tracks"),
-        pl.col("mmsi").is_null().sum().alias("n_null"),
-        (pl.col("mmsi") == pl.col("truth_mmsi")).sum().alias("n_correct"),
-        (pl.col("mmsi").is_not_null() & (pl.col("mmsi") != pl.col("truth_mmsi")))
-        .sum()
-        .alias("n_wrong"),
-        pl.col("system_track_id").filter(pl.col("primary")).first().alias("primary_track"),
-    )
-    tt = truths.join(per_truth, on=key, how="left").with_columns(pl.col("n_tracks").fill_null(0))
+    if positional:
+        tt = truths.with_columns(_per_truth_columns(a, j, truths.height))
+    else:
+        per_truth = a.group_by(key).agg(
+            pl.len().alias("n_tracks"),
+            pl.col("mmsi").is_null().sum().alias("n_null"),
+            (pl.col("mmsi") == pl.col("truth_mmsi")).sum().alias("n_correct"),
+            (pl.col("mmsi").is_not_null() & (pl.col("mmsi") != pl.col("truth_mmsi")))
+            .sum()
+            .alias("n_wrong"),
+            pl.col("system_track_id").filter(pl.col("primary")).first().alias("primary_track"),
+        )
+        tt = truths.join(per_truth, on=key, how="left").with_columns(
+            pl.col("n_tracks").fill_null(0))
     parts = [
         _truth_sums(tt, epoch_period_s),
         a.group_by("sector").agg(
@@ -362,6 +419,32 @@ def siap_sums(
     for p in parts[1:]:
         out = out.join(p, on="sector", how="full", coalesce=True, nulls_equal=True)
     return out.with_columns([pl.col(c).fill_null(0) for c in SUM_COLUMNS if c in out.columns])
+
+
+def _per_truth_columns(a: pl.DataFrame, j: np.ndarray, n: int) -> list[pl.Series]:
+    """n_tracks, n_null, n_correct, n_wrong, primary_track of each truth row (bincounts
+    over the associated pairs' truth rows ``j``: the per-truth aggregation without a
+    group_by and a join)."""
+    mmsi = a["mmsi"]
+    truth_mmsi = a["truth_mmsi"]
+    has = mmsi.is_not_null().to_numpy()
+    same = (mmsi == truth_mmsi).fill_null(False).to_numpy()
+    primary = a["primary"].to_numpy()
+    prim_track = np.zeros(n, np.int64)
+    prim_has = np.zeros(n, bool)
+    prim_track[j[primary]] = a["system_track_id"].to_numpy()[primary]
+    prim_has[j[primary]] = True
+
+    def count(w: np.ndarray | None = None) -> np.ndarray:
+        return np.bincount(j, weights=w, minlength=n).astype(np.uint32)
+
+    return [
+        pl.Series("n_tracks", count()),
+        pl.Series("n_null", count((~has).astype(float))),
+        pl.Series("n_correct", count(same.astype(float))),
+        pl.Series("n_wrong", count((has & ~same).astype(float))),
+        pl.Series("primary_track", prim_track).set(pl.Series(~prim_has), None),
+    ]
 
 
 def _truth_sums(tt: pl.DataFrame, period_s: float) -> pl.DataFrame:
@@ -393,6 +476,12 @@ def _truth_sums(tt: pl.DataFrame, period_s: float) -> pl.DataFrame:
 
 
 def _track_sums(tracks: pl.DataFrame, assoc: pl.DataFrame) -> pl.DataFrame:
+    if "_i" in assoc.columns:
+        associated = np.zeros(tracks.height, bool)
+        associated[assoc["_i"].to_numpy()] = True
+        return tracks.select("sector").with_columns(pl.Series("_a", associated)).group_by(
+            "sector").agg(pl.len().alias("track_epochs"),
+                          (~pl.col("_a")).sum().alias("spurious_track_epochs"))
     flagged = tracks.select("time_ns", "system_track_id", "sector").join(
         assoc.select("time_ns", "system_track_id", pl.lit(True).alias("_a")),
         on=["time_ns", "system_track_id"],

@@ -51,15 +51,25 @@ def stitch_track_ids(associations_by_unit: list[pl.DataFrame]) -> dict[int, int]
     return mapping
 
 
-def relabel(frame: pl.DataFrame, mapping: dict[int, int]) -> pl.DataFrame:
-    """Apply a stitch map to a frame's ``system_track_id``."""
-    if not mapping or "system_track_id" not in frame.columns or frame.height == 0:
-        return frame
-    return frame.with_columns(pl.col("system_track_id").replace(mapping))
+def unit_seam(outputs: dict[str, pl.DataFrame]) -> pl.DataFrame:
+    """``Family.unit_seam`` of the maritime family: the association rows of the unit's
+    first and last epochs (site_id, local_track_id, system_track_id, time_ns): all that
+    :func:`stitch_track_ids` reads of a unit."""
+    a = outputs["associations"].select("time_ns", "site_id", "local_track_id",
+                                       "system_track_id")
+    if a.height == 0:
+        return a
+    t = a["time_ns"]
+    return a.filter((pl.col("time_ns") == t.min()) | (pl.col("time_ns") == t.max()))
 
 
-def join_units(parts: dict[str, list[pl.DataFrame]]) -> dict[str, list[pl.DataFrame]]:
-    """``Family.join_units`` of the maritime family: every table's unit parts (in time
-    order) with the system track ids stitched across the seams."""
-    mapping = stitch_track_ids(parts.get("associations", []))
-    return {name: [relabel(p, mapping) for p in frames] for name, frames in parts.items()}
+def join_units(seams: list[pl.DataFrame]) -> list[dict[str, dict[int, int]] | None]:
+    """``Family.join_units`` of the maritime family: per unit (in time order) the
+    relabelling of ``system_track_id`` that continues the ids of the units before it."""
+    mapping = stitch_track_ids(seams)
+    out: list[dict[str, dict[int, int]] | None] = []
+    for seam in seams:
+        ids = set(seam["system_track_id"].to_list()) if seam.height else set()
+        own = {k: v for k, v in mapping.items() if k in ids}
+        out.append({"system_track_id": own} if own else None)
+    return out

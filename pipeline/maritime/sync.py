@@ -41,6 +41,8 @@ extrapolation does not change course or speed, hence not their errors.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import polars as pl
 
@@ -134,18 +136,122 @@ def synchronise(aligned: pl.DataFrame, *, epochs_ns: np.ndarray, sync: SyncConfi
     sigma_course_rad, sigma_speed_mps; sorted by (time_ns, site_id, local_track_id).
     """
     epochs = np.unique(np.asarray(epochs_ns, dtype=np.int64))
-    scans = _step1_scans(aligned)
-    row, epoch = _serve_epochs(scans, epochs)
-    pick = scans[row]
-    return _step2(pick, epoch, sync.sigma_dt_s)
+    scans = _step1(aligned)
+    row, epoch = _serve(scans, epochs)
+    return _step2_columns(aligned, scans, row, epoch, sync.sigma_dt_s)
+
+
+@dataclass(frozen=True)
+class _Scans:
+    """Step 1 as arrays: ``rows`` (indices into the aligned reports, the kept report of
+    each (site, track, scan), ordered by (scan end, site, local track)) and per kept
+    row its dt_1 (s), t_TO (ns), scan end (ns), scan period (s, the scan's largest) and
+    the end of the same site's next scan (ns; int64 max when none)."""
+
+    rows: np.ndarray
+    dt1_s: np.ndarray
+    t_to_ns: np.ndarray
+    scan_end_ns: np.ndarray
+    scan_T_s: np.ndarray  # noqa: N815 - T as in the paper
+    next_end_ns: np.ndarray
+
+
+def _step1(aligned: pl.DataFrame) -> _Scans:
+    """Step 1 (eq. 7), with numpy on the key columns only: scan-end time t_TO of each
+    report, grouped into scans per site (a run of a site's t_TO values closer than half a
+    scan period; its end is the latest t_TO in it); a track reported twice in one scan
+    keeps its latest report. Same rows, order and values as :func:`_step1_scans`."""
+    T = aligned["scan_period_s"].to_numpy().astype(float)
+    dt1 = scan_end_offset_s(
+        aligned["azimuth_rad"].to_numpy(), aligned["scan_end_azimuth_rad"].to_numpy(), T
+    )
+    t = aligned["time_ns"].to_numpy()
+    t_to = t + np.round(dt1 * NS).astype(np.int64)
+    sites = aligned["site_id"]
+    names = sorted(sites.unique().to_list())
+    site = sites.replace_strict(names, list(range(len(names))), return_dtype=pl.Int64).to_numpy()
+    track = aligned["local_track_id"].to_numpy()
+    o = np.lexsort((track, t_to, site))
+    so, to, To = site[o], t_to[o], T[o]
+    first = np.r_[True, so[1:] != so[:-1]] if o.size else np.zeros(0, bool)
+    gap = np.r_[0, np.diff(to)].astype(float)
+    new = first | (gap > To * (0.5 * NS))
+    scan = np.cumsum(new) - 1  # scan index of each sorted row
+    starts = np.flatnonzero(new)
+    end = np.maximum.reduceat(to, starts) if o.size else np.zeros(0, np.int64)
+    big_T = np.maximum.reduceat(To, starts) if o.size else np.zeros(0)
+    scan_site = so[starts]
+    nxt = np.full(starts.size, np.iinfo(np.int64).max)
+    same = scan_site[1:] == scan_site[:-1]
+    nxt[:-1][same] = end[1:][same]
+    # the latest report of each (site, track, scan): order by (scan, track, time)
+    sc_row = np.empty(o.size, np.int64)
+    sc_row[o] = scan
+    k = np.lexsort((t, track, sc_row))
+    last = np.r_[(sc_row[k][1:] != sc_row[k][:-1]) | (track[k][1:] != track[k][:-1]), True] \
+        if k.size else np.zeros(0, bool)
+    keep = k[last]
+    ks = sc_row[keep]
+    final = keep[np.lexsort((track[keep], site[keep], end[ks]))]
+    fs = sc_row[final]
+    return _Scans(final, dt1[final], t_to[final], end[fs], big_T[fs], nxt[fs])
+
+
+def _serve(scans: _Scans, epochs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Step 2 selection (eq. 8): epochs each report serves, as (row index into the scans,
+    epoch) pairs. A report of a scan ending at s serves the epochs e with s <= e <
+    min(next scan end, s + T_scan + tolerance)."""
+    end = scans.scan_end_ns
+    limit = end + np.round((scans.scan_T_s + SCAN_TOLERANCE_S) * NS).astype(np.int64)
+    lo = np.searchsorted(epochs, end, side="left")
+    hi = np.searchsorted(epochs, np.minimum(limit, scans.next_end_ns), side="left")
+    row, idx = expand_ranges(lo, hi)
+    return row, epochs[idx]
+
+
+def _step2_columns(aligned: pl.DataFrame, scans: _Scans, row: np.ndarray, epoch: np.ndarray,
+                   sigma_dt_s: float) -> pl.DataFrame:
+    """:func:`_step2` on arrays: extrapolate each picked report by dt_1 + dt_2, inflate its
+    covariance, and gather only the output columns, in (epoch, site, track) order."""
+    src = scans.rows[row]
+    dt = scans.dt1_s[row] + (epoch - scans.t_to_ns[row]) / NS
+
+    def col(name: str) -> np.ndarray:
+        return aligned[name].to_numpy()[src]
+
+    V, C = col("speed_mps"), col("course_rad")
+    x, y = extrapolate_position(col("x_enu_m"), col("y_enu_m"), V, C, dt)
+    sv, sc = col("sigma_speed_mps"), col("sigma_course_rad")
+    dxx, dyy, dxy = extrapolation_covariance(V, C, dt, sv, sc, sigma_dt_s, n_timing_errors=2)
+    site = aligned["site_id"].gather(src)
+    track = col("local_track_id")
+    names = sorted(site.unique().to_list())
+    code = site.replace_strict(names, list(range(len(names))), return_dtype=pl.Int64).to_numpy()
+    o = np.lexsort((track, code, epoch))
+    return pl.DataFrame(
+        {
+            "time_ns": epoch[o],
+            "site_id": site.gather(o),
+            "local_track_id": track[o],
+            "report_time_ns": col("time_ns")[o],
+            "x_enu_m": x[o],
+            "y_enu_m": y[o],
+            "P_xx": (col("P_xx") + dxx)[o],
+            "P_yy": (col("P_yy") + dyy)[o],
+            "P_xy": (col("P_xy") + dxy)[o],
+            "course_rad": C[o],
+            "speed_mps": V[o],
+            "sigma_course_rad": sc[o],
+            "sigma_speed_mps": sv[o],
+        },
+        schema_overrides={"time_ns": pl.Int64, "report_time_ns": pl.Int64},
+    ).select(SYNCED_COLUMNS)
 
 
 def _step1_scans(aligned: pl.DataFrame) -> pl.DataFrame:
-    """Step 1 (eq. 7): scan-end time t_TO of each report, grouped into scans per site.
-
-    A scan is a run of a site's t_TO values closer than half a scan period; its end is
-    the latest t_TO in it. A track reported twice in one scan keeps its latest report.
-    """
+    """Step 1 (eq. 7) in polars (the reference of :func:`_step1`): scan-end time t_TO of
+    each report, grouped into scans per site; a track reported twice in one scan keeps
+    its latest report."""
     dt1 = scan_end_offset_s(
         aligned["azimuth_rad"].to_numpy(),
         aligned["scan_end_azimuth_rad"].to_numpy(),
@@ -176,12 +282,17 @@ def _step1_scans(aligned: pl.DataFrame) -> pl.DataFrame:
     )
 
 
-def _serve_epochs(scans: pl.DataFrame, epochs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Step 2 selection (eq. 8): epochs each report serves, as (row index, epoch) pairs.
+def synchronise_reference(aligned: pl.DataFrame, *, epochs_ns: np.ndarray, sync: SyncConfig
+                          ) -> pl.DataFrame:
+    """:func:`synchronise` through polars frames (the reference it is tested against)."""
+    epochs = np.unique(np.asarray(epochs_ns, dtype=np.int64))
+    scans = _step1_scans(aligned)
+    row, epoch = _serve_epochs(scans, epochs)
+    return _step2(scans[row], epoch, sync.sigma_dt_s)
 
-    A report of a scan ending at s serves the epochs e with s <= e < min(next scan end,
-    s + T_scan + tolerance).
-    """
+
+def _serve_epochs(scans: pl.DataFrame, epochs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Step 2 selection (eq. 8) on the polars scans (reference path)."""
     end = scans["scan_end_ns"].to_numpy()
     limit = end + np.round((scans["scan_T_s"].to_numpy() + SCAN_TOLERANCE_S) * NS).astype(np.int64)
     nxt = scans["next_end_ns"].fill_null(np.iinfo(np.int64).max).to_numpy()

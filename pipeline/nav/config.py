@@ -10,7 +10,16 @@ import math
 from dataclasses import dataclass, field, replace
 
 from pipeline.config import Config
-from pipeline.configspec import Document, latitude, longitude, positive, setting, text
+from pipeline.configspec import (
+    Document,
+    count,
+    latitude,
+    longitude,
+    positive,
+    probability,
+    setting,
+    text,
+)
 from pipeline.filters.current_log import CurrentLogSettings
 from pipeline.filters.gyro_gnss_log import FilterSettings, GyroModel, NavFilterModel, RollModel
 
@@ -20,6 +29,12 @@ EARTH_RADIUS_M = 6_371_000.0
 def _outages(outages: tuple[tuple[float, float], ...]) -> str | None:
     bad = [i for i, (_, duration) in enumerate(outages) if duration <= 0]
     return f"outage {bad[0]}: [start_s, duration_s] needs a duration > 0" if bad else None
+
+
+def _jumps(jumps: tuple[tuple[float, ...], ...]) -> str | None:
+    bad = [i for i, j in enumerate(jumps) if len(j) != 4 or j[0] < 0 or j[1] <= 0]
+    return (f"jump {bad[0]}: [start_s >= 0, duration_s > 0, east_m, north_m]" if bad
+            else None)
 
 
 @dataclass(frozen=True)
@@ -46,6 +61,9 @@ class OwnshipScenarioConfig:
     gnss_velocity_tau_s: float = 15.0
     outages_s: tuple[tuple[float, float], ...] = setting(
         [[960.0, 30.0], [1320.0, 120.0]], key="outages", ge=0.0, check=_outages)
+    # GNSS position jumps [start_s, duration_s, east_m, north_m]: positions moved, the
+    # velocity not (spoofing, multipath, a receiver fault); issue 22
+    jumps: tuple[tuple[float, float, float, float], ...] = setting([], check=_jumps)
     outlier_count: int = setting(6, ge=0)
     outlier_position_m: tuple[float, float] = (40.0, 150.0)
     outlier_velocity_mps: tuple[float, float] = (1.0, 3.0)
@@ -76,6 +94,11 @@ class NavSettings:
         convert=lambda deg: math.radians(deg) * EARTH_RADIUS_M)
     dr_correction_window_s: float = positive(120.0)
     dr_bound_n_sigma: float = positive(3.0)
+    # the GNSS position test (pipeline/nav/integrity.py, issue 22)
+    gnss_position_tau_s: float = positive(60.0)  # correlation time of the position error
+    gnss_q: float = probability(0.001)  # false-alarm probability of one fix
+    gnss_readmit_run: int = count(5)  # fixes in a row that pass before it is used again
+    gnss_exclusion: bool = setting(True)  # false: test every fix, use them anyway
 
 
 @dataclass(frozen=True)

@@ -23,6 +23,7 @@ from pipeline.geometry import assign_sectors
 from pipeline.nav import deadreckoning as dr
 from pipeline.nav.config import OwnshipConfig
 from pipeline.nav.inputs import NS, Segment, emergency_steps, segments
+from pipeline.nav.integrity import GnssCheck, check_positions, nominal_q
 
 SOLUTION_GATE = {1.0: "pass", 0.0: "reject"}
 
@@ -84,6 +85,8 @@ def solve_segment(seg: Segment, oc: OwnshipConfig) -> tuple[pl.DataFrame, list[d
     emergency, _ = emergency_steps(seg, oc.nav.gnss_timeout_s)
     oc = segment_model(seg, oc)
     out = run_filter(filter_inputs(seg, emergency, oc.nav.filter_step_s), oc.model, oc.current)
+    gnss = _gnss_check(seg, emergency, out.fix_accepted[0], oc)
+    accepted = out.fix_accepted[0] & ~gnss.excluded
     has_heading = np.isfinite(seg.heading_rad)
     # no gyro signals logged (plain NMEA): alpha is not observable, the heading is the
     # gyro's own and its sigma the prior (the filter still estimates W for the gate)
@@ -95,7 +98,7 @@ def solve_segment(seg: Segment, oc: OwnshipConfig) -> tuple[pl.DataFrame, list[d
     st = dr_settings(oc)
     sol = dr.dead_reckon(
         lat_deg=seg.lat_deg, lon_deg=seg.lon_deg, vel_east=seg.vel_east_mps,
-        vel_north=seg.vel_north_mps, accepted=out.fix_accepted[0], emergency=emergency,
+        vel_north=seg.vel_north_mps, accepted=accepted, emergency=emergency,
         heading_rad=heading, sigma_heading_rad=sig_alpha,
         log_speed=seg.log_speed_mps, st=st, current=out.current[0],
         current_cov=out.current_cov[0])
@@ -126,14 +129,50 @@ def solve_segment(seg: Segment, oc: OwnshipConfig) -> tuple[pl.DataFrame, list[d
         "w_innovation_mps2": out.w_innovation[0],
         "w_innovation_sigma_mps2": out.w_innovation_sigma[0],
         "nis": out.nis[0],
+        "gnss_nis": gnss.xi,
+        "gnss_eta": _gnss_eta(seg, emergency, out.gate_passed[0], gnss),
+        "gnss_excluded": emergency | (seg.fix_valid & ~accepted),
+        "gnss_q": nominal_q(oc.nav.gnss_q, oc.model.settings.gate_n_sigma),
         "converged": t_rel_s >= oc.nav.convergence_s,
     }, strict=False).with_columns(
         pl.col(pl.Float64).exclude("fix_quality").fill_nan(None),
         pl.col("fix_quality").fill_nan(None).cast(pl.Int16),
+        pl.col("gnss_eta").replace(-1, None).cast(pl.Int16),
     )
     outs = [_outage_row(seg, sol, o, sig_alpha, st) for o in dr.outages(
         emergency, seg.fix_valid, seg.gnss_msg)]
     return rows, outs
+
+
+def _gnss_check(seg: Segment, emergency: np.ndarray, gate_ok: np.ndarray,
+                oc: OwnshipConfig) -> GnssCheck:
+    """The GNSS position test of :mod:`pipeline.nav.integrity` on one segment."""
+    ok = seg.fix_valid & np.isfinite(seg.lat_deg) & np.isfinite(seg.lon_deg)
+    if not ok.any():
+        n = seg.n
+        return GnssCheck(np.full(n, np.nan), np.full(n, -1, np.int8), np.zeros(n, bool))
+    k0 = int(np.flatnonzero(ok)[0])
+    e, n_ = frames.geodetic_to_enu(np.where(ok, seg.lat_deg, seg.lat_deg[k0]),
+                                   np.where(ok, seg.lon_deg, seg.lon_deg[k0]),
+                                   float(seg.lat_deg[k0]), float(seg.lon_deg[k0]))
+    nav = oc.nav
+    return check_positions(
+        np.atleast_1d(e), np.atleast_1d(n_), seg.vel_east_mps, seg.vel_north_mps, ok,
+        gate_ok, emergency, step_s=nav.filter_step_s, q=nav.gnss_q,
+        readmit_run=nav.gnss_readmit_run, sigma_p_m=nav.gnss_position_sigma_m,
+        tau_p_s=nav.gnss_position_tau_s, sigma_v_mps=oc.current.gnss_velocity_sigma_mps,
+        tau_v_s=oc.current.gnss_velocity_tau_s, exclusion=nav.gnss_exclusion)
+
+
+def _gnss_eta(seg: Segment, emergency: np.ndarray, gate: np.ndarray, g: GnssCheck
+              ) -> np.ndarray:
+    """Eq. 23 per step for the GNSS channel: 1 when the filter's gate rejected the fix,
+    the position test flagged it, or no fix came (emergency mode: an outage); 0 for a
+    fix that passed both; -1 no decision (no fix outside an outage, a fix not tested)."""
+    rejected = gate == 0.0
+    passed = (gate == 1.0) & (g.eta == 0)
+    out = np.where(rejected | (g.eta == 1) | emergency, 1, np.where(passed, 0, -1))
+    return out.astype(np.int16)
 
 
 def _silence_between(prev: Segment, seg: Segment) -> dict:

@@ -34,13 +34,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from datetime import UTC, datetime
 
 import numpy as np
 import polars as pl
 from pyais import encode_dict
 
+from pipeline.simulate.channel_faults import ais_mmsi, ais_offsets, ais_state_times
 from pipeline.units import KNOT_MPS
 
 """One knot in m/s."""
@@ -102,6 +103,8 @@ class AisStation:
 
     ``turn_windows_s``: (n, 2) array of [begin, end) times, s since the scenario start,
     while the vessel is changing course. Speed is constant over the vessel's life.
+    ``faults``: its ``ais_offset`` / ``ais_stuck`` channel faults, ``swaps``: (``ais_mmsi_swap``
+    fault, the MMSI it sends meanwhile) (:mod:`pipeline.simulate.channel_faults`).
     """
 
     vessel_id: int
@@ -111,6 +114,8 @@ class AisStation:
     t_exit_s: float
     turn_windows_s: np.ndarray
     seed_key: tuple[int, ...]
+    faults: tuple = ()
+    swaps: tuple = ()
 
 
 # --- identities ------------------------------------------------------------------
@@ -319,8 +324,11 @@ def simulate_ais(
         ident = station.identity
         if t_pos.size:
             z = rng.standard_normal((t_pos.size, 4))
-            lat, lon, course, speed = state(t_pos)
-            lat, lon = _offset_lat_lon(lat, lon, GNSS_SIGMA_M * z[:, 0], GNSS_SIGMA_M * z[:, 1])
+            lat, lon, course, speed = state(ais_state_times(station.faults, t_pos))
+            off = ais_offsets(station.faults, t_pos)
+            lat, lon = _offset_lat_lon(
+                lat, lon, GNSS_SIGMA_M * z[:, 0] + off[:, 0], GNSS_SIGMA_M * z[:, 1] + off[:, 1]
+            )
             sog_kn = np.clip(np.round((speed + SOG_SIGMA_MPS * z[:, 2]) / KNOT_MPS, 1), 0, 102.2)
             cog_deg = np.mod(np.round(np.degrees(course + COG_SIGMA_RAD * z[:, 3]), 1), 360.0)
             heading = np.mod(np.round(np.degrees(course)), 360).astype(int)
@@ -329,7 +337,7 @@ def simulate_ais(
             for i in range(t_pos.size):
                 msg: dict = {
                     "type": int(msg_ids[i]),
-                    "mmsi": ident.mmsi,
+                    "mmsi": ais_mmsi(station.swaps, ident.mmsi, float(t_pos[i])),
                     "speed": float(sog_kn[i]),
                     "accuracy": True,
                     "lon": float(lon[i]),
@@ -347,7 +355,8 @@ def simulate_ais(
         t_static = station.t_enter_s + float(phase_static) * step
         t_static_all = t_static + step * np.arange(max(0, math.ceil((end - t_static) / step)))
         for t in t_static_all[t_static_all < end]:
-            rows.extend(_static_messages(ident, float(t), station.vessel_id, start_ns))
+            sent = replace(ident, mmsi=ais_mmsi(station.swaps, ident.mmsi, float(t)))
+            rows.extend(_static_messages(sent, float(t), station.vessel_id, start_ns))
     # time order; the parts of a message 24 follow each other by their own times
     rows.sort(key=lambda r: (r[0], r[1], r[2]))
     log_time: list[int] = []

@@ -67,10 +67,11 @@ course is clockwise from true north at the vessel.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import polars as pl
+import shapely
 from scipy.special import ndtr
 
 from pipeline.config import Config, RadarSite
@@ -82,9 +83,17 @@ from pipeline.frames import (
     polar_to_enu,
     wrap_angle,
 )
-from pipeline.maritime.config import SiteBias, radar_bias_config
+from pipeline.geometry import sector_polygons
+from pipeline.maritime.config import ChannelFault, SiteBias, channel_faults, radar_bias_config
 from pipeline.messages import RADAR_REPORT, message_layout
 from pipeline.simulate.ais_traffic import AisStation, StateFn, draw_identity, simulate_ais
+from pipeline.simulate.channel_faults import (
+    FAULT_TRUTH_SCHEMA,
+    fault_truth,
+    pick_vessel,
+    radar_effects,
+    radar_silent,
+)
 from pipeline.units import NS
 
 # --- traffic -----------------------------------------------------------------------
@@ -138,6 +147,8 @@ class ChannelScenario:
       enter_time_ns, exit_time_ns, close_pass.
     - ``radar_track_truth``: site_id, track_id, vessel_id, first_time_ns,
       last_time_ns, n_reports: which vessel each local track follows.
+    - ``fault_truth``: the injected faults (``[[channel_faults]]``), one row per
+      affected channel (:func:`pipeline.simulate.channel_faults.fault_truth`).
 
     ``seed``, ``start_ns`` (ns since the Unix epoch, UTC) and ``duration_s`` are the
     arguments of the run; ``site_ids`` the radar sites in config order.
@@ -152,6 +163,9 @@ class ChannelScenario:
     start_ns: int
     duration_s: float
     site_ids: tuple[str, ...]
+    fault_truth: pl.DataFrame = field(
+        default_factory=lambda: pl.DataFrame(schema=FAULT_TRUTH_SCHEMA)
+    )
 
     @property
     def end_ns(self) -> int:
@@ -530,9 +544,11 @@ def _site_reports(
     duration_s: float,
     seed: int,
     bias: SiteBias = SiteBias(),  # noqa: B008
+    faults: tuple[ChannelFault, ...] = (),
 ) -> tuple[dict[str, np.ndarray], list[tuple]]:
     """Track reports of one site's tracker, as column arrays, plus one
-    (first_time_s, vessel_index, track_no, first_row, last_row) per track."""
+    (first_time_s, vessel_index, track_no, first_row, last_row) per track. ``faults``:
+    the site's channel faults (:mod:`pipeline.simulate.channel_faults`)."""
     T = site.scan_period_s
     t_first_scan = -T * float(np.random.default_rng([seed, _RADAR_PHASE, site_index]).random())
     k_max = math.ceil((duration_s - t_first_scan) / T) - 2  # last scan ending before the end
@@ -553,7 +569,8 @@ def _site_reports(
         return r, az, c, speed
 
     cols: dict[str, list[np.ndarray]] = {
-        k: [] for k in ("vessel", "track_no", "t", "log_t", "r", "az", "x", "y", "c", "v", "status")
+        k: []
+        for k in ("vessel", "track_no", "t", "log_t", "r", "az", "x", "y", "c", "v", "status", "dt")
     }
     tracks: list[tuple] = []
     n_rows = 0
@@ -571,16 +588,23 @@ def _site_reports(
         valid = (ts >= v.t_seen_from_s) & (ts <= v.t_exit_s) & (r <= site.max_range_m)
         n = k.size
         z = np.random.default_rng([seed, _RADAR, site_index, *v.key]).standard_normal((n, 6))
-        detected = ndtr(z[:, 0]) < DETECTION_PROBABILITY
+        can_detect, f_dr, f_daz, f_dt, f_noise = radar_effects(faults, ts, az)
+        detected = (ndtr(z[:, 0]) < DETECTION_PROBABILITY) & can_detect
         lost = ndtr(z[:, 1]) < TRACK_LOSS_PROBABILITY
         status, track_no = _track_life(valid, detected, lost)
-        rep = np.flatnonzero((status > 0) & (ts >= 0.0))  # the warm-up is not archived
+        # the warm-up is not archived; nothing is published during an outage
+        rep = np.flatnonzero((status > 0) & (ts >= 0.0) & ~radar_silent(faults, tk + T))
         if rep.size == 0:
             continue
-        r_m = np.abs(r + bias.range_bias_m + site.sigma_range_m * z[:, 2])
-        az_m = np.mod(az + bias.azimuth_bias_rad + site.sigma_azimuth_rad * z[:, 3], TWO_PI)
-        c_m = np.mod(c + bias.azimuth_bias_rad + site.sigma_course_rad * z[:, 4], TWO_PI)
-        v_m = np.abs(spd + site.sigma_speed_mps * z[:, 5])
+        r_m = np.abs(r + bias.range_bias_m + f_dr + site.sigma_range_m * f_noise * z[:, 2])
+        az_m = np.mod(
+            az + bias.azimuth_bias_rad + f_daz + site.sigma_azimuth_rad * f_noise * z[:, 3],
+            TWO_PI,
+        )
+        c_m = np.mod(
+            c + bias.azimuth_bias_rad + f_daz + site.sigma_course_rad * f_noise * z[:, 4], TWO_PI
+        )
+        v_m = np.abs(spd + site.sigma_speed_mps * f_noise * z[:, 5])
         x_m, y_m = polar_to_enu(r_m, az_m)
         for i in np.flatnonzero(status == 3):  # coast: predict from the previous report
             dt = ts[i] - ts[i - 1]
@@ -598,6 +622,7 @@ def _site_reports(
             ("v", v_m),
             ("status", status),
             ("track_no", track_no),
+            ("dt", f_dt),
         ):
             cols[name].append(arr[rep])
         cols["log_t"].append(tk[rep] + T)
@@ -667,6 +692,8 @@ def simulate_channel(
         raise ValueError(f"duration_s must be positive, got {duration_s}")
     frame = _Frame(cfg.region.origin_lat_deg, cfg.region.origin_lon_deg)
     plans = _plan_vessels(cfg, frame, duration_s, seed)
+    faults = channel_faults(cfg)
+    hit, other = _ais_fault_vessels(cfg, faults, plans, frame, seed)
 
     # identities (MMSIs unique, in vessel-id order)
     used: set[int] = set()
@@ -691,14 +718,20 @@ def simulate_channel(
         ident = replace(ident, mmsi=mmsi)
         mmsi_of.append(mmsi)
         names.append(ident.shipname)
+        own = tuple(f for f, h in zip(faults, hit, strict=True) if h == vid - 1)
         station = AisStation(
-            vid, ident, v.speed_mps, v.t_enter_s, v.t_exit_s, v.turn_windows_s(), (_AIS, *v.key)
+            vid, ident, v.speed_mps, v.t_enter_s, v.t_exit_s, v.turn_windows_s(), (_AIS, *v.key),
+            faults=tuple(f for f in own if f.kind in ("ais_offset", "ais_stuck")),
         )
         stations.append((station, _state_fn(frame, v)))
+    stations = _with_swaps(stations, faults, hit, other)
+    stations += _spoofers(cfg, faults, frame, len(plans), duration_s, seed)
 
     truth = _truth(plans, frame, mmsi_of, start_ns, duration_s)
     reports, links = _radar(cfg, plans, frame, start_ns, duration_s, seed)
     ais = simulate_ais(stations, start_ns=start_ns, duration_s=duration_s, seed=seed)
+    injected = fault_truth(faults, start_ns, duration_s, vessel_of=hit, other_of=other,
+                           mmsi_of=lambda i: mmsi_of[i])
     vessels = pl.DataFrame(
         {
             "vessel_id": np.arange(1, len(plans) + 1, dtype=np.int64),
@@ -728,7 +761,95 @@ def simulate_channel(
         start_ns=start_ns,
         duration_s=float(duration_s),
         site_ids=tuple(s.site_id for s in cfg.radar_sites),
+        fault_truth=injected,
     )
+
+
+def _ais_fault_vessels(
+    cfg: Config, faults: tuple[ChannelFault, ...], plans: list[_Vessel], frame: _Frame,
+    seed: int,
+) -> tuple[list[int | None], list[int | None]]:
+    """Per fault, the vessel (0-based) an AIS fault hits and the other vessel of a swap
+    (None for radar faults and spoofers, or when no vessel fits)."""
+    polys = {s.name: p for s, p in zip(cfg.sectors, sector_polygons(cfg.sectors, cfg.region),
+                                        strict=True)}
+
+    def present(i: int, t0: float, t1: float) -> bool:
+        return plans[i].t_enter_s <= t0 and plans[i].t_exit_s >= t1
+
+    def in_sector(i: int, t: float, sector: str) -> bool:
+        x, y, _, _ = plans[i].route.at(plans[i].s_at(np.array([t])))
+        return bool(shapely.contains_xy(polys[sector], x[0], y[0]))
+
+    class_a = [i for i, v in enumerate(plans) if v.ais_class == "A"]
+    hit: list[int | None] = []
+    other: list[int | None] = []
+    for k, f in enumerate(faults):
+        if f.sensor_kind == "radar" or f.kind == "ais_spoof":
+            hit.append(None), other.append(None)
+            continue
+        a = f.vessel_id - 1 if f.vessel_id else pick_vessel(
+            f, class_a, present, in_sector, seed, k)
+        b = None
+        if f.kind == "ais_mmsi_swap" and a is not None:
+            b = f.other_vessel_id - 1 if f.other_vessel_id else pick_vessel(
+                replace(f, sector=""), class_a, present, in_sector, seed, 1000 + k,
+                exclude=(a,))
+            if b is None:
+                a = None
+        for i in (a, b):
+            if i is not None and not 0 <= i < len(plans):
+                raise ValueError(f"channel fault {f.kind}: vessel {i + 1} does not exist")
+            if i is not None and plans[i].ais_class is None:
+                raise ValueError(f"channel fault {f.kind}: vessel {i + 1} carries no AIS")
+        hit.append(a), other.append(b)
+    return hit, other
+
+
+def _with_swaps(
+    stations: list[tuple[AisStation, StateFn]], faults: tuple[ChannelFault, ...],
+    hit: list[int | None], other: list[int | None],
+) -> list[tuple[AisStation, StateFn]]:
+    """Stations of an MMSI swap send each other's MMSI while it lasts."""
+    mmsi = {st.vessel_id - 1: st.identity.mmsi for st, _ in stations}
+    swaps: dict[int, list[tuple[ChannelFault, int]]] = {}
+    for f, a, b in zip(faults, hit, other, strict=True):
+        if f.kind == "ais_mmsi_swap" and a is not None and b is not None:
+            swaps.setdefault(a, []).append((f, mmsi[b]))
+            swaps.setdefault(b, []).append((f, mmsi[a]))
+    return [(replace(st, swaps=tuple(swaps.get(st.vessel_id - 1, ()))), fn)
+            for st, fn in stations]
+
+
+def _spoofers(
+    cfg: Config, faults: tuple[ChannelFault, ...], frame: _Frame, n_vessels: int,
+    duration_s: float, seed: int,
+) -> list[tuple[AisStation, StateFn]]:
+    """A Class A station on no ship per ``ais_spoof`` fault: a straight line from its
+    start position at its course and speed (course in the regional frame)."""
+    out = []
+    for k, f in enumerate(faults):
+        if f.kind != "ais_spoof" or f.start_s >= duration_s:
+            continue
+        ident = replace(
+            draw_identity(np.random.default_rng([seed, _IDENTITY, 3, k]), ais_class="A",
+                          kind="fairway", inbound=True),
+            mmsi=f.mmsi,
+        )
+        x0, y0 = geodetic_to_enu(f.start_lat_deg, f.start_lon_deg, frame.lat0, frame.lon0)
+
+        def state(t_s: np.ndarray, f=f, x0=float(x0), y0=float(y0)) -> tuple[np.ndarray, ...]:
+            d = f.speed_mps * (np.asarray(t_s, float) - f.start_s)
+            lat, lon = enu_to_geodetic(x0 + d * math.sin(f.course_rad),
+                                       y0 + d * math.cos(f.course_rad), frame.lat0, frame.lon0)
+            course = np.mod(f.course_rad - convergence_rad(lat, lon, frame.lat0, frame.lon0),
+                            TWO_PI)
+            return lat, lon, course, np.full(np.shape(lat), f.speed_mps)
+
+        station = AisStation(n_vessels + 1 + k, ident, f.speed_mps, f.start_s,
+                             min(f.end_s, duration_s), np.empty((0, 2)), (_AIS, 3, k))
+        out.append((station, state))
+    return out
 
 
 def _state_fn(frame: _Frame, v: _Vessel) -> StateFn:
@@ -776,7 +897,8 @@ def _radar(
     frames, links = [], []
     for si, site in enumerate(cfg.radar_sites):
         bias = radar_bias_config(cfg).simulate.get(site.site_id, SiteBias())
-        cols, tracks = _site_reports(site, si, plans, frame, duration_s, seed, bias)
+        faults = tuple(f for f in channel_faults(cfg) if f.site_id == site.site_id)
+        cols, tracks = _site_reports(site, si, plans, frame, duration_s, seed, bias, faults)
         n = cols["t"].size
         track_id = np.zeros(n, dtype=np.int64)
         # local track ids increase with initiation time; a track's rows are contiguous
@@ -798,7 +920,7 @@ def _radar(
                 "site_id": [site.site_id] * n,
                 "track_id": track_id,
                 "time_ns": start_ns
-                + np.round((cols["t"] + bias.time_offset_s) * NS).astype(np.int64),
+                + np.round((cols["t"] + bias.time_offset_s + cols["dt"]) * NS).astype(np.int64),
                 "range_m": cols["r"],
                 "azimuth_rad": cols["az"],
                 "x_m": cols["x"],

@@ -16,7 +16,9 @@ Sensors (1 Hz by default):
   Gauss-Markov per axis with sigma 0.053 m/s and correlation 15 s, so that the change
   of speed over 1 s has sigma ~0.019 m/s^2, the paper's figure for the differentiated
   speed; outlier fixes (position and velocity jumps, still fix quality 1) and outages
-  (fix quality 0) at configured times.
+  (fix quality 0) at configured times; position jumps (``jumps``: the positions of a
+  time span moved by a fixed offset, the velocity not: spoofing, multipath), whose truth
+  goes with the outages' to the ``/truth/faults`` channel (table ``fault_truth``).
 - gyrocompass: heading K + alpha (HDT, resolution ``heading_resolution_deg``), the
   accelerometer signal (mean of beta + a_N/g over each sample interval) and the
   amplifier output delta, with white noise.
@@ -45,10 +47,12 @@ from pipeline.filters.gyro_gnss_log import EARTH_RATE_RADPS, G_MPS2, GyroModel, 
 from pipeline.io.mcap_write import write_mcap_file
 from pipeline.messages import message_layout
 from pipeline.nav.config import OwnshipScenarioConfig
+from pipeline.simulate.channel_faults import FAULT_TRUTH_SCHEMA
 from pipeline.units import KNOT_MPS, NS
 
 GYRO_SIGNALS_SCHEMA = "surveil.GyroSignals"
 OWNSHIP_TRUTH_SCHEMA = "surveil.OwnshipTruth"
+FAULT_TRUTH_SCHEMA_NAME = "surveil.FaultTruth"
 MCAP_LIBRARY = "surveil-pipeline/ownship"
 
 
@@ -65,6 +69,7 @@ class OwnshipScenario:
     gyro_heading: pl.DataFrame  # time_ns, heading_rad (K + alpha, quantised)
     gnss: pl.DataFrame  # time_ns, lat_deg, lon_deg, sog_mps, cog_rad, fix_quality, is_outlier
     speed_log: pl.DataFrame  # time_ns, speed_water_mps
+    fault_truth: pl.DataFrame  # the GNSS outages and jumps (FAULT_TRUTH_SCHEMA)
 
 
 def kinematics(t_s: np.ndarray, c: OwnshipScenarioConfig) -> dict[str, np.ndarray]:
@@ -230,7 +235,30 @@ def simulate_ownship(
         gyro_heading,
         gnss,
         speed_log,
+        gnss_fault_truth(c, start_ns, duration_s),
     )
+
+
+def gnss_fault_truth(c: OwnshipScenarioConfig, start_ns: int, duration_s: float
+                     ) -> pl.DataFrame:
+    """One ``fault_truth`` row per GNSS outage (fix quality 0) and position jump of the
+    scenario that starts before its end."""
+    rows = []
+    for kind, spans in (("gnss_outage", [(a, b, None) for a, b in c.outages_s]),
+                        ("gnss_jump", [(a, b, (e, n)) for a, b, e, n in c.jumps])):
+        for a, b, off in spans:
+            if a >= duration_s:
+                continue
+            rows.append({
+                "start_ns": start_ns + round(a * NS),
+                "end_ns": start_ns + round(min(a + b, duration_s) * NS),
+                "family": "nav", "sensor_kind": "gnss", "channel": c.platform_id,
+                "kind": kind, "value": None if off is None else math.hypot(*off),
+                "unit": None if off is None else "m", "vessel_id": None, "mmsi": None,
+                "detail": None if off is None else f"east {off[0]:.1f} m, north {off[1]:.1f} m",
+            })
+    return pl.DataFrame(rows, schema=FAULT_TRUTH_SCHEMA, orient="row") if rows else \
+        pl.DataFrame(schema=FAULT_TRUTH_SCHEMA)
 
 
 def _gnss(
@@ -250,6 +278,9 @@ def _gnss(
     outage = np.zeros(n, bool)
     for start, length in c.outages_s:
         outage |= (ts > start) & (ts <= start + length)
+    jump = np.zeros((n, 2))
+    for start, length, east, north in c.jumps:
+        jump[(ts > start) & (ts <= start + length)] += (east, north)
     outlier = np.zeros(n, bool)
     candidates = np.flatnonzero(~outage & (ts > 60.0))
     # keep outliers apart from outages and from each other (>= 10 s)
@@ -270,7 +301,7 @@ def _gnss(
     dv = rng.uniform(*c.outlier_velocity_mps, m)
     pos_err[picked] += np.column_stack([dp * np.sin(ang[:, 0]), dp * np.cos(ang[:, 0])])
     vel_err[picked] += np.column_stack([dv * np.sin(ang[:, 1]), dv * np.cos(ang[:, 1])])
-    p = pos + pos_err
+    p = pos + pos_err + jump
     v = vel + vel_err
     lat, lon = frames.enu_to_geodetic(p[:, 0], p[:, 1], c.start_lat_deg, c.start_lon_deg)
     return pl.DataFrame(
@@ -386,6 +417,7 @@ TOPIC_GYRO_NMEA = "/ownship/gyro/nmea"
 TOPIC_LOG = "/ownship/log/nmea"
 TOPIC_GYRO_SIGNALS = "/ownship/gyro/signals"
 TOPIC_TRUTH = "/ownship/truth"
+TOPIC_FAULTS = "/truth/faults"
 
 
 def _json_payloads(df: pl.DataFrame, fields: list[str]) -> pl.Series:
@@ -420,6 +452,11 @@ def ownship_messages(sc: OwnshipScenario, sample_period_s: float) -> pl.DataFram
                                 "payload": _json_payloads(gyro, gyro_fields)}))
     frames.append(pl.DataFrame({"log_time_ns": truth["time_ns"], "channel": 4,
                                 "payload": _json_payloads(truth, truth_fields)}))
+    _, fault_fields = _schema("fault_truth.schema.json")
+    frames.append(pl.DataFrame({"log_time_ns": sc.fault_truth["start_ns"], "channel": 5,
+                                "payload": _json_payloads(sc.fault_truth, fault_fields)},
+                               schema={"log_time_ns": pl.Int64, "channel": pl.Int32,
+                                       "payload": pl.Binary}))
     return (pl.concat([f.with_columns(pl.col("channel").cast(pl.Int32),
                                       pl.int_range(pl.len(), dtype=pl.Int64).alias("row"))
                        for f in frames])
@@ -432,6 +469,7 @@ CHANNELS = (  # (topic, message encoding, schema name or None)
     (TOPIC_LOG, "nmea0183", None),
     (TOPIC_GYRO_SIGNALS, "json", GYRO_SIGNALS_SCHEMA),
     (TOPIC_TRUTH, "json", OWNSHIP_TRUTH_SCHEMA),
+    (TOPIC_FAULTS, "json", FAULT_TRUTH_SCHEMA_NAME),
 )
 
 
@@ -444,7 +482,8 @@ def write_ownship_archive(sc: OwnshipScenario, out_dir: Path, *, sample_period_s
     out_dir.mkdir(parents=True, exist_ok=True)
     period_ns = round(file_period_s * NS)
     schemas = {GYRO_SIGNALS_SCHEMA: _schema("gyro_signals.schema.json")[0],
-               OWNSHIP_TRUTH_SCHEMA: _schema("ownship_truth.schema.json")[0]}
+               OWNSHIP_TRUTH_SCHEMA: _schema("ownship_truth.schema.json")[0],
+               FAULT_TRUTH_SCHEMA_NAME: _schema("fault_truth.schema.json")[0]}
     messages = ownship_messages(sc, sample_period_s).with_columns(
         (pl.col("log_time_ns") // period_ns).alias("file_index"))
     meta = {"name": "ownship", "seed": str(sc.seed), "start_ns": str(sc.start_ns),

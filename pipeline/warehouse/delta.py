@@ -20,9 +20,11 @@ import datetime as dt
 import math
 from pathlib import Path
 
+import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.dataset as pds
+import pyarrow.parquet as pq
 from deltalake import DeltaTable, WriterProperties, write_deltalake
 
 from pipeline.tables import conform, empty, spec
@@ -148,9 +150,10 @@ def read_table(
     end_ns: int | None = None,
     columns: list[str] | None = None,
     predicate: pc.Expression | None = None,
+    sort: bool = True,
 ) -> pa.Table:
     """Rows of the current snapshot of ``name`` with the time column in ``[start_ns, end_ns)``,
-    sorted by the table's sort key (when the selected columns include it).
+    sorted by the table's sort key (when the selected columns include it and ``sort``).
 
     The window also filters the ``date`` partition, so files of other days are pruned.
     ``predicate`` is an extra Arrow filter. Returns an empty table with the canonical
@@ -173,7 +176,7 @@ def read_table(
             table = table.add_column(i, f, pa.nulls(table.num_rows, f.type))
     table = table.cast(target)
     keys = spec(name).sort_by
-    if table.num_rows and keys and all(k in target.names for k in keys):
+    if sort and table.num_rows and keys and all(k in target.names for k in keys):
         table = table.sort_by([(k, "ascending") for k in keys])  # files come in any order
     return table
 
@@ -190,9 +193,11 @@ def replace_rows(warehouse: Path, name: str, table: pa.Table, *, predicate_sql: 
     of ``table`` outside the predicate makes Delta reject the whole write (``DeltaError``);
     nothing is committed then. An empty ``table`` deletes the matching rows. A nullable
     column added to the canonical schema after the table was created is added to the
-    table by this write (``schema_mode="merge"``; older rows read as null).
+    table by this write (``schema_mode="merge"``; older rows read as null). Column docs
+    edited in ``schemas/`` since the table was created keep the table's (delta-rs refuses
+    a write whose column metadata differs from the table's, merge or not).
     """
-    data = conform(name, table)
+    data = _with_table_metadata(warehouse, name, conform(name, table))
     s = spec(name)
     write_deltalake(
         str(table_path(warehouse, name)),
@@ -203,6 +208,18 @@ def replace_rows(warehouse: Path, name: str, table: pa.Table, *, predicate_sql: 
         writer_properties=_writer_properties(),
         schema_mode="merge",
     )
+
+
+def _with_table_metadata(warehouse: Path, name: str, data: pa.Table) -> pa.Table:
+    """``data`` with the column metadata the existing table stores (zero-copy)."""
+    if not table_exists(warehouse, name):
+        return data
+    have = pa.schema(DeltaTable(str(table_path(warehouse, name))).schema().to_arrow())
+    fields = [f.with_metadata(have.field(f.name).metadata) if f.name in have.names else f
+              for f in data.schema]
+    if all(f.equals(g, check_metadata=True) for f, g in zip(fields, data.schema, strict=True)):
+        return data
+    return pa.Table.from_arrays(data.columns, schema=pa.schema(fields, data.schema.metadata))
 
 
 def replace_window(
@@ -242,13 +259,88 @@ def replace_source_file(
 def table_files(warehouse: Path, name: str) -> list[str]:
     """Absolute paths of the Parquet files of the snapshot readers see (the current one,
     or the pinned one while a job commits the table); empty if no table."""
-    delta_table = _reader_table(warehouse, name)
-    if delta_table is None:
-        return []
-    uris = delta_table.file_uris()
-    return [u.removeprefix("file://") for u in uris]
+    return table_snapshot(warehouse, name)[0]
+
+
+def table_snapshot(warehouse: Path, name: str) -> tuple[list[str], frozenset[str]]:
+    """``(files, column names)`` of the snapshot readers see (``([], {})`` if no table):
+    a table written before its canonical schema gained a column lacks it."""
+    t = _reader_table(warehouse, name)
+    if t is None:
+        return [], frozenset()
+    files = [u.removeprefix("file://") for u in t.file_uris()]
+    return files, frozenset(f.name for f in t.schema().fields)
 
 
 def empty_table(name: str) -> pa.Table:
     """Empty table with ``name``'s canonical schema."""
     return empty(name)
+
+
+def volume_profile(warehouse: Path, name: str, start_ns: int, end_ns: int
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Where ``name``'s rows lie in time, from metadata only: per Parquet row group of the
+    current snapshot overlapping ``[start_ns, end_ns)``, its (first time, last time, rows)
+    on the table's time column (the footers' statistics; no row is read). Row groups of
+    ingested tables hold ~64 Ki rows sorted by time, so this locates the rows to a few
+    seconds in a busy hour. Empty arrays when the table does not exist."""
+    s = spec(name)
+    empty = (np.empty(0, np.int64), np.empty(0, np.int64), np.empty(0, np.int64))
+    if not table_exists(warehouse, name) or not s.time_column:
+        return empty
+    dt = DeltaTable(str(table_path(warehouse, name)))
+    adds = pa.table(dt.get_add_actions(flatten=True))
+    lo_col, hi_col = f"min.{s.time_column}", f"max.{s.time_column}"
+    if adds.num_rows == 0:
+        return empty
+    lo = adds[lo_col].to_numpy(zero_copy_only=False) if lo_col in adds.column_names else None
+    hi = adds[hi_col].to_numpy(zero_copy_only=False) if hi_col in adds.column_names else None
+    root = table_path(warehouse, name)
+    first, last, rows = [], [], []
+    for k, path in enumerate(adds["path"].to_pylist()):
+        if lo is not None and hi is not None and (hi[k] < start_ns or lo[k] >= end_ns):
+            continue
+        md = pq.ParquetFile(root / path).metadata
+        idx = md.schema.names.index(s.time_column)
+        for g in range(md.num_row_groups):
+            rg = md.row_group(g)
+            st = rg.column(idx).statistics
+            if st is None or not st.has_min_max:  # no statistics: spread over the file
+                a, b = (int(lo[k]), int(hi[k])) if lo is not None else (start_ns, end_ns - 1)
+            else:
+                a, b = int(st.min), int(st.max)
+            if b < start_ns or a >= end_ns:
+                continue
+            first.append(a)
+            last.append(b)
+            rows.append(rg.num_rows)
+    return (np.asarray(first, np.int64), np.asarray(last, np.int64),
+            np.asarray(rows, np.int64))
+
+
+def volume_cuts(first: np.ndarray, last: np.ndarray, rows: np.ndarray, start_ns: int,
+                end_ns: int, max_rows: int) -> list[int]:
+    """Cut times inside ``(start_ns, end_ns)`` so that no piece holds more than about
+    ``max_rows`` rows, the rows of each row group (``volume_profile``) taken as spread
+    evenly over its time span. Returns the interior cuts, ascending."""
+    if rows.size == 0 or rows.sum() <= max_rows:
+        return []
+    a = np.maximum(first, start_ns).astype(float)
+    b = np.minimum(last, end_ns - 1).astype(float) + 1.0
+    frac = (b - a) / np.maximum(last - first + 1, 1)
+    n = rows * np.clip(frac, 0.0, 1.0)
+    # piecewise-linear cumulative count over the union of breakpoints
+    edges = np.unique(np.concatenate([[start_ns, end_ns], a, b]))
+    edges = edges[(edges >= start_ns) & (edges <= end_ns)]
+    density = np.zeros(edges.size - 1)
+    for lo, hi, cnt in zip(a, b, n, strict=True):
+        i0, i1 = np.searchsorted(edges, lo), np.searchsorted(edges, hi)
+        width = edges[i1] - edges[i0]
+        if width > 0:
+            density[i0:i1] += cnt / width
+    cum = np.r_[0.0, np.cumsum(density * np.diff(edges))]
+    total = cum[-1]
+    k = int(np.ceil(total / max_rows))
+    targets = total * np.arange(1, k) / k
+    cuts = np.interp(targets, cum, edges)
+    return sorted({int(c) for c in cuts if start_ns < c < end_ns})

@@ -285,11 +285,19 @@ class TableStager:
     """
 
     def __init__(
-        self, folder: Path, *, row_group_rows: int = ROW_GROUP_ROWS, threaded: bool = True
+        self,
+        folder: Path,
+        *,
+        row_group_rows: int = ROW_GROUP_ROWS,
+        threaded: bool = True,
+        presorted: bool = False,
     ):
+        """``presorted``: the caller adds each table's rows in the order of its sort key
+        (e.g. a batch stage's outputs), so row groups are not checked nor sorted."""
         self.folder = Path(folder)
         self.row_group_rows = row_group_rows
         self.threaded = threaded
+        self.presorted = presorted
         self.rows: dict[str, int] = {}
         self._slots: dict[tuple[str, str], _Slot] = {}
 
@@ -359,7 +367,7 @@ class TableStager:
         parts, slot.pending, slot.pending_rows = slot.pending, [], 0
         group = pa.concat_tables(parts)
         keys = [k for k in spec(slot.table).sort_by if k in group.column_names]
-        if keys and not _sorted_by_first(group, keys[0]):  # each row group sorted
+        if keys and not self.presorted and not _sorted_by_first(group, keys[0]):
             group = group.sort_by([(k, "ascending") for k in keys])
         idle = [f for f in slot.files if not f.busy()]
         if idle:
@@ -512,3 +520,96 @@ def _drop_added(table: Path, adds: list[AddAction]) -> None:
     for a in adds:
         with contextlib.suppress(OSError):
             os.remove(table / a.path)
+
+
+# -- derived tables: replace a time window -----------------------------------------------
+
+
+def commit_window(
+    warehouse: Path, name: str, staged: list[StagedFile], *, start_ns: int, end_ns: int
+) -> str:
+    """Replace the rows of ``name`` whose time is in ``[start_ns, end_ns)`` by the staged
+    files: ONE Delta commit (the batch's window replace, without re-encoding the rows).
+
+    The data files of the current snapshot whose time statistics lie wholly inside the
+    window are removed; a file that also holds rows outside it (an earlier batch over a
+    wider window) is rewritten without the window's rows (read, filtered, staged again)
+    and swapped in the same commit; a file without usable time statistics is treated
+    like one that overlaps. Returns ``noop``, ``create`` or ``swap``.
+    """
+    uri = table_path(warehouse, name)
+    s = spec(name)
+    if not table_exists(warehouse, name):
+        if not staged:
+            return "noop"
+        adds = _add_actions(uri, staged)
+        try:
+            create_table_with_add_actions(
+                str(uri), DeltaSchema.from_arrow(s.schema), adds, mode="error",
+                partition_by=list(s.partition_by),
+            )
+        except Exception:
+            _drop_added(uri, adds)
+            raise
+        return "create"
+    dt = DeltaTable(str(uri))
+    removes, partial = files_in_window(dt, s.time_column, start_ns, end_ns)
+    kept: list[StagedFile] = []
+    scratch = Path(warehouse) / "_staging" / f"rewrite-{uuid.uuid4().hex}"
+    if partial:
+        stager = TableStager(scratch, threaded=False)
+        for path, partition in partial:
+            t = pq.read_table(uri / path)
+            for k, v in partition.items():
+                t = t.append_column(k, pa.array([v] * t.num_rows, pa.string()).cast(pa.date32()))
+            col = t[s.time_column]
+            outside = pc.or_(pc.less(col, start_ns), pc.greater_equal(col, end_ns))
+            stager.add(name, conform(name, t.filter(outside)))
+        kept = stager.close()
+    if not staged and not removes and not kept:
+        return "noop"
+    adds = _add_actions(uri, [*staged, *kept])
+    try:
+        dt.create_write_transaction(
+            [*removes, *adds], mode="append", schema=dt.schema(), partition_by=list(s.partition_by)
+        )
+    except Exception:
+        _drop_added(uri, adds)
+        raise
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
+    return "swap"
+
+
+def files_in_window(
+    dt: DeltaTable, time_column: str, start_ns: int, end_ns: int
+) -> tuple[list[RemoveAction], list[tuple[str, dict[str, str]]]]:
+    """Remove actions for every data file holding rows of ``[start_ns, end_ns)``, and the
+    (path, partition values) of those that also hold rows outside it (to rewrite)."""
+    adds = pa.table(dt.get_add_actions(flatten=True))
+    if adds.num_rows == 0:
+        return [], []
+    names = adds.column_names
+    lo_col, hi_col = f"min.{time_column}", f"max.{time_column}"
+    n = adds.num_rows
+    lo = adds[lo_col].to_pylist() if lo_col in names else [None] * n
+    hi = adds[hi_col].to_pylist() if hi_col in names else [None] * n
+    rows = adds["num_records"].to_pylist() if "num_records" in names else [None] * n
+    part_cols = [c for c in names if c.startswith("partition.")]
+    now_ms = int(time.time() * 1000)
+    removes, partial = [], []
+    for i in range(n):
+        a, b = lo[i], hi[i]
+        a = a.value if hasattr(a, "value") else a  # timestamps come back as objects
+        b = b.value if hasattr(b, "value") else b
+        if rows[i] == 0:
+            continue
+        known = a is not None and b is not None
+        if known and (b < start_ns or a >= end_ns):
+            continue  # wholly outside: untouched
+        pv = {c.removeprefix("partition."): _part_str(adds[c][i].as_py()) for c in part_cols}
+        path = adds["path"][i].as_py()
+        removes.append(RemoveAction(path, True, now_ms, adds["size_bytes"][i].as_py(), pv))
+        if not (known and a >= start_ns and b < end_ns):
+            partial.append((path, {k: v for k, v in pv.items() if v is not None}))
+    return removes, partial

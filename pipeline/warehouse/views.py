@@ -46,14 +46,14 @@ import re
 import shutil
 import threading
 import uuid
-from collections.abc import Iterable
+from collections.abc import Collection, Iterable
 from pathlib import Path
 
 import duckdb
 import pyarrow as pa
 
 from pipeline.tables import column_comment, spec, table_specs
-from pipeline.warehouse.delta import sql_literal, table_files
+from pipeline.warehouse.delta import sql_literal, table_snapshot
 
 VIEWS_FILE = "surveil.duckdb"
 STORAGE_VERSION = "v1.0.0"  # the oldest storage format of DuckDB 1.x: every 1.x reads it
@@ -85,16 +85,17 @@ def _duckdb_type(t: pa.DataType) -> str:
         raise TypeError(f"no DuckDB type mapped for Arrow {t}") from None
 
 
-def _select_list(schema: pa.Schema, *, null: bool) -> str:
+def _select_list(schema: pa.Schema, *, null: bool, present: Collection[str] | None = None
+                 ) -> str:
     cols = []
     for f in schema:
-        src = "NULL" if null else _ident(f.name)
+        src = "NULL" if null or (present is not None and f.name not in present) else _ident(f.name)
         cols.append(f"CAST({src} AS {_duckdb_type(f.type)}) AS {_ident(f.name)}")
     return ", ".join(cols)
 
 
 def view_sql(name: str, files: list[str], schema: str | None = None,
-             root: Path | None = None) -> str:
+             present: Collection[str] | None = None, root: Path | None = None) -> str:
     """``CREATE OR REPLACE VIEW`` statement of table ``name`` over ``files``.
 
     With no files the view is typed and empty (``... WHERE false``), and DuckDB (2.0 on)
@@ -104,7 +105,8 @@ def view_sql(name: str, files: list[str], schema: str | None = None,
     so that a file missing from the snapshot fails the job, not an analyst's query.
     File paths come from the Delta log and are quoted with ``sql_literal`` (DuckDB cannot
     bind parameters in a view definition); with ``root`` (the warehouse), they are written
-    relative to it, as in the views file.
+    relative to it, as in the views file. ``present``: the columns the table has (None:
+    all); one the canonical schema gained after the table was written reads as NULL.
     """
     s = spec(name).schema
     qualified = f"{_ident(schema)}.{_ident(name)}" if schema else _ident(name)
@@ -116,10 +118,19 @@ def view_sql(name: str, files: list[str], schema: str | None = None,
         files = [os.path.relpath(f, base) for f in files]
     file_list = ", ".join(sql_literal(f) for f in files)
     body = (
-        f"SELECT {_select_list(s, null=False)} FROM read_parquet([{file_list}], "
+        f"SELECT {_select_list(s, null=False, present=_missing_only(s, present))} "
+        f"FROM read_parquet([{file_list}], "
         "hive_partitioning=true, union_by_name=true)"
     )
     return f"CREATE OR REPLACE VIEW {qualified} AS {body}"
+
+
+def _missing_only(s: pa.Schema, present: Collection[str] | None) -> Collection[str] | None:
+    """``present`` when it lacks a column of ``s``, else None (the usual case: the view's
+    text stays the same as without it)."""
+    if present is None or all(n in present for n in s.names):
+        return None
+    return present
 
 
 def _defer_binding_clause(version: str) -> str:
@@ -136,7 +147,15 @@ def view_statements(warehouse: Path, names: Iterable[str] | None = None) -> dict
     """Table name -> its ``CREATE OR REPLACE VIEW`` over the current snapshot (all
     canonical tables when ``names`` is None)."""
     selected = list(names) if names is not None else list(table_specs())
-    return {name: view_sql(name, table_files(warehouse, name)) for name in selected}
+    return {name: _current_view_sql(warehouse, name) for name in selected}
+
+
+def _current_view_sql(warehouse: Path, name: str, schema: str | None = None,
+                      root: Path | None = None) -> str:
+    """:func:`view_sql` of ``name`` over its current snapshot (paths relative to
+    ``root`` when given)."""
+    files, present = table_snapshot(warehouse, name)
+    return view_sql(name, files, schema, present, root)
 
 
 def doc_view_statements(name: str) -> list[str]:
@@ -291,8 +310,7 @@ def _rebuild(engine: ViewsEngine, warehouse: Path) -> Path:
     warehouse = Path(warehouse)
     warehouse.mkdir(parents=True, exist_ok=True)
     target = warehouse / VIEWS_FILE
-    statements = {name: view_sql(name, table_files(warehouse, name), SNAPSHOT_SCHEMA,
-                                 root=warehouse)
+    statements = {name: _current_view_sql(warehouse, name, SNAPSHOT_SCHEMA, root=warehouse)
                   for name in table_specs()}
     tmp = warehouse / f".{VIEWS_FILE}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}"
     try:

@@ -10,6 +10,7 @@ from pipeline.config import Config
 from pipeline.decode.ais import decode_ais_sentences
 from pipeline.families import config_from_mapping
 from pipeline.family import Window
+from pipeline.maritime.config import without_faults
 from pipeline.maritime.stage import stage
 from pipeline.simulate.channel import simulate_channel
 from pipeline.units import NS
@@ -31,11 +32,13 @@ def biased(cfg: Config, simulate: dict[str, dict], *, apply: bool = False,
     return with_sections(cfg, radar_bias=base)
 
 
-def scenario_tables(cfg: Config, *, duration_s: float, seed: int, start_ns: int = T0_NS
-                    ) -> tuple[pl.DataFrame, pl.DataFrame, pl.DataFrame]:
+def scenario_tables(cfg: Config, *, duration_s: float, seed: int, start_ns: int = T0_NS,
+                    faults: bool = False) -> tuple[pl.DataFrame, pl.DataFrame, pl.DataFrame]:
     """(radar_tracks, ais_reports, truth) of the channel scenario, canonical columns
-    (radar_tracks also keeps the simulator's ``status``: new/confirmed/coasting)."""
-    sc = simulate_channel(cfg, start_ns=start_ns, duration_s=duration_s, seed=seed)
+    (radar_tracks also keeps the simulator's ``status``: new/confirmed/coasting);
+    without the config's fault schedule unless ``faults``."""
+    sc = simulate_channel(cfg if faults else without_faults(cfg), start_ns=start_ns,
+                          duration_s=duration_s, seed=seed)
     radar = sc.radar_reports.rename(
         {"track_id": "local_track_id", "x_m": "x_site_m", "y_m": "y_site_m"}
     ).with_columns(pl.lit("sim").alias("source_file"),

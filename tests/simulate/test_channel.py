@@ -17,6 +17,7 @@ from polars.testing import assert_frame_equal
 from jobs.simulate import DEFAULT_START_NS, parse_duration, run_simulate
 from pipeline.config import Config
 from pipeline.frames import TWO_PI, enu_to_polar, geodetic_to_enu, wrap_angle
+from pipeline.maritime.config import without_faults
 from pipeline.resources import resource_path
 from pipeline.simulate.ais_traffic import KNOT_MPS
 from pipeline.simulate.channel import ChannelScenario, build_route, simulate_channel
@@ -29,7 +30,9 @@ SEED = 11
 
 @pytest.fixture(scope="module")
 def scenario(cfg: Config) -> ChannelScenario:
-    return simulate_channel(cfg, start_ns=DEFAULT_START_NS, duration_s=DURATION_S, seed=SEED)
+    """The fault-free scenario (the fault schedule is tested in test_channel_faults.py)."""
+    return simulate_channel(without_faults(cfg), start_ns=DEFAULT_START_NS,
+                            duration_s=DURATION_S, seed=SEED)
 
 
 @pytest.fixture(scope="module")
@@ -90,7 +93,8 @@ def test_one_file_per_utc_hour(tmp_path: Path, cfg: Config) -> None:
         assert meta["surveil.scenario"]["file_start_ns"] == str(hour)
         assert meta["surveil.scenario"]["seed"] == "3"
         total += stats.message_count
-    assert total == sc.truth.height + sc.radar_reports.height + sc.ais_sentences.height
+    assert total == (sc.truth.height + sc.radar_reports.height + sc.ais_sentences.height
+                     + sc.fault_truth.height)
 
 
 def test_archive_reads_back_with_schemas(tmp_path: Path, scenario: ChannelScenario) -> None:
@@ -103,6 +107,7 @@ def test_archive_reads_back_with_schemas(tmp_path: Path, scenario: ChannelScenar
         reader = make_reader(f)
         summary = reader.get_summary()
         topics = {c.topic: c for c in summary.channels.values()}
+        # fault-free: no /truth/faults channel (tests/simulate/test_channel_faults.py)
         assert set(topics) == {"/radar/R1/tracks", "/radar/R2/tracks", "/ais/nmea",
                                "/truth/vessels"}
         for topic in ("/radar/R1/tracks", "/radar/R2/tracks"):

@@ -139,5 +139,5 @@ def test_archive_channels_metadata_and_determinism(tmp_path, cfg):
     assert all(ch.metadata == {"platform_id": c.platform_id} for ch in chans.values())
     assert chans["/ownship/gnss/nmea"].message_encoding == "nmea0183"
     names = {summary.schemas[ch.schema_id].name for ch in chans.values() if ch.schema_id}
-    assert names == {"surveil.GyroSignals", "surveil.OwnshipTruth"}
+    assert names == {"surveil.GyroSignals", "surveil.OwnshipTruth", "surveil.FaultTruth"}
     assert summary.statistics.message_count == 120 * 3 + 120 * 4  # GGA RMC VTG + 4 channels

@@ -184,3 +184,41 @@ def test_concurrent_reader_sees_old_or_new_never_a_mix(tmp_path):
     assert len(seen) > 3
     for n, speeds in seen:
         assert (n, frozenset(speeds)) in allowed
+
+
+def test_a_table_written_before_its_schema_gained_a_column(tmp_path):
+    """A warehouse written by an earlier release (here: truth without ``mmsi``): reads give
+    nulls for the new column, views bind, and the next window replace adds the column."""
+    import duckdb
+    from deltalake import write_deltalake
+
+    from pipeline.tables import conform
+    from pipeline.warehouse.views import register_tables
+
+    rows = truth_rows(hours(0, 2))
+    old = conform("truth", rows).drop_columns(["mmsi"])
+    write_deltalake(str(table_path(tmp_path, "truth")), old, partition_by=["date"])
+    got = read_table(tmp_path, "truth")
+    assert got.schema == schema("truth") and got["mmsi"].null_count == got.num_rows
+    con = duckdb.connect()
+    register_tables(con, tmp_path, ["truth"])
+    assert con.execute("SELECT count(*), count(mmsi) FROM truth").fetchone() == (rows.num_rows, 0)
+    replace_window(tmp_path, "truth", rows, start_ns=T0, end_ns=T0 + DAY)
+    assert "mmsi" in DeltaTable(str(table_path(tmp_path, "truth"))).schema().to_arrow().names
+    assert read_table(tmp_path, "truth").equals(read_table(tmp_path, "truth").cast(schema("truth")))
+    register_tables(con, tmp_path, ["truth"])
+    assert con.execute("SELECT count(*) FROM truth").fetchone() == (rows.num_rows,)
+
+
+def test_a_column_doc_edited_since_the_table_was_written(tmp_path):
+    """A column's doc changed in schemas/ after the table was created (main's rejects.stage):
+    delta-rs refuses a write whose column metadata differs; the write keeps the table's."""
+    from deltalake import write_deltalake
+
+    from pipeline.tables import conform
+
+    rows = conform("truth", truth_rows(hours(0, 2)))
+    old = pa.schema([f.with_metadata({"doc": "an older doc"}) for f in rows.schema])
+    write_deltalake(str(table_path(tmp_path, "truth")), rows.cast(old), partition_by=["date"])
+    replace_window(tmp_path, "truth", rows, start_ns=T0, end_ns=T0 + DAY)
+    assert read_table(tmp_path, "truth").num_rows == rows.num_rows

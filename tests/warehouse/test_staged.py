@@ -27,7 +27,9 @@ def stage(folder: Path, source: str, t_ns: np.ndarray, *, rows_per_group: int = 
 def test_stager_writes_sorted_row_groups_per_day_with_stats(tmp_path):
     t = T0_NS + np.arange(5000, dtype=np.int64) * 10**9 * 30  # crosses a day boundary
     files = stage(tmp_path / "s", "/a.mcap", t, rows_per_group=300)
-    days = sorted(f.partition["date"] for f in files)
+    # a day's second row group goes to a second file when the first is still being
+    # written (MAX_FILES_PER_SLOT): how many files a day gets depends on the machine's load
+    days = sorted({f.partition["date"] for f in files})
     assert days == ["2026-01-01", "2026-01-02"]
     assert sum(f.rows for f in files) == 5000
     groups = 0

@@ -1,0 +1,342 @@
+"""Seeded Monte Carlo of channel integrity for radars, AIS and the own ship's GNSS
+(issue 22), measured like the airfield's (``pipeline.experiments.airfield_montecarlo``).
+
+One seed = the ``channel`` scenario with a compressed fault schedule (:func:`mc_faults`:
+every maritime fault kind once, 90 s each, 60 s apart, radar and AIS faults in turn)
+run through the maritime stage twice (``[channel_integrity] exclusion`` on and off) from
+the same simulated reports, the same scenario without faults (the false-alarm share and
+the fault-free accuracy of each radar), and the ``ownship`` scenario with a GNSS outage
+and a GNSS position jump through the nav stage (and without them). Everything from the
+simulators onwards is the production code in memory: AIS and the own ship's NMEA go
+through the decoders, the radar reports skip only the JSON round trip (tested exact).
+
+Per injected fault (one row per affected channel: a swap is two):
+
+- **detected within 3**: a radar's first decision with eta = 1 (any sector) within 3 of
+  its scan periods after the fault start; an AIS transponder's first flagged report
+  among its first 3 reports from the fault start (a spoofer: from its first report);
+  the GNSS channel's first flagged step within 3 fixes;
+- the delay (scans, reports, fixes) of that first flag, whether it came at all during
+  the fault, and the share of the channel's decisions during the fault with eta = 1;
+- fused accuracy during the fault, on the (time, ship) points fused in every run: RMS
+  error against truth with exclusion on and off and their mean NEES (2 when the fused
+  sigmas are honest), and, from the fault-free run, the RMS of the fused picture and of
+  each radar alone on the same points (the best of them is the goal for a radar bias
+  jump).
+
+Fault-free runs give the share of decisions flagged per sensor kind (against radar_q,
+ais_q; the GNSS position test against ``gnss_q`` and the filter's gate against its 3-sigma
+tail, apart) and the share of decisions after which the channel was excluded (what false
+alarms cost the fused picture: a radar is excluded after ``radar_confirm`` failures in a
+row).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+import polars as pl
+
+from pipeline.config import Config
+from pipeline.decode.ais import decode_ais_sentences
+from pipeline.decode.nmea import decode_nmea_sentences
+from pipeline.executors import make_executor
+from pipeline.family import Window
+from pipeline.filters.integrity import chi2_thresholds
+from pipeline.maritime.config import ChannelFault, maritime_config, with_faults, without_faults
+from pipeline.maritime.stage import stage as maritime_stage
+from pipeline.nav.config import ownship_config
+from pipeline.nav.solution import nav_window
+from pipeline.simulate import DEFAULT_START_NS
+from pipeline.simulate.channel import simulate_channel
+from pipeline.simulate.ownship import (
+    gnss_sentences,
+    hdt_sentences,
+    simulate_ownship,
+    vhw_sentences,
+)
+from pipeline.units import NS
+
+DETECT_WITHIN = 3
+FAULT_S = 90.0
+GAP_S = 60.0
+FIRST_S = 120.0
+LEAD_OUT_S = 60.0
+SPOOF_MMSI = 272999001
+GNSS_OUTAGE = (300.0, 60.0)
+GNSS_JUMP = (450.0, 60.0, 50.0, -30.0)
+GNSS_DURATION_S = 600.0
+
+
+def mc_faults(cfg: Config) -> tuple[ChannelFault, ...]:
+    """The compressed schedule of one Monte Carlo scene: every maritime fault kind once,
+    ``FAULT_S`` long, ``GAP_S`` apart from ``FIRST_S`` on (radar and AIS in turn; the
+    sizes of the default config's schedule)."""
+    r1, r2 = (s.site_id for s in cfg.radar_sites[:2])
+    kinds = [
+        ChannelFault("radar_range_bias", 0, 0, site_id=r2, range_bias_m=80.0),
+        ChannelFault("ais_offset", 0, 0, north_m=250.0),
+        ChannelFault("radar_azimuth_bias", 0, 0, site_id=r1, azimuth_bias_rad=math.radians(1.0)),
+        ChannelFault("ais_stuck", 0, 0),
+        ChannelFault("radar_outage", 0, 0, site_id=r1),
+        ChannelFault("ais_mmsi_swap", 0, 0),
+        ChannelFault("radar_time_offset", 0, 0, site_id=r2, time_offset_s=5.0),
+        ChannelFault("ais_spoof", 0, 0, mmsi=SPOOF_MMSI, start_lat_deg=46.392,
+                     start_lon_deg=30.870, course_rad=math.radians(90.0), speed_mps=6.0),
+        ChannelFault("radar_blank", 0, 0, site_id=r2, azimuth_from_rad=math.radians(240.0),
+                     azimuth_to_rad=math.radians(285.0)),
+        ChannelFault("radar_noise", 0, 0, site_id=r1, factor=4.0),
+    ]
+    return tuple(replace(f, start_s=FIRST_S + i * (FAULT_S + GAP_S), duration_s=FAULT_S)
+                 for i, f in enumerate(kinds))
+
+
+def scene_duration_s(cfg: Config) -> float:
+    return FIRST_S + len(mc_faults(cfg)) * (FAULT_S + GAP_S) - GAP_S + LEAD_OUT_S
+
+
+@dataclass(frozen=True)
+class McUnit:
+    """One seed (picklable)."""
+
+    cfg: Config
+    seed: int
+    start_ns: int = DEFAULT_START_NS
+
+
+def _maritime_inputs(cfg: Config, seed: int, start_ns: int, duration_s: float
+                     ) -> tuple[dict[str, pl.DataFrame], pl.DataFrame]:
+    sc = simulate_channel(cfg, start_ns=start_ns, duration_s=duration_s, seed=seed)
+    radar = sc.radar_reports.rename(
+        {"track_id": "local_track_id", "x_m": "x_site_m", "y_m": "y_site_m"}
+    ).with_columns(pl.lit("simulated").alias("source_file"), pl.lit("/radar").alias("topic"))
+    s = sc.ais_sentences
+    ais, _, _ = decode_ais_sentences([x.encode() for x in s["sentence"].to_list()],
+                                     s["log_time_ns"].to_numpy(), source_file="simulated",
+                                     topic="/ais/nmea")
+    return {"radar_tracks": radar, "ais_reports": pl.from_arrow(ais), "truth": sc.truth}, \
+        sc.fault_truth
+
+
+def _with_exclusion(cfg: Config, on: bool) -> Config:
+    mc = maritime_config(cfg)
+    fam = dict(cfg.families)
+    fam["maritime"] = replace(mc, integrity=replace(mc.integrity, exclusion=on))
+    return replace(cfg, families=fam)
+
+
+def run_seed(unit: McUnit) -> dict[str, pl.DataFrame]:
+    """Metrics of one seed: ``faults`` (one row per injected fault and channel),
+    ``false_alarms`` (fault-free decisions and flags per sensor kind)."""
+    cfg = with_faults(unit.cfg, mc_faults(unit.cfg))
+    duration = scene_duration_s(unit.cfg)
+    window = Window(unit.start_ns, unit.start_ns + round(duration * NS))
+    inputs, truth = _maritime_inputs(cfg, unit.seed, unit.start_ns, duration)
+    on = maritime_stage(inputs, window, _with_exclusion(cfg, True))
+    off = maritime_stage(inputs, window, _with_exclusion(cfg, False))
+    clean_inputs, _ = _maritime_inputs(without_faults(cfg), unit.seed, unit.start_ns, duration)
+    clean = maritime_stage(clean_inputs, window, _with_exclusion(cfg, True))
+    rows = _fault_rows(cfg, truth, on, off, clean, inputs["ais_reports"])
+    fa = _false_alarms(clean["maritime_channel_health"], "sensor_kind")
+    g_faults, g_fa = _gnss_seed(unit)
+    seed = pl.lit(unit.seed).alias("seed")
+    return {"faults": pl.concat([rows, g_faults], how="diagonal_relaxed").with_columns(seed),
+            "false_alarms": pl.concat([fa, g_fa]).with_columns(seed)}
+
+
+def _false_alarms(health: pl.DataFrame, key: str) -> pl.DataFrame:
+    return health.filter(pl.col("eta").is_not_null()).group_by(key).agg(
+        pl.len().alias("decisions"), (pl.col("eta") == 1).sum().alias("flagged"),
+        pl.col("q").mean().alias("q"), pl.col("excluded").sum().alias("excluded"),
+    ).rename({key: "sensor_kind"}).select("sensor_kind", "decisions", "flagged", "q",
+                                          "excluded")
+
+
+def _points(errors: pl.DataFrame, source: str, t0: int, t1: int) -> pl.DataFrame:
+    """(time_ns, vessel, error_m) of one source's points against truth in [t0, t1)."""
+    return errors.filter(
+        (pl.col("reference") == "truth") & (pl.col("source") == source)
+        & pl.col("time_ns").is_between(t0, t1, closed="left") & pl.col("error_m").is_not_null()
+    ).select("time_ns", pl.col("reference_id").alias("vessel"), "error_m", "nees").unique(
+        ["time_ns", "vessel"], keep="first")
+
+
+def _rms(points: pl.DataFrame) -> float:
+    v = points["error_m"].to_numpy()
+    return float(np.sqrt(np.mean(v**2))) if v.size else float("nan")
+
+
+def _accuracy(on: dict, off: dict, clean: dict, sites: list[str], t0: int, t1: int
+              ) -> dict[str, float]:
+    """RMS errors during a fault on the same points: the (time, vessel) pairs fused in
+    every run (exclusion on, off, fault-free); each fault-free radar alone on those of
+    them it sees, and the best of them."""
+    key = ["time_ns", "vessel"]
+    f_on = _points(on["track_errors"], "fused", t0, t1)
+    f_off = _points(off["track_errors"], "fused", t0, t1)
+    f_clean = _points(clean["track_errors"], "fused", t0, t1)
+    common = f_on.select(key).join(f_off.select(key), on=key).join(f_clean.select(key), on=key)
+    radar = {s: _rms(_points(clean["track_errors"], s, t0, t1).join(common, on=key))
+             for s in sites}
+    return {
+        "points": common.height,
+        "fused_rms_on_m": _rms(f_on.join(common, on=key)),
+        "fused_rms_off_m": _rms(f_off.join(common, on=key)),
+        "clean_fused_rms_m": _rms(f_clean.join(common, on=key)),
+        "fused_nees_on": float(f_on.join(common, on=key)["nees"].mean() or np.nan),
+        "fused_nees_off": float(f_off.join(common, on=key)["nees"].mean() or np.nan),
+        **{f"clean_{s}_rms_m": v for s, v in radar.items()},
+        "clean_best_radar_rms_m": float(np.nanmin(list(radar.values()))),
+    }
+
+
+def _fault_rows(cfg: Config, truth: pl.DataFrame, on: dict, off: dict, clean: dict,
+                ais: pl.DataFrame) -> pl.DataFrame:
+    h = on["maritime_channel_health"]
+    periods = {s.site_id: s.scan_period_s for s in cfg.radar_sites}
+    sites = list(periods)
+    rows = []
+    for f in truth.iter_rows(named=True):  # one row per injected fault and channel
+        t0, t1 = f["start_ns"], f["end_ns"]
+        ch = h.filter((pl.col("channel") == f["channel"]) & (pl.col("time_ns") >= t0)
+                      & (pl.col("time_ns") < t1 + round(LEAD_OUT_S * NS)))
+        during = ch.filter(pl.col("time_ns") < t1)
+        flags = ch.filter(pl.col("eta") == 1)
+        first = flags["time_ns"].min()
+        if f["sensor_kind"] == "radar":
+            unit = periods[f["channel"]]
+            delay = None if first is None else (first - t0) / NS / unit
+        else:
+            sent = ais.filter((pl.col("mmsi") == f["mmsi"]) & (pl.col("time_ns") >= t0))
+            delay = None if first is None else int((sent["time_ns"] <= first).sum())
+        rows.append({
+            "kind": f["kind"], "sensor_kind": f["sensor_kind"], "channel": f["channel"],
+            "detected": first is not None and first < t1,
+            "delay": delay,
+            "detected_within_3": delay is not None and delay <= DETECT_WITHIN,
+            "flagged_share_during": float(during["eta"].mean()) if during.height else None,
+            **_accuracy(on, off, clean, sites, t0, t1),
+        })
+    return pl.DataFrame(rows)
+
+
+def _gnss_seed(unit: McUnit) -> tuple[pl.DataFrame, pl.DataFrame]:
+    """The ownship scenario with one outage and one position jump, and without them,
+    through the nav stage: per fault row and the fault-free false alarms."""
+    oc = ownship_config(unit.cfg)
+    # the scenario's single-fix outliers are faults too: none here, so that the fault-free
+    # run measures false alarms and the faulty one these two faults only
+    faulty = replace(oc.scenario, outages_s=(GNSS_OUTAGE,), jumps=(GNSS_JUMP,), outlier_count=0)
+    clean = replace(oc.scenario, outages_s=(), jumps=(), outlier_count=0)
+    sol_f, truth = _nav_run(unit, faulty)
+    sol_c, _ = _nav_run(unit, clean)
+    rows = []
+    for f in truth.iter_rows(named=True):
+        t0, t1 = f["start_ns"], f["end_ns"]
+        w = sol_f.filter(pl.col("time_ns") >= t0)
+        flags = w.filter(pl.col("gnss_eta") == 1)
+        first = flags["time_ns"].min()
+        # delay in fixes: faulty (or missing) fixes from the start up to the first flag
+        delay = None if first is None else int(
+            ((w["time_ns"] > t0) & (w["time_ns"] <= first)).sum())
+        during = w.filter(pl.col("time_ns") < t1)
+        rows.append({
+            "kind": f["kind"], "sensor_kind": "gnss", "channel": f["channel"],
+            "detected": first is not None and first < t1, "delay": delay,
+            "detected_within_3": delay is not None and delay <= DETECT_WITHIN,
+            "flagged_share_during": float((during["gnss_eta"] == 1).mean()),
+            "fused_rms_on_m": _nav_rms(sol_f, t0, t1), "clean_fused_rms_m": _nav_rms(sol_c, t0, t1),
+        })
+    # fault-free: the position test (at gnss_q) and the filter's 3-sigma gate apart
+    d1, d2 = chi2_thresholds(oc.nav.gnss_q, 2)
+    pos = sol_c.filter(pl.col("gnss_nis").is_not_null()).select(
+        pl.lit("gnss_position").alias("sensor_kind"), pl.len().alias("decisions"),
+        ((pl.col("gnss_nis") <= d1) | (pl.col("gnss_nis") >= d2)).sum().alias("flagged"),
+        pl.lit(oc.nav.gnss_q).alias("q"), pl.col("gnss_excluded").sum().alias("excluded"))
+    gate = sol_c.filter(pl.col("gate").is_not_null()).select(
+        pl.lit("gnss_gate").alias("sensor_kind"), pl.len().alias("decisions"),
+        (pl.col("gate") == "reject").sum().alias("flagged"),
+        pl.lit(math.erfc(oc.model.settings.gate_n_sigma / math.sqrt(2.0))).alias("q"),
+        (pl.col("gate") == "reject").sum().alias("excluded"))  # a rejected fix is not used
+    return pl.DataFrame(rows), pl.concat([pos, gate], how="vertical_relaxed")
+
+
+def _nav_rms(sol: pl.DataFrame, t0: int, t1: int) -> float:
+    v = sol.filter(pl.col("time_ns").is_between(t0, t1, closed="left"))["position_error_m"]
+    v = v.drop_nulls().to_numpy()
+    return float(np.sqrt(np.mean(v**2))) if v.size else float("nan")
+
+
+def _nav_run(unit: McUnit, sc_cfg) -> tuple[pl.DataFrame, pl.DataFrame]:
+    oc = ownship_config(unit.cfg)
+    sc = simulate_ownship(sc_cfg, start_ns=unit.start_ns, duration_s=GNSS_DURATION_S,
+                          seed=unit.seed)
+    pid = sc.platform_id
+    tables = {}
+    for frame_ in (gnss_sentences(sc.gnss), hdt_sentences(sc.gyro_heading),
+                   vhw_sentences(sc.speed_log)):
+        out = decode_nmea_sentences([s.encode() for s in frame_["sentence"].to_list()],
+                                    frame_["time_ns"].to_numpy(), source_file="simulated",
+                                    topic="/ownship", platform_id=pid)
+        for name in ("nav_gnss", "nav_heading", "nav_speed_log"):
+            t = pl.from_arrow(out[name])
+            if t.height:
+                tables[name] = t
+    gyro = sc.gyro_signals.with_columns(pl.lit(pid).alias("platform_id"))
+    truth = sc.truth.select("time_ns", "platform_id", "lat_deg", "lon_deg", "heading_rad")
+    end_ns = unit.start_ns + round(GNSS_DURATION_S * NS)
+    out = nav_window(tables["nav_gnss"], tables["nav_heading"], tables["nav_speed_log"], gyro,
+                     truth, start_ns=unit.start_ns, end_ns=end_ns, cfg=unit.cfg, oc=oc)
+    return out["nav_solution"], sc.fault_truth
+
+
+def run_montecarlo(cfg: Config, *, seeds: range | list[int], executor: str = "process"
+                   ) -> dict[str, pl.DataFrame]:
+    """Every seed's metrics, concatenated; raises if a seed fails."""
+    units = [McUnit(cfg, int(s)) for s in seeds]
+    ex = make_executor(executor, min(cfg.execution.max_workers, len(units)),
+                       cfg.execution.threads_per_worker)
+    parts: dict[str, list[pl.DataFrame]] = {"faults": [], "false_alarms": []}
+    for r in ex.map_units(run_seed, units):
+        if not r.ok:
+            raise RuntimeError(f"seed {r.unit.seed} failed: {r.error}")
+        for k, v in r.value.items():
+            parts[k].append(v)
+    return {k: pl.concat(v, how="diagonal_relaxed") for k, v in parts.items()}
+
+
+def summarise(res: dict[str, pl.DataFrame]) -> pl.DataFrame:
+    """One row per fault kind: channels faulted (runs), share detected within 3 scans /
+    reports / fixes, share detected during the fault, median and worst delay, fused RMS
+    during the fault (median over runs) with exclusion on and off, fault-free fused and
+    best single radar; then one row per sensor kind of the fault-free false alarms."""
+    f = res["faults"]
+    faults = f.group_by("kind", "sensor_kind").agg(
+        pl.len().alias("runs"),
+        pl.col("detected_within_3").mean().alias("p_detect_3"),
+        pl.col("detected").mean().alias("p_detect"),
+        pl.col("delay").median().alias("median_delay"),
+        pl.col("delay").max().alias("worst_delay"),
+        pl.col("flagged_share_during").median().alias("flagged_share_during"),
+        pl.col("fused_rms_on_m").median().alias("fused_rms_on_m"),
+        pl.col("fused_rms_off_m").median().alias("fused_rms_off_m"),
+        pl.col("clean_fused_rms_m").median().alias("clean_fused_rms_m"),
+        pl.col("clean_best_radar_rms_m").median().alias("clean_best_radar_rms_m"),
+        pl.col("fused_nees_on").median().alias("fused_nees_on"),
+        pl.col("fused_nees_off").median().alias("fused_nees_off"),
+        (pl.col("fused_rms_on_m") <= pl.col("clean_best_radar_rms_m")).mean().alias(
+            "share_on_le_best_radar"),
+    ).with_columns(pl.lit(None, pl.Float64).alias("false_alarm_share"),
+                   pl.lit(None, pl.Float64).alias("q"))
+    fa = res["false_alarms"].group_by("sensor_kind").agg(
+        pl.col("decisions").sum(), pl.col("flagged").sum(), pl.col("q").mean(),
+        pl.col("excluded").sum())
+    fa = fa.select(
+        pl.lit("(fault-free)").alias("kind"), "sensor_kind",
+        pl.col("decisions").cast(pl.UInt32).alias("runs"),
+        (pl.col("flagged") / pl.col("decisions")).alias("false_alarm_share"), "q",
+        (pl.col("excluded") / pl.col("decisions")).alias("false_exclusion_share"))
+    return pl.concat([faults.sort("sensor_kind", "kind"), fa.sort("sensor_kind")],
+                     how="diagonal_relaxed")

@@ -1,0 +1,225 @@
+"""Faster paths of the maritime stage against the references they replaced (STYLE.md:
+a faster path keeps its reference and is tested against it)."""
+
+from __future__ import annotations
+
+import numpy as np
+import polars as pl
+import pytest
+from polars.testing import assert_frame_equal
+
+from pipeline.families import load_config
+from pipeline.maritime import identity, score
+from pipeline.maritime.associate import assign, assign_grouped, gate_threshold
+
+T0_NS = 1_768_471_200 * 10**9
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_assign_grouped_equals_assign_per_group(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    rows, cols, costs, groups, miss_all = [], [], [], [], []
+    r0 = c0 = 0
+    expect_r, expect_c = [], []
+    for g in range(12):
+        n, m = rng.integers(0, 9), rng.integers(0, 9)
+        cost = np.where(rng.random((n, m)) < 0.35, rng.uniform(0, 10, (n, m)), np.inf)
+        if g % 3 == 0 and n and m:  # ties
+            cost[cost < 5] = 2.0
+        miss = rng.uniform(1, 12, n)
+        if n and m:
+            r, c = assign(cost, miss)
+            expect_r.append(r0 + r)
+            expect_c.append(c0 + c)
+        i, j = np.nonzero(np.isfinite(cost))
+        rows.append(r0 + i)
+        cols.append(c0 + j)
+        costs.append(cost[i, j])
+        groups.append(np.full(n, g))
+        miss_all.append(miss)
+        r0, c0 = r0 + n, c0 + m
+    perm = rng.permutation(sum(map(len, rows)))  # entries in any order
+    r, c = assign_grouped(np.concatenate(rows)[perm], np.concatenate(cols)[perm],
+                          np.concatenate(costs)[perm], np.concatenate(miss_all),
+                          np.concatenate(groups), c0)
+    np.testing.assert_array_equal(r, np.concatenate(expect_r) if expect_r else [])
+    np.testing.assert_array_equal(c, np.concatenate(expect_c) if expect_c else [])
+
+
+def _crowd(seed: int, n_epochs: int = 20, n: int = 120) -> tuple[pl.DataFrame, pl.DataFrame]:
+    """Tracks and AIS points crowded enough that gates overlap."""
+    rng = np.random.default_rng(seed)
+    t = np.repeat(T0_NS + 4 * 10**9 * np.arange(n_epochs), n)
+    base = rng.uniform(0, 6000, (n, 2))
+    xy = np.tile(base, (n_epochs, 1)) + rng.normal(0, 40, (n * n_epochs, 2))
+    sig = rng.choice([10.0, 60.0, 300.0], n * n_epochs)
+    tracks = pl.DataFrame({
+        "time_ns": t, "system_track_id": np.tile(np.arange(n), n_epochs),
+        "x_enu_m": xy[:, 0], "y_enu_m": xy[:, 1], "sigma_x_m": sig, "sigma_y_m": sig * 0.7,
+        "cov_xy_m2": sig * sig * 0.2,
+    })
+    keep = rng.random(n * n_epochs) < 0.8
+    ais = pl.DataFrame({
+        "time_ns": t[keep], "mmsi": 200_000_000 + np.tile(np.arange(n), n_epochs)[keep],
+        "ais_time_ns": t[keep], "x_enu_m": xy[keep, 0] + rng.normal(0, 15, keep.sum()),
+        "y_enu_m": xy[keep, 1] + rng.normal(0, 15, keep.sum()), "P_xx": 100.0,
+        "P_yy": 100.0, "P_xy": 0.0,
+    })
+    return tracks.sort("time_ns", "system_track_id"), ais.sort("time_ns", "mmsi")
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_ais_match_equals_dense_reference(seed: int) -> None:
+    tracks, ais = _crowd(seed)
+    gate = gate_threshold(0.999)
+    fast = identity._match(tracks, ais, gate)
+    ref = identity._match_reference(tracks, ais, gate)
+    assert ref.height > 1000
+    assert_frame_equal(fast, ref)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_nearest_truth_equals_polars_reference(seed: int) -> None:
+    cfg = load_config()
+    rng = np.random.default_rng(seed)
+    n_v, n_e = 80, 15
+    t = np.repeat(T0_NS + 5 * 10**9 * np.arange(n_e), n_v)
+    lat = 46.40 + np.tile(rng.uniform(-0.05, 0.05, n_v), n_e) + rng.normal(0, 1e-5, n_v * n_e)
+    lon = 30.90 + np.tile(rng.uniform(-0.05, 0.05, n_v), n_e)
+    truth = pl.DataFrame({"time_ns": t, "vessel_id": np.tile(np.arange(n_v), n_e),
+                          "mmsi": np.tile(np.arange(n_v), n_e) + 1000, "lat_deg": lat,
+                          "lon_deg": lon, "course_rad": 0.0, "speed_mps": 0.0})
+    epochs = T0_NS + 4 * 10**9 * np.arange(15)
+    at = score.truth_at_epochs(truth, epochs, cfg.region)
+    pts = at.sample(400, with_replacement=True, seed=seed).select(
+        "time_ns", (pl.col("ref_x_m") + rng.normal(0, 600, 400)).alias("x_enu_m"),
+        (pl.col("ref_y_m") + rng.normal(0, 600, 400)).alias("y_enu_m"),
+    ).with_row_index("system_track_id").with_columns(pl.col("system_track_id").cast(pl.Int64))
+    pts = pts.sort("time_ns", "system_track_id")
+    ref = score._truth_reference_reference(pts, truth, cfg.region, 1000.0, 0.0).sort(
+        "time_ns", "system_track_id")
+    row = score.nearest_truth(pts["time_ns"].to_numpy(), pts["x_enu_m"].to_numpy(),
+                              pts["y_enu_m"].to_numpy(), at, 1000.0)
+    got = pts.filter(pl.Series(row >= 0)).select(
+        "time_ns", "system_track_id",
+        pl.Series("reference_id", at["vessel_id"].to_numpy()[row[row >= 0]]))
+    assert ref.height > 100
+    assert_frame_equal(got, ref.select("time_ns", "system_track_id", "reference_id"))
+
+
+def test_stage_outputs_come_sorted_by_the_tables_sort_keys() -> None:
+    """The family declares sorted_outputs: the batch writes the frames as they are."""
+    from maritime_helpers import batch_tables
+
+    from pipeline import tables
+    from pipeline.maritime.stage import FAMILY
+
+    assert FAMILY.sorted_outputs
+    out = batch_tables(load_config(), duration_s=600.0, seed=3)
+    for name, frame in out.items():
+        if name == "rejects" or frame.height == 0:
+            continue
+        shaped = pl.from_arrow(tables.shape(name, frame))
+        assert_frame_equal(shaped, pl.from_arrow(tables.conform(name, frame)), check_exact=True)
+
+
+@pytest.fixture(scope="module")
+def region_synced():
+    """Ten busy minutes of a small region, aligned (and synchronised) with its config."""
+    from pathlib import Path
+    from tempfile import mkdtemp
+
+    from pipeline.maritime.align import align_reports
+    from pipeline.maritime.config import maritime_config
+    from pipeline.maritime.sync import epoch_grid
+    from pipeline.simulate.region import RegionSimulation
+    from pipeline.simulate.region_layout import region_config, region_layout, toml_text
+
+    path = Path(mkdtemp()) / "region.toml"
+    path.write_text(toml_text(region_config(region_layout(5))))
+    cfg = load_config(path)
+    sim = RegionSimulation(region_layout(5), n_ships=200, seed=9, start_ns=T0_NS,
+                           duration_s=600.0)
+    radar = pl.concat([s.radar_reports for s in sim.slices()]).rename(
+        {"track_id": "local_track_id", "x_m": "x_site_m", "y_m": "y_site_m"})
+    aligned, _ = align_reports(radar, cfg)
+    mc = maritime_config(cfg)
+    epochs = epoch_grid(T0_NS + 10 * 10**9, T0_NS + 600 * 10**9, mc.sync.epoch_period_s)
+    return cfg, aligned, epochs
+
+
+def test_synchronise_equals_polars_reference(region_synced) -> None:
+    from pipeline.maritime.config import maritime_config
+    from pipeline.maritime.sync import synchronise, synchronise_reference
+
+    cfg, aligned, epochs = region_synced
+    sync = maritime_config(cfg).sync
+    fast = synchronise(aligned, epochs_ns=epochs, sync=sync)
+    assert fast.height > 50_000
+    assert_frame_equal(fast, synchronise_reference(aligned, epochs_ns=epochs, sync=sync),
+                       check_exact=True)
+    shuffled = aligned.sample(fraction=1.0, shuffle=True, seed=1)  # any input order
+    assert_frame_equal(synchronise(shuffled, epochs_ns=epochs, sync=sync), fast,
+                       check_exact=True)
+
+
+def test_associate_and_fuse_equal_references(region_synced) -> None:
+    """Native epoch loop + numpy leave-one-out and fusion (Kahan group sums, polars'
+    trigonometry) give bit for bit the frames of the numpy/polars references."""
+    from pipeline.maritime.associate import associate_tracks, associate_tracks_reference
+    from pipeline.maritime.config import maritime_config
+    from pipeline.maritime.fuse import fuse, fuse_reference
+    from pipeline.maritime.sync import synchronise
+
+    cfg, aligned, epochs = region_synced
+    mc = maritime_config(cfg)
+    synced = synchronise(aligned, epochs_ns=epochs, sync=mc.sync)
+    fast = associate_tracks(synced, cfg=mc.association, id_base=7_000)
+    ref = associate_tracks_reference(synced, cfg=mc.association, id_base=7_000)
+    assert_frame_equal(fast, ref, check_exact=True)
+    assert_frame_equal(fuse(fast), fuse_reference(ref), check_exact=True)
+
+
+def test_stage_siap_pairs_and_cross_track_equal_references() -> None:
+    """The channel scenario through the stage, then the polars references of SIAP's
+    candidate pairs and of the cross-track table on the same frames."""
+    from maritime_helpers import scenario_tables
+
+    from pipeline.family import Window
+    from pipeline.maritime import cross_track, siap
+    from pipeline.maritime.config import maritime_config
+    from pipeline.maritime.stage import stage
+
+    cfg = load_config()
+    radar, ais, truth = scenario_tables(cfg, duration_s=900.0, seed=5)
+    w = Window(1_768_435_200 * 10**9 + 60 * 10**9, 1_768_435_200 * 10**9 + 840 * 10**9)
+    out = stage({"radar_tracks": radar, "ais_reports": ais, "truth": truth}, w, cfg)
+    ref = cross_track.cross_track_by_leg_reference(
+        out["system_tracks"], out["associations"], out["track_errors"], legs=cfg.fairway_legs,
+        region=cfg.region, sites=cfg.radar_sites)
+    assert ref.height > 1000
+    assert_frame_equal(out["cross_track_by_leg"], ref, check_exact=True)
+    tracks = siap._tracks(out["system_tracks"])
+    truths = siap.truth_states(truth, out["system_tracks"]["time_ns"].unique().to_numpy(),
+                               cfg.region)
+    got = siap.candidate_pairs(tracks, truths, maritime_config(cfg).siap)
+    want = siap.candidate_pairs_reference(tracks, truths, maritime_config(cfg).siap)
+    assert want.height > 1000
+    assert_frame_equal(got.drop("_i", "_j"), want, check_exact=True, check_dtypes=False)
+
+
+@pytest.mark.parametrize(("window_s", "min_matches"), [(300.0, 3), (20.0, 1), (60.0, 2)])
+def test_vote_identity_rows_equal_join_asof_reference(window_s: float, min_matches: int) -> None:
+    tracks, ais = _crowd(7, n_epochs=40, n=60)
+    # a few MMSIs on two tracks, two MMSIs on one track: contested votes
+    ais = ais.with_columns(pl.when(pl.col("mmsi") % 7 == 0).then(pl.col("mmsi") + 1)
+                           .otherwise(pl.col("mmsi")).alias("mmsi"))
+    matches = identity._match(tracks, ais, gate_threshold(0.9999))
+    points = tracks.select("time_ns", "system_track_id")
+    ref = points.join(identity.vote_identity(points, matches, window_s, min_matches),
+                      on=["time_ns", "system_track_id"], how="left")["mmsi"]
+    got = identity.vote_identity_rows(points["time_ns"].to_numpy(),
+                                      points["system_track_id"].to_numpy(), matches,
+                                      window_s, min_matches)
+    assert ref.is_not_null().sum() > 100
+    assert got.to_list() == ref.to_list()
