@@ -13,6 +13,23 @@ table that removes the window's old files and adds the staged ones (a file that 
 holds rows outside the window is rewritten without them), so no row passes through the
 driver and its memory does not grow with the window. A failure or a crash before the
 commit leaves the previous data of the window untouched.
+
+**Units own rows.** Every committed unit is recorded in ``batch_units`` (family, start,
+end). A batch whose window overlaps committed units is widened to cover them whole
+(:func:`owned_window`, repeated until no unit straddles an edge), and each family's units
+inside are cut as a single pass cuts them: at its unit grid, and, for a family without a
+grid (one unit per window), at the edges of its committed units. So a reprocess of any
+sub-window re-runs exactly the units that own it, with the same inputs, and replaces
+their rows: an aggregate row keyed by its unit (``siap_by_sector``) is replaced, never
+left beside a new one, and every table equals the single-pass result. A family with a
+``join_units`` (system track ids stitched across seams) also joins the window's first
+unit to the rows committed just before the window (``stitch_lookback_s``), so ids
+continue across the window's leading edge as they do across unit seams.
+
+**One commit for readers.** Families that read another family's output run in a later
+wave (``family_waves``: gaps after maritime) and read this batch's staged rows of it
+inside the window. The commits of a window sit between a pending marker and its removal
+(``pipeline.warehouse.pending``): readers see every table of the window old or new.
 """
 
 from __future__ import annotations
@@ -22,7 +39,7 @@ import itertools
 import logging
 import shutil
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -37,7 +54,14 @@ from pipeline.families import FAMILIES, family
 from pipeline.family import Family, Relabel, Window, relabel
 from pipeline.signals import deferred_interrupts
 from pipeline.units import NS
-from pipeline.warehouse.delta import read_table, replace_rows, volume_cuts, volume_profile
+from pipeline.warehouse import pending
+from pipeline.warehouse.delta import (
+    read_table,
+    replace_rows,
+    replace_window,
+    volume_cuts,
+    volume_profile,
+)
 from pipeline.warehouse.staged import StagedFile, TableStager, commit_window, read_staged
 from pipeline.warehouse.views import rebuild_views_file, warm_up
 
@@ -54,12 +78,17 @@ class BatchUnit:
     end_ns: int
     cfg: Config
     family: str = "maritime"
+    # {table: staged Parquet files}: this batch's rows of another family's output for
+    # the whole window, read instead of the warehouse's rows inside the window
+    overrides: tuple[tuple[str, tuple[str, ...]], ...] = ()
+    window: tuple[int, int] | None = None  # the batch window the overrides cover
 
 
 @dataclass
 class BatchSummary:
     start_ns: int
     end_ns: int
+    requested: tuple[int, int] | None = None  # the window asked for, when widened
     units_total: int = 0
     failed_units: list[str] = field(default_factory=list)
     rows: dict[str, int] = field(default_factory=dict)
@@ -78,6 +107,9 @@ class BatchSummary:
             f"{self.units_total} unit(s), {len(self.failed_units)} failed, "
             f"{'committed' if self.committed else 'NOT committed (previous data kept)'}"
         ]
+        if self.requested is not None:
+            lines.append(f"  (asked for [{_iso(self.requested[0])}, {_iso(self.requested[1])}): "
+                         "widened to the committed units it overlaps, re-run whole)")
         lines += [f"  {name:<16} {n:>9} rows" for name, n in self.rows.items()]
         if self.family_s:
             lines.append("  time: " + ", ".join(f"{fam} {s:.1f} s" for fam, s in
@@ -89,12 +121,20 @@ class BatchSummary:
         return "\n".join(lines)
 
 
-def read_inputs(fam: Family, warehouse: Path, cfg: Config, window: Window
-                ) -> dict[str, pl.DataFrame]:
-    """The tables ``fam``'s stage declares, each over its own span around ``window``."""
+def read_inputs(fam: Family, warehouse: Path, cfg: Config, window: Window,
+                overrides: dict[str, tuple[str, ...]] | None = None,
+                batch_window: tuple[int, int] | None = None) -> dict[str, pl.DataFrame]:
+    """The tables ``fam``'s stage declares, each over its own span around ``window``. A
+    table in ``overrides`` (another family's output of this same batch) is read from
+    those files inside ``batch_window`` and from the warehouse outside it."""
     out = {}
     for spec in fam.inputs(cfg):
         columns = list(spec.columns) if spec.columns else None
+        if overrides and spec.table in overrides and batch_window is not None:
+            lo, hi = (None, None) if spec.whole_table else spec.span_ns(window)
+            out[spec.table] = _overridden(warehouse, spec.table, overrides[spec.table],
+                                          batch_window, lo, hi, columns)
+            continue
         if spec.whole_table:
             table = read_table(warehouse, spec.table, columns=columns, sort=spec.sorted)
         else:
@@ -103,6 +143,32 @@ def read_inputs(fam: Family, warehouse: Path, cfg: Config, window: Window
                                sort=spec.sorted)
         out[spec.table] = pl.from_arrow(table)
     return out
+
+
+def _overridden(warehouse: Path, name: str, paths: tuple[str, ...], batch_window: tuple[int, int],
+                lo: int | None, hi: int | None, columns: list[str] | None) -> pl.DataFrame:
+    """Rows of ``name`` in [lo, hi): this batch's (``paths``) inside ``batch_window``, the
+    warehouse's outside it, sorted by the table's sort key."""
+    w_lo, w_hi = batch_window
+    time_col = tables.spec(name).time_column
+    parts = []
+    if lo is None or lo < w_lo:  # the warehouse's rows before the batch window
+        parts.append(pl.from_arrow(read_table(warehouse, name, start_ns=lo, end_ns=w_lo,
+                                              columns=columns)))
+    if hi is None or hi > w_hi:  # and after it
+        parts.append(pl.from_arrow(read_table(warehouse, name, start_ns=w_hi, end_ns=hi,
+                                              columns=columns)))
+    mine = (pl.read_parquet(list(paths), columns=columns) if paths
+            else pl.from_arrow(tables.empty(name)).select(columns or pl.all()))
+    keep = pl.lit(True)
+    if lo is not None:
+        keep = keep & (pl.col(time_col) >= max(lo, w_lo))
+    if hi is not None:
+        keep = keep & (pl.col(time_col) < min(hi, w_hi))
+    parts.append(mine.filter(keep))
+    frame = pl.concat([p for p in parts if p.width], how="vertical_relaxed")
+    keys = [k for k in tables.spec(name).sort_by if k in frame.columns]
+    return frame.sort(keys) if keys else frame
 
 
 @dataclass(frozen=True)
@@ -125,7 +191,9 @@ def run_unit(unit: BatchUnit) -> UnitManifest:
     t0 = time.perf_counter()
     fam = family(unit.family)
     window = Window(unit.start_ns, unit.end_ns)
-    out = fam.stage(read_inputs(fam, Path(unit.warehouse), unit.cfg, window), window, unit.cfg)
+    inputs = read_inputs(fam, Path(unit.warehouse), unit.cfg, window, dict(unit.overrides),
+                         unit.window)
+    out = fam.stage(inputs, window, unit.cfg)
     unknown = set(out) - set(fam.outputs) - {"rejects"}
     if unknown:
         raise ValueError(f"family {fam.name} returned tables it does not own: {unknown}")
@@ -181,17 +249,44 @@ def finalize_unit(task: FinalizeTask) -> UnitManifest:
     return UnitManifest(m.family, m.start_ns, files, m.seam, str(folder), m.elapsed_s)
 
 
+def owned_window(warehouse: Path, start_ns: int, end_ns: int
+                 ) -> tuple[int, int, dict[str, list[int]]]:
+    """``[start_ns, end_ns)`` widened until no committed unit (``batch_units``) of any
+    family straddles its edges, and per family the edges of its committed units inside
+    the widened window: (start, end, {family: cuts})."""
+    units = pl.from_arrow(read_table(warehouse, "batch_units",
+                                     columns=["family", "start_ns", "end_ns"]))
+    lo, hi = start_ns, end_ns
+    while True:
+        touched = units.filter((pl.col("start_ns") < hi) & (pl.col("end_ns") > lo))
+        if touched.height == 0:
+            break
+        new_lo = min(lo, int(touched["start_ns"].min()))
+        new_hi = max(hi, int(touched["end_ns"].max()))
+        if (new_lo, new_hi) == (lo, hi):
+            break
+        lo, hi = new_lo, new_hi
+    inside = units.filter((pl.col("start_ns") >= lo) & (pl.col("end_ns") <= hi))
+    cuts: dict[str, list[int]] = {}
+    for (name,), rows in inside.group_by(["family"]):
+        edges = set(rows["start_ns"].to_list()) | set(rows["end_ns"].to_list())
+        cuts[str(name)] = sorted(t for t in edges if lo < t < hi)
+    return lo, hi, cuts
+
+
 def plan_units(
     warehouse: Path, cfg: Config, start_ns: int, end_ns: int, staging_dir: Path,
     families: tuple[Family, ...] = FAMILIES,
+    committed_cuts: dict[str, list[int]] | None = None,
 ) -> list[BatchUnit]:
     """Cut [start_ns, end_ns) into each family's work units: at UTC multiples of its
     ``unit_s`` (or one unit for the whole window), and, for a family with
     ``unit_rows``, wherever the volume of its ``unit_table`` calls for more cuts."""
     units = []
     for fam in families:
-        if fam.unit_s is None:
-            cuts = [start_ns, end_ns]
+        if fam.unit_s is None:  # and the edges of its committed units (owned_window)
+            kept = (committed_cuts or {}).get(fam.name, [])
+            cuts = sorted({start_ns, end_ns, *kept})
         else:
             step = fam.unit_s * NS
             cuts = [start_ns, *range((start_ns // step + 1) * step, end_ns, step), end_ns]
@@ -225,17 +320,35 @@ def run_batch(
         raise ValueError("--to must be after --from")
     fams = FAMILIES if families is None else tuple(family(name) for name in families)
     warm_up(warehouse)  # the views file's DuckDB instance, built while the batch runs
+    requested = (start_ns, end_ns)
+    start_ns, end_ns, committed_cuts = owned_window(warehouse, start_ns, end_ns)
     staging = warehouse / "_staging" / f"batch-{start_ns}-{end_ns}"
     shutil.rmtree(staging, ignore_errors=True)
-    units = plan_units(warehouse, cfg, start_ns, end_ns, staging, fams)
-    summary = BatchSummary(start_ns=start_ns, end_ns=end_ns, units_total=len(units))
+    units = plan_units(warehouse, cfg, start_ns, end_ns, staging, fams, committed_cuts)
+    summary = BatchSummary(start_ns=start_ns, end_ns=end_ns, units_total=len(units),
+                           requested=None if requested == (start_ns, end_ns) else requested)
     ex = cfg.execution
     executor = make_executor(
         executor_kind or ex.executor, min(ex.max_workers, len(units)), ex.threads_per_worker
     )
+    manifests: list[UnitManifest] = []
+    if progress is not None:
+        progress.batch_units(len(units))
     try:
         with executor:  # one pool for the units and their finalisation
-            manifests = _run_units(executor, units, fams, summary, progress)
+            for wave in family_waves(fams, cfg):
+                # a family reading another family's output reads this batch's rows of it
+                overrides = tuple(
+                    (name, tuple(f.path for m in manifests for f in m.files.get(name, [])))
+                    for fam in fams if fam.name in {m.family for m in manifests}
+                    for name in fam.outputs)
+                names = {f.name for f in wave}
+                ours = [replace(u, overrides=overrides, window=(start_ns, end_ns))
+                        for u in units if u.family in names]
+                manifests += _run_units(executor, ours, tuple(wave), summary, progress,
+                                        warehouse)
+                if summary.failed_units:
+                    break
     except BaseException:  # interrupted: the pool is stopped, nothing was committed
         shutil.rmtree(staging, ignore_errors=True)
         raise
@@ -244,7 +357,7 @@ def run_batch(
         return summary
     t0 = time.perf_counter()
     with deferred_interrupts():  # the window's commit is whole or not begun
-        _commit(warehouse, manifests, summary, fams)
+        _commit(warehouse, manifests, summary, fams, units)
     summary.commit_s = time.perf_counter() - t0
     shutil.rmtree(staging, ignore_errors=True)
     with contextlib.suppress(OSError):  # only when empty: another job may be staging
@@ -255,10 +368,9 @@ def run_batch(
 
 
 def _run_units(executor, units: list[BatchUnit], fams: tuple[Family, ...],
-               summary: BatchSummary, progress: Any = None) -> list[UnitManifest]:
+               summary: BatchSummary, progress: Any = None,
+               warehouse: Path | None = None) -> list[UnitManifest]:
     manifests = []
-    if progress is not None:
-        progress.batch_units(len(units))
     for result in executor.map_units(run_unit, units):
         if progress is not None:
             progress.batch_result(result)
@@ -273,18 +385,52 @@ def _run_units(executor, units: list[BatchUnit], fams: tuple[Family, ...],
             log.error("batch unit failed %s", label)
     if summary.failed_units:
         return manifests
-    return _finalize_units(executor, manifests, fams, summary)
+    return _finalize_units(executor, manifests, fams, summary, warehouse)
+
+
+def family_waves(families: tuple[Family, ...], cfg: Config) -> list[list[Family]]:
+    """The families in waves: a family that reads another family's output (gaps reads
+    maritime's system_tracks) runs in a wave after it, on this batch's rows of it."""
+    owner = {name: f.name for f in families for name in f.outputs}
+    needs = {f.name: {owner[i.table] for i in f.inputs(cfg) if i.table in owner} - {f.name}
+             for f in families}
+    waves: list[list[Family]] = []
+    done: set[str] = set()
+    while len(done) < len(families):
+        wave = [f for f in families if f.name not in done and needs[f.name] <= done]
+        if not wave:
+            raise ValueError(f"families read each other's outputs in a cycle: {needs}")
+        waves.append(wave)
+        done |= {f.name for f in wave}
+    return waves
+
+
+def _stored_before(warehouse: Path, fam: Family, start_ns: int) -> dict[str, pl.DataFrame]:
+    """``fam``'s committed outputs in the ``stitch_lookback_s`` before ``start_ns``: the
+    unit before the window as its ``join_units`` sees a unit (a pseudo-unit)."""
+    lo = start_ns - round(fam.stitch_lookback_s * NS)
+    return {name: pl.from_arrow(read_table(warehouse, name, start_ns=lo, end_ns=start_ns))
+            for name in fam.outputs}
 
 
 def _finalize_units(executor, manifests: list[UnitManifest], families: tuple[Family, ...],
-                    summary: BatchSummary) -> list[UnitManifest]:
-    """Each family's ``join_units`` over its units' seams, then every unit written as
+                    summary: BatchSummary, warehouse: Path | None = None
+                    ) -> list[UnitManifest]:
+    """Each family's ``join_units`` over its units' seams (led by the seam of the rows
+    committed just before the window: ``stitch_lookback_s``), then every unit written as
     Parquet data files by the executor's workers (relabelled where the join asks)."""
     tasks: list[FinalizeTask] = []
     for fam in families:
         ours = sorted((m for m in manifests if m.family == fam.name), key=lambda m: m.start_ns)
-        maps = (fam.join_units([m.seam for m in ours])
-                if fam.join_units is not None and len(ours) > 1 else [None] * len(ours))
+        seams = [m.seam for m in ours]
+        lead = 0
+        if (fam.join_units is not None and fam.unit_seam is not None
+                and fam.stitch_lookback_s and warehouse is not None):
+            before = _stored_before(warehouse, fam, summary.start_ns)
+            if any(f.height for f in before.values()):
+                seams, lead = [fam.unit_seam(before), *seams], 1
+        maps = (fam.join_units(seams)[lead:]
+                if fam.join_units is not None and len(seams) > 1 else [None] * len(ours))
         tasks += [FinalizeTask(m, mapping) for m, mapping in zip(ours, maps, strict=True)]
     out: list[UnitManifest] = []
     for result in executor.map_units(finalize_unit, tasks):
@@ -297,10 +443,17 @@ def _finalize_units(executor, manifests: list[UnitManifest], families: tuple[Fam
 
 
 def _commit(warehouse: Path, manifests: list[UnitManifest], summary: BatchSummary,
-            families: tuple[Family, ...] = FAMILIES) -> None:
+            families: tuple[Family, ...] = FAMILIES, units: list[BatchUnit] | None = None
+            ) -> None:
     """One Delta commit per derived table replacing the window's rows by the units'
-    staged files (``commit_window``: no row passes through the driver). Only the driver
-    commits."""
+    staged files (``commit_window``: no row passes through the driver), then the batch
+    rejects and the window's units (``batch_units``). Readers see none of them until all
+    are made (a pending marker pins the tables: ``pipeline.warehouse.pending``); a crash
+    in between leaves the marker, and readers the previous rows of every table, until a
+    batch covering this window finishes. Only the driver commits."""
+    derived = [name for fam in families for name in fam.outputs]
+    marker = pending.begin(warehouse, [*derived, "rejects", "batch_units"], job="batch",
+                           window=[summary.start_ns, summary.end_ns])
     for fam in families:
         ours = [m for m in manifests if m.family == fam.name]
         for name in fam.outputs:
@@ -320,7 +473,26 @@ def _commit(warehouse: Path, manifests: list[UnitManifest], summary: BatchSummar
         ),
     )
     summary.rejects = rejects.num_rows
+    if units is not None:
+        _record_units(warehouse, units, summary)
+    lo, hi = summary.start_ns, summary.end_ns
+    pending.finish(warehouse, marker, supersedes=lambda doc: doc.get("job") == "batch"
+                   and lo <= doc["window"][0] and doc["window"][1] <= hi)
     summary.committed = True
+
+
+def _record_units(warehouse: Path, units: list[BatchUnit], summary: BatchSummary) -> None:
+    """The window's units replace those of ``batch_units`` inside it (one commit)."""
+    now = time.time_ns()
+    rows = pl.DataFrame(
+        {"start_ns": [u.start_ns for u in units], "end_ns": [u.end_ns for u in units],
+         "family": [u.family for u in units]},
+        schema={"start_ns": pl.Int64, "end_ns": pl.Int64, "family": pl.String},
+    ).with_columns(window_start_ns=pl.lit(summary.start_ns, pl.Int64),
+                   window_end_ns=pl.lit(summary.end_ns, pl.Int64),
+                   committed_at_ns=pl.lit(now, pl.Int64))
+    replace_window(warehouse, "batch_units", tables.conform("batch_units", rows),
+                   start_ns=summary.start_ns, end_ns=summary.end_ns)
 
 
 def _iso(t_ns: int) -> str:

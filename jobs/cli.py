@@ -31,6 +31,7 @@ from jobs.common import (
     checked_warehouse,
     parse_duration,
     parse_time_ns,
+    require_warehouse,
     setup_logging,
 )
 from pipeline.config import Config, ConfigError
@@ -63,7 +64,15 @@ class _State:
 
     @property
     def warehouse(self) -> Path:
+        """The warehouse a command writes (``ingest``, ``run``, ``demo`` create it),
+        absolute; exit 2 when Delta cannot use the path."""
         return checked_warehouse(Path(self.warehouse_option or self.cfg.warehouse_path))
+
+    @property
+    def existing_warehouse(self) -> Path:
+        """The warehouse a command reads: exit 2 naming it when it does not exist (a
+        typo in ``--warehouse`` must not read as an empty warehouse, nor create one)."""
+        return require_warehouse(self.warehouse)
 
     def sector(self, name: str | None) -> str | None:
         """``--sector``, checked against the config's sectors (maritime and airfield)."""
@@ -74,6 +83,15 @@ class _State:
             raise UsageError(f"unknown sector {name!r}; the config's sectors are: "
                              f"{', '.join(known)}")
         return name
+
+
+def _locked(st: _State, wait: bool = False) -> contextlib.AbstractContextManager:
+    """The warehouse's writer lock for a command that commits (exit 2 naming the holder
+    when another job has it)."""
+    from jobs.lock import warehouse_lock
+
+    return warehouse_lock(st.warehouse, command=" ".join(["surveil", *sys.argv[1:]]),
+                          wait=wait)
 
 
 def sector_names(cfg: Config) -> list[str]:
@@ -180,6 +198,9 @@ _TO_REQUIRED = click.option("--to", required=True, metavar="TIME", help=_TO_HELP
 _SECTOR = click.option("--sector", default=None, shell_complete=_complete_sectors,
                        help="one sector of the config (default: every sector); an unknown "
                             "name lists them")
+_WAIT = click.option("--wait", is_flag=True,
+                     help="wait for another job holding the warehouse (default: exit 2 "
+                          "naming it)")
 _EXECUTOR = click.option(
     "--executor", type=click.Choice(["serial", "process", "ray"]), default=None,
     help="How work units run (default from config: process pool).",
@@ -255,15 +276,16 @@ def import_command(st: _State, paths, out_dir, base_time) -> None:
 @_TO
 @click.option("--force", is_flag=True, help="re-ingest files the ledger says are unchanged")
 @_EXECUTOR
+@_WAIT
 @click.pass_obj
-def ingest(st: _State, paths, from_, to, force, executor) -> None:
+def ingest(st: _State, paths, from_, to, force, executor, wait) -> None:
     """Decode MCAP files into the warehouse's raw tables."""
     from jobs.ingest import expand_paths, run_ingest
     from jobs.progress import terminal_progress
 
     start, end = _window(from_, to, required=False)
     progress = terminal_progress()
-    with progress or contextlib.nullcontext():
+    with _locked(st, wait), progress or contextlib.nullcontext():
         if progress is not None:
             progress.ingest_total(expand_paths([Path(p) for p in paths]))
         summary = run_ingest([Path(p) for p in paths], st.cfg, st.warehouse,
@@ -280,16 +302,19 @@ def ingest(st: _State, paths, from_, to, force, executor) -> None:
 @_FROM_REQUIRED
 @_TO_REQUIRED
 @_EXECUTOR
+@_WAIT
 @click.pass_obj
-def batch(st: _State, from_, to, executor) -> None:
+def batch(st: _State, from_, to, executor, wait) -> None:
     """Run every sensor family's batch over one window; commit it atomically."""
     from jobs.batch import run_batch
     from jobs.progress import terminal_progress
 
-    start, end = _bounded(st, *_window(from_, to, required=True))
+    window = _window(from_, to, required=True)
+    warehouse = st.existing_warehouse
+    start, end = _bounded(st, *window)
     progress = terminal_progress()
-    with progress or contextlib.nullcontext():
-        summary = run_batch(st.cfg, st.warehouse, start_ns=start, end_ns=end,
+    with _locked(st, wait), progress or contextlib.nullcontext():
+        summary = run_batch(st.cfg, warehouse, start_ns=start, end_ns=end,
                             executor_kind=executor, progress=progress)
     click.echo(summary.render())
     sys.exit(summary.exit_code)
@@ -299,17 +324,41 @@ def batch(st: _State, from_, to, executor) -> None:
 @_FROM_REQUIRED
 @_TO_REQUIRED
 @_EXECUTOR
+@_WAIT
 @click.pass_obj
-def reprocess(st: _State, from_, to, executor) -> None:
+def reprocess(st: _State, from_, to, executor, wait) -> None:
     """Re-ingest the archived files overlapping a window and re-run its batch."""
     from jobs.progress import terminal_progress
     from jobs.reprocess import run_reprocess
 
-    start, end = _bounded(st, *_window(from_, to, required=True))
+    window = _window(from_, to, required=True)
+    warehouse = st.existing_warehouse
+    start, end = _bounded(st, *window)
     progress = terminal_progress()
-    with progress or contextlib.nullcontext():
-        summary = run_reprocess(st.cfg, st.warehouse, start_ns=start, end_ns=end,
+    with _locked(st, wait), progress or contextlib.nullcontext():
+        summary = run_reprocess(st.cfg, warehouse, start_ns=start, end_ns=end,
                                 executor_kind=executor, progress=progress)
+    click.echo(summary.render())
+    sys.exit(summary.exit_code)
+
+
+@cli.command("run")
+@click.argument("folders", nargs=-1, type=click.Path())
+@_EXECUTOR
+@_WAIT
+@click.pass_obj
+def run_command(st: _State, folders, executor, wait) -> None:
+    """The nightly job: scan the archive folders (FOLDERS, default [archive] folders),
+    ingest new and changed MCAP files, batch the windows they touch (and any a failed
+    run left), record the run in the `runs` table. Nothing new: does nothing, says so."""
+    from jobs.progress import terminal_progress
+    from jobs.run import run_nightly
+
+    progress = terminal_progress()
+    with _locked(st, wait), progress or contextlib.nullcontext():
+        summary = run_nightly(st.cfg, st.warehouse, folders=list(folders),
+                              executor_kind=executor, progress=progress,
+                              command=" ".join(["surveil", *sys.argv[1:]]))
     click.echo(summary.render())
     sys.exit(summary.exit_code)
 
@@ -368,16 +417,16 @@ def report(st: _State, name, from_, to, sector, fmt, params, list_) -> None:
     start, end = _window(from_, to, required=False)
     sector = st.sector(sector)
     try:
-        table = run_named_report(st.warehouse, name, start_ns=start, end_ns=end, sector=sector,
-                                 cfg=st.cfg, params=_params(params))
+        table = run_named_report(st.existing_warehouse, name, start_ns=start, end_ns=end,
+                                 sector=sector, cfg=st.cfg, params=_params(params))
     except UnknownReportError as exc:
         raise UsageError(f"no report {name!r}; available: {', '.join(list_reports(dirs))}"
                          ) from exc
     except ReportError as exc:
         raise UsageError(str(exc)) from exc
     if table.num_rows == 0:
-        why = explain_empty(st.warehouse, load_report(name, dirs), start_ns=start, end_ns=end,
-                            sector=sector, cfg=st.cfg)
+        why = explain_empty(st.existing_warehouse, load_report(name, dirs), start_ns=start,
+                            end_ns=end, sector=sector, cfg=st.cfg)
         click.echo(f"{name}: no rows. {why}", err=True)
     click.echo(format_report(table, fmt, title=name), nl=fmt != "table")
 
@@ -420,7 +469,7 @@ def audit(st: _State, from_, to, sector, out_dir, pdf) -> None:
     from jobs.audit import run_audit
 
     start, end = _window(from_, to, required=True)
-    result = run_audit(st.cfg, st.warehouse, Path(out_dir), start_ns=start, end_ns=end,
+    result = run_audit(st.cfg, st.existing_warehouse, Path(out_dir), start_ns=start, end_ns=end,
                        sector=st.sector(sector), pdf=pdf)
     click.echo(result.render())
     sys.exit(EXIT_USAGE if pdf and result.pdf is None else 0)
@@ -438,7 +487,8 @@ def export(st: _State, from_, to, out_path) -> None:
     from jobs.export import run_export
 
     start, end = _window(from_, to, required=True)
-    summary = run_export(st.cfg, st.warehouse, Path(out_path), start_ns=start, end_ns=end)
+    summary = run_export(st.cfg, st.existing_warehouse, Path(out_path), start_ns=start,
+                         end_ns=end)
     click.echo(summary.render())
 
 
@@ -455,7 +505,7 @@ def sql(st: _State, query, fmt) -> None:
 
     from jobs.report import format_report, open_warehouse
 
-    con = open_warehouse(st.warehouse)
+    con = open_warehouse(st.existing_warehouse)
     try:
         if query is not None:
             try:
@@ -536,7 +586,7 @@ def calibrate(st: _State, from_, to, max_order, min_speed) -> None:
     from jobs.calibrate import run_calibrate
 
     start, end = _window(from_, to, required=True)
-    summary = run_calibrate(st.cfg, st.warehouse, start_ns=start, end_ns=end,
+    summary = run_calibrate(st.cfg, st.existing_warehouse, start_ns=start, end_ns=end,
                             max_order=max_order, min_speed_mps=min_speed)
     click.echo(summary.render())
 
@@ -553,7 +603,7 @@ def calibrate_radars(st: _State, from_, to, fmt) -> None:
     from jobs.calibrate import render, run_calibration
 
     start, end = _window(from_, to, required=True)
-    est = run_calibration(st.cfg, st.warehouse, start_ns=start, end_ns=end)
+    est = run_calibration(st.cfg, st.existing_warehouse, start_ns=start, end_ns=end)
     click.echo(est.write_json() if fmt == "json" else render(est))
 
 

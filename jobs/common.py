@@ -36,6 +36,19 @@ def checked_warehouse(path: Path) -> Path:
     return path
 
 
+def require_warehouse(warehouse: Path) -> Path:
+    """``warehouse`` when it is one (a folder holding ``tables/``, what ``ingest``, ``run``
+    and ``demo`` create), else :class:`UsageError` naming it: a command that reads a
+    warehouse must not read a mistyped path as an empty one, nor create it."""
+    path = Path(warehouse)
+    if not (path / "tables").is_dir():
+        why = "does not exist" if not path.exists() else "is not a warehouse (no tables/ in it)"
+        raise UsageError(
+            f"warehouse {path} {why}; `surveil ingest ARCHIVE --warehouse {path}` (or "
+            "`surveil run`, `surveil demo`) creates one")
+    return path
+
+
 def parse_time_ns(text: str) -> int:
     """ISO 8601 (``2026-01-15T01:00:00Z``, naive means UTC) or an integer ns timestamp."""
     t = text.strip()

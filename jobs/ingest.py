@@ -14,12 +14,14 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import logging
 import os
 import shutil
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
+from jobs.common import iso
 from pipeline.config import Config
 from pipeline.convert.config import import_options
 from pipeline.executors import Executor, UnitResult, make_executor
@@ -27,7 +29,10 @@ from pipeline.ingest import FileManifest, IngestContext, IngestSummary, commit_f
 from pipeline.ingest.plan import IngestUsageError, expand_paths, plan_units
 from pipeline.signals import deferred_interrupts
 from pipeline.warehouse.ledger import same_content
+from pipeline.warehouse.overlaps import record_overlaps
 from pipeline.warehouse.views import rebuild_views_file
+
+log = logging.getLogger(__name__)
 
 __all__ = ["IngestSummary", "IngestUsageError", "expand_paths", "run_ingest"]
 
@@ -79,9 +84,21 @@ def run_ingest(
             with contextlib.suppress(OSError):
                 (warehouse / "_staging").rmdir()
         if committed:
+            if start_ns is None:  # whole files: their mcap_index rows are new
+                _warn_overlaps(warehouse, summary)
             with deferred_interrupts():
                 rebuild_views_file(warehouse, ctx.views)
     return summary
+
+
+def _warn_overlaps(warehouse: Path, summary: IngestSummary) -> None:
+    """Record and warn about other files carrying the same topics over the same times."""
+    found = record_overlaps(warehouse, summary.committed_files)
+    for r in found.iter_rows(named=True):
+        text = (f"{r['source_file']} and {r['other_file']} both carry {r['topic']} over "
+                f"[{iso(r['overlap_start_ns'])}, {iso(r['overlap_end_ns'])}]")
+        summary.overlaps.append(text)
+        log.warning("two sources overlap: %s", text)
 
 
 def _executor(executor: Executor | str | None, cfg: Config, n_units: int) -> Executor:
@@ -138,4 +155,5 @@ def _handle(
             with contextlib.suppress(OSError):
                 os.remove(sf.path)  # still there only when the commit did not take it
     summary.add(m)
+    summary.committed_files.append(m.source_file)
     return True

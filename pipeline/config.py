@@ -100,6 +100,15 @@ class ExecutionConfig:
     memory_budget_mb: int = setting(0, ge=0)
 
 
+def _folder_names(folders: tuple[str, ...]) -> str | None:
+    """``[archive] folders``: non-empty, distinct paths."""
+    if any(not str(f).strip() for f in folders):
+        return "a folder name is empty"
+    if len(set(folders)) != len(folders):
+        return "a folder is named twice"
+    return None
+
+
 @dataclass(frozen=True)
 class Config:
     region: RegionConfig = setting()
@@ -109,6 +118,10 @@ class Config:
     fairway_legs: tuple[FairwayLeg, ...] = setting([], file_only=True)
     sectors: tuple[Sector, ...] = setting([], file_only=True)
     warehouse_path: str = text("warehouse", key=("warehouse", "path"))
+    # folders `surveil run` scans for MCAP files (absolute, or relative to the working
+    # folder); empty: `surveil run FOLDER...` names them
+    archive_folders: tuple[str, ...] = setting([], key=("archive", "folders"),
+                                               check=_folder_names)
     execution: ExecutionConfig = setting({}, factory=ExecutionConfig)
     source: str = ""
     # The whole parsed TOML (raw), and each sensor family's section parsed into its own

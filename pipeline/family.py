@@ -28,6 +28,9 @@ A family (``pipeline.maritime``, ``pipeline.airfield``, ``pipeline.nav``,
   and last epochs); the driver gives the seams of a window's units, in time order, to
   ``join_units``, which returns per unit ``None`` or a :data:`Relabel` to apply to every
   output of that unit (the units' outputs themselves never travel to the driver).
+- ``stitch_lookback_s``: how far before a window the batch reads the family's committed
+  outputs; their ``unit_seam`` leads the window's seams given to ``join_units`` (ids
+  continue across the window's leading edge); 0: the window's units are joined alone.
 
 Nothing here reads files: the job reads the inputs, runs the stage in a worker and
 commits what it returns.
@@ -109,3 +112,4 @@ class Family:
     sorted_outputs: bool = False
     unit_seam: Callable[[Outputs], Any] | None = None
     join_units: Callable[[list[Any]], list[Relabel | None]] | None = None
+    stitch_lookback_s: float = 0.0

@@ -19,6 +19,7 @@ from pathlib import Path
 from pipeline.decode.registry import RAW_TABLES
 from pipeline.ingest.worker import FileManifest
 from pipeline.tables import empty
+from pipeline.warehouse import pending
 from pipeline.warehouse.delta import replace_source_file
 from pipeline.warehouse.ledger import ledger_entry, write_entry
 from pipeline.warehouse.staged import commit_staged, read_staged
@@ -28,8 +29,19 @@ def commit_file(
     warehouse: Path, m: FileManifest, *, start_ns: int | None = None, end_ns: int | None = None
 ) -> None:
     """Replace the file's rows in every raw table (one commit per table that changes),
-    then (whole-file runs) its ``mcap_index`` rows and its ledger row."""
-    for name in dict.fromkeys((*RAW_TABLES, *m.staged)):
+    then (whole-file runs) its ``mcap_index`` rows and its ledger row. Readers see the
+    file's tables as before until all are made (``pipeline.warehouse.pending``)."""
+    names = list(dict.fromkeys((*RAW_TABLES, *m.staged)))
+    marker = pending.begin(warehouse, [*names, "mcap_index", "ingest_ledger"], job="ingest",
+                           source_file=m.source_file)
+    _commit_tables(warehouse, m, names, start_ns, end_ns)
+    pending.finish(warehouse, marker,
+                   supersedes=lambda doc: doc.get("source_file") == m.source_file)
+
+
+def _commit_tables(warehouse: Path, m: FileManifest, names: list[str],
+                   start_ns: int | None, end_ns: int | None) -> None:
+    for name in names:
         staged = m.staged.get(name, [])
         if start_ns is None:
             commit_staged(warehouse, name, staged, source_file=m.source_file)

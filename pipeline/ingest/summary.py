@@ -24,6 +24,8 @@ class IngestSummary:
     not_stored: dict[str, int] = field(default_factory=dict)
     failed: list[tuple[str, str]] = field(default_factory=list)
     window: tuple[int, int] | None = None
+    committed_files: list[str] = field(default_factory=list)
+    overlaps: list[str] = field(default_factory=list)  # "file topic other [a, b)" warnings
 
     @property
     def rejected(self) -> int:
@@ -71,6 +73,11 @@ class IngestSummary:
         if self.rejects.get("decoder_missing"):
             lines.append("WARNING: ASTERIX channels not decoded: the ASTERIX decoder is not "
                          "installed; pip install 'surveil-pipeline[asterix]'")  # fmt: skip
+        for text in self.overlaps[:10]:
+            lines.append(f"WARNING: two sources overlap: {text}")
+        if self.overlaps:
+            lines.append("  (recorded in source_overlaps: rows of the two would mix; give "
+                         "each site its own warehouse, or remove the duplicate file)")
         for path, err in self.failed[:10]:
             lines.append(f"FAILED {path}: {err}")
         if len(self.failed) > 10:

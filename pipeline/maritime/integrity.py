@@ -768,8 +768,9 @@ def _coverage(
     miss = exp & ~rad.detected[s0:s1]
     idx = (np.arange(C)[None, :] * (G + 1) + rad.slot_sector[s0:s1, None]).ravel()
     n = C * (G + 1)
-    expected = np.bincount(idx, weights=exp.ravel(), minlength=n)
-    missed = np.bincount(idx, weights=miss.ravel(), minlength=n)
+    # (np.bincount of an empty index is int64 whatever the weights: float, for the +=)
+    expected = np.bincount(idx, weights=exp.ravel(), minlength=n).astype(np.float64)
+    missed = np.bincount(idx, weights=miss.ravel(), minlength=n).astype(np.float64)
     ref = st.ais_ref[m_ref]
     lost = (ref >= 0) & ~hit & ~st.ais_excl[m_ref] & (st.ais_ref_seen[m_ref] >= t_k - timeout_ns)
     if lost.any():

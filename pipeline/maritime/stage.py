@@ -141,4 +141,5 @@ FAMILY = Family(
     sorted_outputs=True,
     unit_seam=unit_seam,
     join_units=join_units,
+    stitch_lookback_s=600.0,  # the unit before a window: its last epoch lies in these 10 min
 )

@@ -31,6 +31,7 @@ import pyarrow.parquet as pq
 from deltalake import DeltaTable, WriterProperties, write_deltalake
 
 from pipeline.tables import conform, empty, spec
+from pipeline.warehouse.pending import pinned_versions
 
 NS_PER_DAY = 86_400 * 10**9
 _EPOCH = dt.date(1970, 1, 1)
@@ -131,6 +132,19 @@ def window_filter(name: str, start_ns: int | None, end_ns: int | None) -> pc.Exp
     return expr
 
 
+def _reader_table(warehouse: Path, name: str) -> DeltaTable | None:
+    """The table as readers see it: at its pinned version while a job is committing it
+    (``pipeline.warehouse.pending``), else its latest; None when readers see no table."""
+    if not table_exists(warehouse, name):
+        return None
+    pinned = pinned_versions(warehouse).get(name)
+    if pinned is None:
+        return DeltaTable(str(table_path(warehouse, name)))
+    if pinned < 0:
+        return None
+    return DeltaTable(str(table_path(warehouse, name)), version=pinned)
+
+
 def read_table(
     warehouse: Path,
     name: str,
@@ -151,12 +165,13 @@ def read_table(
     target = spec(name).schema
     if columns is not None:
         target = pa.schema([target.field(c) for c in columns])
-    if not table_exists(warehouse, name):
+    delta_table = _reader_table(warehouse, name)
+    if delta_table is None:
         return target.empty_table()
     expr = window_filter(name, start_ns, end_ns)
     if predicate is not None:
         expr = predicate if expr is None else expr & predicate
-    dataset = _snapshot_dataset(table_path(warehouse, name), spec(name).schema)
+    dataset = _snapshot_dataset(delta_table, table_path(warehouse, name), spec(name).schema)
     have = set(dataset.schema.names)
     table = dataset.to_table(columns=[c for c in target.names if c in have], filter=expr)
     for i, f in enumerate(target):  # a nullable column added to the schema after the table
@@ -169,9 +184,9 @@ def read_table(
     return table
 
 
-def _snapshot_dataset(path: Path, schema: pa.Schema) -> pds.Dataset:
-    """The current snapshot's Parquet files as a plain pyarrow dataset on the local
-    filesystem (hive ``date=`` partitions).
+def _snapshot_dataset(snapshot: DeltaTable, path: Path, schema: pa.Schema) -> pds.Dataset:
+    """``snapshot``'s (the version readers see) Parquet files as a plain pyarrow dataset
+    on the local filesystem (hive ``date=`` partitions).
 
     Not ``DeltaTable.to_pyarrow_dataset()``: that dataset reads through delta-rs's
     Python filesystem handler (a ``PyFileSystem``), which Arrow's I/O threads call back
@@ -180,7 +195,6 @@ def _snapshot_dataset(path: Path, schema: pa.Schema) -> pds.Dataset:
     script that reads the ledger and exits; apache/arrow#34314, delta-io/delta-rs#2184).
     The file list comes from the Delta log (so replaced files are never read); the
     reading is Arrow's own."""
-    snapshot = DeltaTable(str(path))
     # local paths, percent-encoded as URIs (a space is %20, '#' is %23, '%' is %25)
     files = [unquote(u) for u in snapshot.file_uris()]
     parts = snapshot.metadata().partition_columns
@@ -275,16 +289,17 @@ def replace_source_file(
 
 
 def table_files(warehouse: Path, name: str) -> list[str]:
-    """Absolute paths of the Parquet files of the current snapshot (empty if no table)."""
+    """Absolute paths of the Parquet files of the snapshot readers see (the current one,
+    or the pinned one while a job commits the table); empty if no table."""
     return table_snapshot(warehouse, name)[0]
 
 
 def table_snapshot(warehouse: Path, name: str) -> tuple[list[str], frozenset[str]]:
-    """``(files, column names)`` of the current snapshot (``([], {})`` if no table): a
-    table written before its canonical schema gained a column lacks it."""
-    if not table_exists(warehouse, name):
+    """``(files, column names)`` of the snapshot readers see (``([], {})`` if no table):
+    a table written before its canonical schema gained a column lacks it."""
+    t = _reader_table(warehouse, name)
+    if t is None:
         return [], frozenset()
-    t = DeltaTable(str(table_path(warehouse, name)))
     files = [unquote(u.removeprefix("file://")) for u in t.file_uris()]  # %23 -> '#'...
     return files, frozenset(f.name for f in t.schema().fields)
 

@@ -22,6 +22,18 @@ end, after the last write. Each view carries
 the digest of its statement as its comment (``duckdb_views().comment``), so an update
 rewrites only the views whose table changed since the file was written (an ingest changes
 three or four of ~30 tables); a missing or unreadable file is built from scratch.
+
+**Portable.** The snapshot views name their files relative to the warehouse folder
+(``tables/<name>/date=.../part-....parquet``), so a copied or moved warehouse reads its
+own files. DuckDB resolves a relative path against the working directory, then against
+the ``file_search_path`` setting (not stored in the file): open the file from inside the
+warehouse (``cd warehouse && duckdb surveil.duckdb``), or set the setting
+(``duckdb -cmd "SET file_search_path='warehouse'" warehouse/surveil.duckdb``), or use
+:func:`connect_views_file`. **Readable by DuckDB 1.x.** The file is written in the
+storage format of :data:`STORAGE_VERSION` (``ATTACH ... (STORAGE_VERSION ...)``), which
+every DuckDB 1.x opens (the 2.x default, storage version 69, makes the 1.x command line
+fail with "we can only read versions between 64 and 68"); a file in another format is
+built anew.
 """
 
 from __future__ import annotations
@@ -44,6 +56,7 @@ from pipeline.tables import column_comment, spec, table_specs
 from pipeline.warehouse.delta import sql_literal, table_snapshot
 
 VIEWS_FILE = "surveil.duckdb"
+STORAGE_VERSION = "v1.0.0"  # the oldest storage format of DuckDB 1.x: every 1.x reads it
 SNAPSHOT_SCHEMA = "snapshot"  # views over each table's current files, in surveil.duckdb
 DESCRIBE_MACRO = "describe_table"  # FROM describe_table('radar_tracks'): columns, types, comments
 _ATTACHED = "views_file"  # the name the temporary copy is attached under
@@ -82,7 +95,7 @@ def _select_list(schema: pa.Schema, *, null: bool, present: Collection[str] | No
 
 
 def view_sql(name: str, files: list[str], schema: str | None = None,
-             present: Collection[str] | None = None) -> str:
+             present: Collection[str] | None = None, root: Path | None = None) -> str:
     """``CREATE OR REPLACE VIEW`` statement of table ``name`` over ``files``.
 
     With no files the view is typed and empty (``... WHERE false``), and DuckDB (2.0 on)
@@ -91,7 +104,8 @@ def view_sql(name: str, files: list[str], schema: str | None = None,
     of a new warehouse (27 of 30 tables empty). A view over files is bound at creation,
     so that a file missing from the snapshot fails the job, not an analyst's query.
     File paths come from the Delta log and are quoted with ``sql_literal`` (DuckDB cannot
-    bind parameters in a view definition). ``present``: the columns the table has (None:
+    bind parameters in a view definition); with ``root`` (the warehouse), they are written
+    relative to it, as in the views file. ``present``: the columns the table has (None:
     all); one the canonical schema gained after the table was written reads as NULL.
     """
     s = spec(name).schema
@@ -99,6 +113,9 @@ def view_sql(name: str, files: list[str], schema: str | None = None,
     if not files:
         body = f"SELECT {_select_list(s, null=True)} WHERE false"
         return f"CREATE OR REPLACE VIEW {qualified}{_DEFER_BINDING} AS {body}"
+    if root is not None:
+        base = os.path.abspath(root)
+        files = [os.path.relpath(f, base) for f in files]
     file_list = ", ".join(sql_literal(f) for f in files)
     body = (
         f"SELECT {_select_list(s, null=False, present=_missing_only(s, present))} "
@@ -133,10 +150,12 @@ def view_statements(warehouse: Path, names: Iterable[str] | None = None) -> dict
     return {name: _current_view_sql(warehouse, name) for name in selected}
 
 
-def _current_view_sql(warehouse: Path, name: str, schema: str | None = None) -> str:
-    """:func:`view_sql` of ``name`` over its current snapshot."""
+def _current_view_sql(warehouse: Path, name: str, schema: str | None = None,
+                      root: Path | None = None) -> str:
+    """:func:`view_sql` of ``name`` over its current snapshot (paths relative to
+    ``root`` when given)."""
     files, present = table_snapshot(warehouse, name)
-    return view_sql(name, files, schema, present)
+    return view_sql(name, files, schema, present, root)
 
 
 def doc_view_statements(name: str) -> list[str]:
@@ -291,12 +310,14 @@ def _rebuild(engine: ViewsEngine, warehouse: Path) -> Path:
     warehouse = Path(warehouse)
     warehouse.mkdir(parents=True, exist_ok=True)
     target = warehouse / VIEWS_FILE
-    statements = {name: _current_view_sql(warehouse, name, SNAPSHOT_SCHEMA)
+    statements = {name: _current_view_sql(warehouse, name, SNAPSHOT_SCHEMA, root=warehouse)
                   for name in table_specs()}
     tmp = warehouse / f".{VIEWS_FILE}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}"
     try:
         with engine._lock:
             con = engine._connection()
+            # the snapshot views' relative paths bind against the warehouse
+            con.execute(f"SET file_search_path = {sql_literal(str(warehouse.resolve()))}")
             copied = _attach_copy_or_new(con, target, tmp)
             try:
                 docs_digest = _docs_digest()
@@ -339,6 +360,7 @@ def _rebuild(engine: ViewsEngine, warehouse: Path) -> Path:
                 con.execute(f"CHECKPOINT {_ATTACHED}")
             finally:
                 _detach(con)
+                con.execute("RESET file_search_path")
         os.replace(tmp, target)
     finally:
         _remove_db_files(tmp)
@@ -356,17 +378,38 @@ def _attach_copy_or_new(con: duckdb.DuckDBPyConnection, target: Path, tmp: Path)
         try:
             shutil.copyfile(target, tmp)
             _attach(con, tmp)
-            return True
+            if _storage_version(con) == STORAGE_VERSION:
+                return True
         except (OSError, duckdb.Error):  # unreadable or not a database: build from scratch
-            _detach(con)
-            _remove_db_files(tmp)
+            pass
+        # (or written in another storage format, e.g. by an older release)
+        _detach(con)
+        _remove_db_files(tmp)
     _attach(con, tmp)
     return False
 
 
 def _attach(con: duckdb.DuckDBPyConnection, db: Path) -> None:
-    con.execute(f"ATTACH {sql_literal(str(db))} AS {_ATTACHED}")
+    con.execute(f"ATTACH {sql_literal(str(db))} AS {_ATTACHED} "
+                f"(STORAGE_VERSION {sql_literal(STORAGE_VERSION)})")
     con.execute(f"USE {_ATTACHED}")
+
+
+def _storage_version(con: duckdb.DuckDBPyConnection) -> str | None:
+    """The storage format of the attached file (``v1.0.0``; DuckDB reports ``v1.0.0+``)."""
+    rows = con.execute("SELECT tags['storage_version'] FROM duckdb_databases() "
+                       "WHERE database_name = ?", [_ATTACHED]).fetchall()
+    return rows[0][0].rstrip("+") if rows and rows[0][0] else None
+
+
+def connect_views_file(warehouse: Path, *, read_only: bool = True
+                       ) -> duckdb.DuckDBPyConnection:
+    """A connection to ``<warehouse>/surveil.duckdb`` whose relative file paths resolve
+    in the warehouse (``file_search_path``), wherever the process runs."""
+    warehouse = Path(warehouse).resolve()
+    con = duckdb.connect(str(warehouse / VIEWS_FILE), read_only=read_only)
+    con.execute(f"SET file_search_path = {sql_literal(str(warehouse))}")
+    return con
 
 
 def _detach(con: duckdb.DuckDBPyConnection) -> None:

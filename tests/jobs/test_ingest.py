@@ -9,7 +9,6 @@ import threading
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
-import duckdb
 import pytest
 from mcap_fixtures import (
     AIS_TYPE1,
@@ -32,7 +31,7 @@ from pipeline.io.mcap_read import read_mcap_batches
 from pipeline.threads import HASHER_NICE, SECOND_PARSER_NICE, WRITER_NICE
 from pipeline.units import NS
 from pipeline.warehouse.delta import read_table, table_version
-from pipeline.warehouse.views import VIEWS_FILE
+from pipeline.warehouse.views import VIEWS_FILE, connect_views_file
 
 TABLES = ("radar_tracks", "ais_reports", "ais_static", "truth", "rejects", "ingest_ledger")
 
@@ -104,7 +103,7 @@ def test_changed_file_replaces_its_rows(tmp_path, cfg):
     assert rows_of(wh, "truth", p) == []
     assert [r["reason_code"] for r in rows_of(wh, "rejects", p)] == ["out_of_range"]
     assert len(rows_of(wh, "radar_tracks", other)) == 10  # other file untouched
-    con = duckdb.connect(str(wh / VIEWS_FILE), read_only=True)
+    con = connect_views_file(wh)
     n_view = con.execute("SELECT count(*) FROM radar_tracks").fetchall()[0][0]
     con.close()
     assert n_view == read_table(wh, "radar_tracks").num_rows == 90

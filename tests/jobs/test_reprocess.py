@@ -20,6 +20,8 @@ def snapshot(warehouse) -> dict[str, pl.DataFrame]:
         t = pl.from_arrow(read_table(warehouse, name))
         if name == "ingest_ledger":
             t = t.drop("ingested_at_ns")
+        if name == "batch_units":
+            t = t.drop("committed_at_ns")
         cols = [c for c in t.columns if t.schema[c] != pl.Binary]
         out[name] = t.sort(cols) if t.height else t
     return out

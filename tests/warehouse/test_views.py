@@ -12,7 +12,12 @@ from mcap_fixtures import DAY, T0, hours, truth_rows
 
 from pipeline.tables import schema, table_specs
 from pipeline.warehouse.delta import read_table, replace_window, table_path
-from pipeline.warehouse.views import VIEWS_FILE, rebuild_views_file, register_tables
+from pipeline.warehouse.views import (
+    VIEWS_FILE,
+    connect_views_file,
+    rebuild_views_file,
+    register_tables,
+)
 
 
 def test_view_counts_snapshot_not_glob_after_overwrite(tmp_path):
@@ -60,11 +65,11 @@ def test_empty_tables_get_typed_empty_views(tmp_path):
 def test_rebuild_views_file_swaps_in_new_views(tmp_path):
     target = rebuild_views_file(tmp_path)
     assert target == tmp_path / VIEWS_FILE
-    with duckdb.connect(str(target), read_only=True) as con:
+    with connect_views_file(tmp_path) as con:
         assert con.execute("SELECT count(*) FROM truth").fetchall()[0][0] == 0
     replace_window(tmp_path, "truth", truth_rows(hours(0, 1)), start_ns=T0, end_ns=T0 + DAY)
     rebuild_views_file(tmp_path)
-    with duckdb.connect(str(target), read_only=True) as con:
+    with connect_views_file(tmp_path) as con:
         assert con.execute("SELECT count(*) FROM truth").fetchall()[0][0] == 60
         views = {
             r[0]
@@ -77,7 +82,7 @@ def test_rebuild_views_file_swaps_in_new_views(tmp_path):
 
 
 def _view_sql(db: Path, schema: str = "main") -> dict[str, str]:
-    with duckdb.connect(str(db), read_only=True) as con:
+    with connect_views_file(db.parent) as con:
         rows = con.execute("SELECT view_name, sql FROM duckdb_views() WHERE NOT internal "
                            "AND schema_name = ?", [schema])
         return dict(rows.fetchall())
@@ -111,7 +116,7 @@ def test_views_a_view_edited_by_hand_is_rewritten_and_a_gone_table_dropped(tmp_p
         con.execute("COMMENT ON VIEW old_table IS 'digest of its statement'")
         con.execute("CREATE VIEW my_view AS SELECT 2 AS y")  # an analyst's own, no comment
     rebuild_views_file(tmp_path)
-    with duckdb.connect(str(target), read_only=True) as con:
+    with connect_views_file(tmp_path) as con:
         assert con.sql("SELECT * FROM truth").columns == schema("truth").names
     assert set(_view_sql(target)) == {*table_specs(), "my_view"}
 
@@ -141,10 +146,10 @@ def test_empty_views_bind_when_queried_and_views_over_files_when_created(tmp_pat
 def test_views_file_documents_every_column_with_its_unit(tmp_path):
     """`main.<table>` carries schemas/' docs as comments (duckdb_columns(), the
     describe_table macro); an update that changes only files keeps them."""
-    target = rebuild_views_file(tmp_path)
+    rebuild_views_file(tmp_path)
     replace_window(tmp_path, "truth", truth_rows(hours(0, 1)), start_ns=T0, end_ns=T0 + DAY)
     rebuild_views_file(tmp_path)
-    with duckdb.connect(str(target), read_only=True) as con:
+    with connect_views_file(tmp_path) as con:
         comments = dict(con.execute(
             "SELECT column_name, comment FROM duckdb_columns() "
             "WHERE schema_name = 'main' AND table_name = 'truth'").fetchall())

@@ -1,0 +1,71 @@
+"""One writer per warehouse: an advisory lock on ``<warehouse>/.surveil.lock``.
+
+``surveil run``, ``ingest``, ``batch`` and ``reprocess`` hold it while they work, so two
+jobs started by cron, a systemd timer and an engineer never interleave their commits.
+The lock is ``flock(2)`` on an open file: the kernel releases it when the holder exits,
+however it exits (SIGKILL included), so a crashed job never leaves a stale lock. The
+holder writes its pid, start time and command into the file; a second job either waits
+(``--wait``) or exits 2 naming them.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import socket
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+from jobs.common import UsageError, iso
+
+LOCK_FILE = ".surveil.lock"
+
+try:
+    import fcntl
+except ImportError:  # not POSIX: no lock (documented)
+    fcntl = None  # type: ignore[assignment]
+
+
+class WarehouseLockedError(UsageError):
+    """Another job holds the warehouse (exit code 2)."""
+
+
+def holder(warehouse: Path) -> dict:
+    """What the lock file says of its (last) holder: pid, started_at_ns, command, host."""
+    try:
+        return json.loads((Path(warehouse) / LOCK_FILE).read_text() or "{}")
+    except (OSError, ValueError):
+        return {}
+
+
+@contextlib.contextmanager
+def warehouse_lock(warehouse: Path, *, command: str, wait: bool = False) -> Iterator[None]:
+    """Hold the warehouse's lock for the block (creating the warehouse folder). Raises
+    :class:`WarehouseLockedError` naming the holder when another process holds it and
+    ``wait`` is False; with ``wait``, blocks until it is free."""
+    warehouse = Path(warehouse)
+    warehouse.mkdir(parents=True, exist_ok=True)
+    if fcntl is None:
+        yield
+        return
+    fd = os.open(warehouse / LOCK_FILE, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | (0 if wait else fcntl.LOCK_NB))
+        except BlockingIOError:
+            h = holder(warehouse)
+            since = iso(h["started_at_ns"]) if "started_at_ns" in h else "unknown time"
+            raise WarehouseLockedError(
+                f"warehouse {warehouse} is busy: pid {h.get('pid', '?')} on "
+                f"{h.get('host', '?')} has held it since {since} "
+                f"({h.get('command', 'unknown command')}); try later or pass --wait"
+            ) from None
+        me = {"pid": os.getpid(), "host": socket.gethostname(),
+              "started_at_ns": time.time_ns(), "command": command}
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, json.dumps(me).encode(), 0)
+        yield
+    finally:
+        os.close(fd)  # releases the lock

@@ -1,0 +1,202 @@
+"""`surveil run`: the nightly job over a growing archive.
+
+1. scan the archive folders (``[archive] folders`` or the command's arguments) and ingest
+   the new and changed ``*.mcap`` files (the ledger skips unchanged ones);
+2. find the windows that need a batch: every ledger file (ok or partial) whose time span
+   is not covered by ``batch_units`` committed after the file was ingested. This is read
+   from the warehouse, not remembered by the job: a file ingested by a run that crashed
+   or whose batch failed is found again by the next run, and nothing else is redone;
+3. batch those windows (spans cut out to whole UTC hours and merged; ``run_batch``
+   widens each to the committed units it overlaps);
+4. record the run in ``runs`` (one row per run that had work).
+
+A run with nothing to ingest and no window pending writes nothing and says so. The
+caller holds the warehouse lock (:mod:`jobs.lock`).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import time
+from dataclasses import dataclass, field
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+import polars as pl
+
+from jobs.batch import BatchSummary, run_batch
+from jobs.common import UsageError, iso
+from jobs.ingest import expand_paths, run_ingest
+from pipeline import tables
+from pipeline.config import Config
+from pipeline.executors import UnitResult
+from pipeline.ingest import IngestSummary
+from pipeline.ingest.plan import IngestUsageError
+from pipeline.units import NS
+from pipeline.warehouse.delta import read_table, replace_window
+
+HOUR_NS = 3600 * NS
+
+
+@dataclass
+class RunSummary:
+    started_at_ns: int
+    command: str
+    files: dict[str, str] = field(default_factory=dict)  # ingested: path -> status
+    files_skipped: int = 0
+    ingest: IngestSummary | None = None
+    windows: list[tuple[int, int]] = field(default_factory=list)
+    batches: list[BatchSummary] = field(default_factory=list)
+    failures: list[str] = field(default_factory=list)
+    ended_at_ns: int = 0
+
+    @property
+    def nothing_to_do(self) -> bool:
+        return not self.files and not self.windows and not self.failures
+
+    @property
+    def status(self) -> str:
+        return "failed" if self.failures else "ok"
+
+    @property
+    def exit_code(self) -> int:
+        return 1 if self.failures else 0
+
+    def rows(self) -> dict[str, int]:
+        out: dict[str, int] = {}
+        if self.ingest is not None:
+            for k, v in self.ingest.rows.items():
+                if v:
+                    out[k] = out.get(k, 0) + v
+        for b in self.batches:
+            for k, v in b.rows.items():
+                out[k] = out.get(k, 0) + v
+        return out
+
+    def render(self) -> str:
+        if self.nothing_to_do:
+            return (f"run: nothing to do: {self.files_skipped} file(s) unchanged, no window "
+                    "pending; nothing written")
+        lines = [f"run {self.status}: {len(self.files)} file(s) ingested, "
+                 f"{self.files_skipped} unchanged; {len(self.windows)} window(s) batched"]
+        lines += [f"  window [{iso(a)}, {iso(b)})" for a, b in self.windows]
+        lines += [f"  {name:<22} {n:>9} rows" for name, n in self.rows().items()]
+        lines += [f"  failed: {f}" for f in self.failures]
+        return "\n".join(lines)
+
+
+def pending_windows(warehouse: Path) -> list[tuple[int, int]]:
+    """Windows to batch: the spans of ledger files (ok or partial) not covered by
+    ``batch_units`` committed after the file was ingested, cut out to whole UTC hours and
+    merged; ascending."""
+    ledger = pl.from_arrow(read_table(warehouse, "ingest_ledger")).filter(
+        pl.col("status").is_in(["ok", "partial"]) & pl.col("start_time_ns").is_not_null()
+        & pl.col("end_time_ns").is_not_null())
+    units = pl.from_arrow(read_table(warehouse, "batch_units"))
+    spans = []
+    for f in ledger.iter_rows(named=True):
+        lo, hi = f["start_time_ns"], f["end_time_ns"] + 1
+        fresh = units.filter((pl.col("committed_at_ns") >= f["ingested_at_ns"])
+                             & (pl.col("start_ns") < hi) & (pl.col("end_ns") > lo))
+        if not _covers(fresh, lo, hi):
+            spans.append((lo // HOUR_NS * HOUR_NS, -(-hi // HOUR_NS) * HOUR_NS))
+    merged: list[tuple[int, int]] = []
+    for a, b in sorted(spans):
+        if merged and a <= merged[-1][1]:
+            merged[-1] = (merged[-1][0], max(merged[-1][1], b))
+        else:
+            merged.append((a, b))
+    return merged
+
+
+def _covers(units: pl.DataFrame, lo: int, hi: int) -> bool:
+    """True when the units' intervals cover [lo, hi)."""
+    t = lo
+    for a, b in sorted(zip(units["start_ns"].to_list(), units["end_ns"].to_list(),
+                           strict=True)):
+        if a > t:
+            return False
+        t = max(t, b)
+        if t >= hi:
+            return True
+    return t >= hi
+
+
+def run_nightly(cfg: Config, warehouse: Path, *, folders: list[str] | None = None,
+                executor_kind: str | None = None, command: str = "surveil run",
+                progress: Any = None) -> RunSummary:
+    """Scan, ingest what is new or changed, batch the pending windows, record the run."""
+    chosen = list(folders or cfg.archive_folders)
+    if not chosen:
+        raise UsageError("no archive folders: set [archive] folders in the config or name "
+                         "them: surveil run FOLDER...")
+    try:
+        files = expand_paths([Path(f) for f in chosen])
+    except IngestUsageError as exc:
+        raise UsageError(str(exc)) from None
+    summary = RunSummary(started_at_ns=time.time_ns(), command=command)
+    results: list[UnitResult] = []
+
+    def seen(res: UnitResult) -> None:
+        results.append(res)
+        if progress is not None:
+            progress.ingest_result(res)
+
+    if progress is not None:
+        progress.ingest_total(files)
+    summary.ingest = run_ingest(files, cfg, warehouse, executor=executor_kind, on_result=seen)
+    for res in results:
+        if res.ok and res.value.skipped:
+            summary.files_skipped += 1
+        elif res.ok:
+            summary.files[res.value.source_file] = res.value.status
+    summary.failures += [f"ingest {path}: {err}" for path, err in summary.ingest.failed]
+    summary.failures += [f"ingest {path}: {status}" for path, status in summary.files.items()
+                         if status == "quarantined"]
+    for start, end in pending_windows(warehouse):
+        summary.windows.append((start, end))
+        batch = run_batch(cfg, warehouse, start_ns=start, end_ns=end,
+                          executor_kind=executor_kind, progress=progress)
+        summary.batches.append(batch)
+        summary.failures += [f"batch [{iso(start)}, {iso(end)}): {u}"
+                             for u in batch.failed_units]
+    summary.ended_at_ns = time.time_ns()
+    if not summary.nothing_to_do:
+        record_run(warehouse, cfg, summary)
+    return summary
+
+
+def record_run(warehouse: Path, cfg: Config, s: RunSummary) -> None:
+    """One ``runs`` row (one commit)."""
+    row = {
+        "started_at_ns": s.started_at_ns, "ended_at_ns": s.ended_at_ns,
+        "run_id": f"{s.started_at_ns}-{os.getpid()}", "command": s.command,
+        "status": s.status, "files_json": json.dumps(s.files, sort_keys=True),
+        "files_skipped": s.files_skipped,
+        "windows_json": json.dumps([[int(a), int(b)] for a, b in s.windows]),
+        "rows_json": json.dumps(s.rows(), sort_keys=True),
+        "failures_json": json.dumps(s.failures), "config_sha256": config_sha256(cfg),
+        "code_version": code_version(),
+    }
+    frame = tables.conform("runs", pl.DataFrame([row]))
+    replace_window(warehouse, "runs", frame, start_ns=s.started_at_ns,
+                   end_ns=s.started_at_ns + 1)
+
+
+def config_sha256(cfg: Config) -> str:
+    """sha256 of the config file (of its repr for a config built in memory)."""
+    try:
+        data = Path(cfg.source).read_bytes()
+    except OSError:
+        data = repr(cfg).encode()
+    return hashlib.sha256(data).hexdigest()
+
+
+def code_version() -> str:
+    try:
+        return metadata.version("surveil-pipeline")
+    except metadata.PackageNotFoundError:
+        return "unknown"
