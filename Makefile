@@ -49,7 +49,7 @@ fuzz-asan: setup
 	gcc $(ASAN_CFLAGS) -I$(PYINC) pipeline/io/_mcap_records.c -o build/asan/pipeline/io/_mcap_records$(EXT)
 
 fuzz: fuzz-asan
-	$(BIN)/pip install --quiet 'atheris>=2.3'
+	$(BIN)/pip install --quiet -e '.[dev,asterix,fuzz]'
 	$(BIN)/python fuzz/run.py all --seconds $(FUZZ_SECONDS)
 	LD_PRELOAD="$$(gcc -print-file-name=libasan.so) $$(gcc -print-file-name=libubsan.so)" \
 	ASAN_OPTIONS=detect_leaks=0:allocator_may_return_null=1:handle_segv=1 \
