@@ -34,7 +34,8 @@ import os
 import struct
 import tempfile
 import zlib
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
@@ -116,6 +117,23 @@ class ChannelSpec:
     metadata: Mapping[str, str] = field(default_factory=dict)
 
 
+@contextmanager
+def atomic_output(path: Path) -> Iterator[BinaryIO]:
+    """A binary file that becomes ``path`` only when the block ends without error: a
+    temporary name beside it, fsync, rename; removed on any error (nothing half written)."""
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            yield f
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
 def write_messages(
     path: Path,
     channels: Sequence[ChannelSpec],
@@ -135,37 +153,28 @@ def write_messages(
         raise ValueError("channel_index, log_times and payloads differ in length")
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            w = Writer(f, compression=CompressionType.ZSTD)
-            w.start(profile=MCAP_PROFILE, library=library)
-            schema_ids: dict[tuple[str, str, bytes], int] = {}
-            ids = []
-            for c in channels:
-                sid = 0
-                if c.schema_name is not None:
-                    key = (c.schema_name, c.schema_encoding, c.schema_data)
-                    if key not in schema_ids:
-                        schema_ids[key] = w.register_schema(*key)
-                    sid = schema_ids[key]
-                ids.append(w.register_channel(c.topic, c.message_encoding, sid,
-                                              metadata=dict(c.metadata)))  # fmt: skip
-            for name, record in (metadata or {}).items():
-                w.add_metadata(name, dict(record))
-            seq = [0] * len(ids)
-            # one add_message call per message: the mcap writer has no bulk API
-            for ch, t, p in zip(channel_index, log_times, payloads, strict=True):
-                w.add_message(ids[ch], int(t), p, int(t), seq[ch])
-                seq[ch] += 1
-            w.finish()
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    with atomic_output(path) as f:
+        w = Writer(f, compression=CompressionType.ZSTD)
+        w.start(profile=MCAP_PROFILE, library=library)
+        schema_ids: dict[tuple[str, str, bytes], int] = {}
+        ids = []
+        for c in channels:
+            sid = 0
+            if c.schema_name is not None:
+                key = (c.schema_name, c.schema_encoding, c.schema_data)
+                if key not in schema_ids:
+                    schema_ids[key] = w.register_schema(*key)
+                sid = schema_ids[key]
+            ids.append(w.register_channel(c.topic, c.message_encoding, sid,
+                                          metadata=dict(c.metadata)))  # fmt: skip
+        for name, record in (metadata or {}).items():
+            w.add_metadata(name, dict(record))
+        seq = [0] * len(ids)
+        # one add_message call per message: the mcap writer has no bulk API
+        for ch, t, p in zip(channel_index, log_times, payloads, strict=True):
+            w.add_message(ids[ch], int(t), p, int(t), seq[ch])
+            seq[ch] += 1
+        w.finish()
     return {c.topic: n for c, n in zip(channels, seq, strict=True) if n}
 
 
@@ -216,43 +225,34 @@ def write_mcap_file_reference(
     """:func:`write_mcap_file` through the ``mcap`` package's ``Writer``, one call per
     message: the reference the batched writer is tested against."""
     check_log_times(df["log_time_ns"].to_list())
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            writer = Writer(f, compression=CompressionType.ZSTD)
-            writer.start(profile=MCAP_PROFILE, library=library)
-            schema_ids: dict[str, int] = {}
-            channel_ids = []
-            for topic, encoding, schema_name, *channel_meta in channels:
-                sid = 0
-                if schema_name is not None:
-                    if schema_name not in schema_ids:
-                        schema_ids[schema_name] = writer.register_schema(
-                            schema_name, "jsonschema", schemas[schema_name]
-                        )
-                    sid = schema_ids[schema_name]
-                meta = channel_meta[0] if channel_meta else {}
-                channel_ids.append(writer.register_channel(topic, encoding, sid, metadata=meta))
-            writer.add_metadata("surveil.scenario", metadata)
-            sequence = [0] * len(channels)
-            add = writer.add_message
-            # one call per message: the mcap writer has no bulk API
-            for t, ch, payload in zip(
-                df["log_time_ns"].to_list(),
-                df["channel"].to_list(),
-                df["payload"].to_list(),
-                strict=True,
-            ):
-                add(channel_ids[ch], t, payload, t, sequence[ch])
-                sequence[ch] += 1
-            writer.finish()
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp_name, path)
-    except BaseException:
-        if os.path.exists(tmp_name):
-            os.unlink(tmp_name)
-        raise
+    with atomic_output(path) as f:
+        writer = Writer(f, compression=CompressionType.ZSTD)
+        writer.start(profile=MCAP_PROFILE, library=library)
+        schema_ids: dict[str, int] = {}
+        channel_ids = []
+        for topic, encoding, schema_name, *channel_meta in channels:
+            sid = 0
+            if schema_name is not None:
+                if schema_name not in schema_ids:
+                    schema_ids[schema_name] = writer.register_schema(
+                        schema_name, "jsonschema", schemas[schema_name]
+                    )
+                sid = schema_ids[schema_name]
+            meta = channel_meta[0] if channel_meta else {}
+            channel_ids.append(writer.register_channel(topic, encoding, sid, metadata=meta))
+        writer.add_metadata("surveil.scenario", metadata)
+        sequence = [0] * len(channels)
+        add = writer.add_message
+        # one call per message: the mcap writer has no bulk API
+        for t, ch, payload in zip(
+            df["log_time_ns"].to_list(),
+            df["channel"].to_list(),
+            df["payload"].to_list(),
+            strict=True,
+        ):
+            add(channel_ids[ch], t, payload, t, sequence[ch])
+            sequence[ch] += 1
+        writer.finish()
 
 
 # -- the batched writer ------------------------------------------------------------------
