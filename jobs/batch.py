@@ -35,6 +35,7 @@ inside the window. The commits of a window sit between a pending marker and its 
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import itertools
 import logging
 import shutil
@@ -59,6 +60,7 @@ from pipeline.warehouse.delta import (
     read_table,
     replace_rows,
     replace_window,
+    sql_literal,
     volume_cuts,
     volume_profile,
 )
@@ -82,6 +84,7 @@ class BatchUnit:
     # the whole window, read instead of the warehouse's rows inside the window
     overrides: tuple[tuple[str, tuple[str, ...]], ...] = ()
     window: tuple[int, int] | None = None  # the batch window the overrides cover
+    site: str | None = None  # the site whose rows the unit reads (and stamps on its outputs)
 
 
 @dataclass
@@ -89,6 +92,7 @@ class BatchSummary:
     start_ns: int
     end_ns: int
     requested: tuple[int, int] | None = None  # the window asked for, when widened
+    site: str | None = None
     units_total: int = 0
     failed_units: list[str] = field(default_factory=list)
     rows: dict[str, int] = field(default_factory=dict)
@@ -102,8 +106,9 @@ class BatchSummary:
         return 0 if self.committed and not self.failed_units else 1
 
     def render(self) -> str:
+        at = f"site {self.site}: " if self.site is not None else ""
         lines = [
-            f"batch window [{_iso(self.start_ns)}, {_iso(self.end_ns)}): "
+            f"{at}batch window [{_iso(self.start_ns)}, {_iso(self.end_ns)}): "
             f"{self.units_total} unit(s), {len(self.failed_units)} failed, "
             f"{'committed' if self.committed else 'NOT committed (previous data kept)'}"
         ]
@@ -123,41 +128,47 @@ class BatchSummary:
 
 def read_inputs(fam: Family, warehouse: Path, cfg: Config, window: Window,
                 overrides: dict[str, tuple[str, ...]] | None = None,
-                batch_window: tuple[int, int] | None = None) -> dict[str, pl.DataFrame]:
+                batch_window: tuple[int, int] | None = None,
+                site: str | None = None) -> dict[str, pl.DataFrame]:
     """The tables ``fam``'s stage declares, each over its own span around ``window``. A
     table in ``overrides`` (another family's output of this same batch) is read from
-    those files inside ``batch_window`` and from the warehouse outside it."""
+    those files inside ``batch_window`` and from the warehouse outside it. ``site``: that
+    site's rows only (the stage sees one site: its ids are unique)."""
     out = {}
     for spec in fam.inputs(cfg):
         columns = list(spec.columns) if spec.columns else None
+        at = site if site is not None and tables.has_site(spec.table) else None
         if overrides and spec.table in overrides and batch_window is not None:
             lo, hi = (None, None) if spec.whole_table else spec.span_ns(window)
             out[spec.table] = _overridden(warehouse, spec.table, overrides[spec.table],
-                                          batch_window, lo, hi, columns)
+                                          batch_window, lo, hi, columns, at)
             continue
         if spec.whole_table:
-            table = read_table(warehouse, spec.table, columns=columns, sort=spec.sorted)
+            table = read_table(warehouse, spec.table, columns=columns, sort=spec.sorted,
+                               site=at)
         else:
             lo, hi = spec.span_ns(window)
             table = read_table(warehouse, spec.table, start_ns=lo, end_ns=hi, columns=columns,
-                               sort=spec.sorted)
+                               sort=spec.sorted, site=at)
         out[spec.table] = pl.from_arrow(table)
     return out
 
 
 def _overridden(warehouse: Path, name: str, paths: tuple[str, ...], batch_window: tuple[int, int],
-                lo: int | None, hi: int | None, columns: list[str] | None) -> pl.DataFrame:
-    """Rows of ``name`` in [lo, hi): this batch's (``paths``) inside ``batch_window``, the
-    warehouse's outside it, sorted by the table's sort key."""
+                lo: int | None, hi: int | None, columns: list[str] | None,
+                site: str | None = None) -> pl.DataFrame:
+    """Rows of ``name`` in [lo, hi): this batch's (``paths``: one site's) inside
+    ``batch_window``, the warehouse's (of ``site``) outside it, sorted by the table's
+    sort key."""
     w_lo, w_hi = batch_window
     time_col = tables.spec(name).time_column
     parts = []
     if lo is None or lo < w_lo:  # the warehouse's rows before the batch window
         parts.append(pl.from_arrow(read_table(warehouse, name, start_ns=lo, end_ns=w_lo,
-                                              columns=columns)))
+                                              columns=columns, site=site)))
     if hi is None or hi > w_hi:  # and after it
         parts.append(pl.from_arrow(read_table(warehouse, name, start_ns=w_hi, end_ns=hi,
-                                              columns=columns)))
+                                              columns=columns, site=site)))
     mine = (pl.read_parquet(list(paths), columns=columns) if paths
             else pl.from_arrow(tables.empty(name)).select(columns or pl.all()))
     keep = pl.lit(True)
@@ -182,6 +193,7 @@ class UnitManifest:
     seam: Any = None
     staging_dir: str = ""
     elapsed_s: float = 0.0  # the unit's wall time (read, compute, IPC)
+    site: str | None = None  # stamped on the outputs when they are staged
 
 
 def run_unit(unit: BatchUnit) -> UnitManifest:
@@ -192,7 +204,7 @@ def run_unit(unit: BatchUnit) -> UnitManifest:
     fam = family(unit.family)
     window = Window(unit.start_ns, unit.end_ns)
     inputs = read_inputs(fam, Path(unit.warehouse), unit.cfg, window, dict(unit.overrides),
-                         unit.window)
+                         unit.window, unit.site)
     out = fam.stage(inputs, window, unit.cfg)
     unknown = set(out) - set(fam.outputs) - {"rejects"}
     if unknown:
@@ -214,7 +226,7 @@ def run_unit(unit: BatchUnit) -> UnitManifest:
                 w.write_table(table)
             files[name] = [str(path)]
     return UnitManifest(unit.family, unit.start_ns, files, seam, str(folder),
-                        time.perf_counter() - t0)
+                        time.perf_counter() - t0, unit.site)
 
 
 @dataclass(frozen=True)
@@ -233,7 +245,8 @@ def finalize_unit(task: FinalizeTask) -> UnitManifest:
     m = task.manifest
     folder = Path(m.staging_dir + "-parquet")
     shutil.rmtree(folder, ignore_errors=True)
-    stager = TableStager(folder, threaded=False, presorted=True)
+    stager = TableStager(folder, threaded=False, presorted=True,
+                         site=m.site if m.site is not None else tables.default_site())
     for name, paths in m.files.items():
         for path in paths:
             with pa.memory_map(path) as source:
@@ -246,16 +259,17 @@ def finalize_unit(task: FinalizeTask) -> UnitManifest:
     for f in stager.close():
         files.setdefault(f.table, []).append(f)
     shutil.rmtree(m.staging_dir, ignore_errors=True)
-    return UnitManifest(m.family, m.start_ns, files, m.seam, str(folder), m.elapsed_s)
+    return UnitManifest(m.family, m.start_ns, files, m.seam, str(folder), m.elapsed_s,
+                        m.site)
 
 
-def owned_window(warehouse: Path, start_ns: int, end_ns: int
+def owned_window(warehouse: Path, start_ns: int, end_ns: int, site: str | None = None
                  ) -> tuple[int, int, dict[str, list[int]]]:
-    """``[start_ns, end_ns)`` widened until no committed unit (``batch_units``) of any
-    family straddles its edges, and per family the edges of its committed units inside
-    the widened window: (start, end, {family: cuts})."""
+    """``[start_ns, end_ns)`` widened until no committed unit (``batch_units``, of
+    ``site`` when given) of any family straddles its edges, and per family the edges of
+    its committed units inside the widened window: (start, end, {family: cuts})."""
     units = pl.from_arrow(read_table(warehouse, "batch_units",
-                                     columns=["family", "start_ns", "end_ns"]))
+                                     columns=["family", "start_ns", "end_ns"], site=site))
     lo, hi = start_ns, end_ns
     while True:
         touched = units.filter((pl.col("start_ns") < hi) & (pl.col("end_ns") > lo))
@@ -278,6 +292,7 @@ def plan_units(
     warehouse: Path, cfg: Config, start_ns: int, end_ns: int, staging_dir: Path,
     families: tuple[Family, ...] = FAMILIES,
     committed_cuts: dict[str, list[int]] | None = None,
+    site: str | None = None,
 ) -> list[BatchUnit]:
     """Cut [start_ns, end_ns) into each family's work units: at UTC multiples of its
     ``unit_s`` (or one unit for the whole window), and, for a family with
@@ -291,15 +306,88 @@ def plan_units(
             step = fam.unit_s * NS
             cuts = [start_ns, *range((start_ns // step + 1) * step, end_ns, step), end_ns]
         if fam.unit_rows is not None and fam.unit_table:
-            first, last, rows = volume_profile(warehouse, fam.unit_table, start_ns, end_ns)
+            first, last, rows = volume_profile(warehouse, fam.unit_table, start_ns, end_ns,
+                                               site)
             extra = volume_cuts(first, last, rows, start_ns, end_ns, fam.unit_rows)
             cuts = sorted(set(cuts) | set(extra))
         units += [
-            BatchUnit(str(warehouse), str(staging_dir), a, b, cfg, fam.name)
+            BatchUnit(str(warehouse), str(staging_dir), a, b, cfg, fam.name, site=site)
             for a, b in itertools.pairwise(cuts)
             if b > a
         ]
     return units
+
+
+@dataclass
+class SitesSummary:
+    """A batch over several sites: one :class:`BatchSummary` per site, each reported
+    apart (a site's rows, units and failures are its own)."""
+
+    by_site: dict[str, BatchSummary]
+    asked_start_ns: int
+    asked_end_ns: int
+
+    @property
+    def start_ns(self) -> int:
+        """Start of the window batched (widened to committed units), earliest site's."""
+        return min((b.start_ns for b in self.by_site.values()), default=self.asked_start_ns)
+
+    @property
+    def end_ns(self) -> int:
+        return max((b.end_ns for b in self.by_site.values()), default=self.asked_end_ns)
+
+    @property
+    def requested(self) -> tuple[int, int] | None:
+        """The window asked for, when some site's was widened."""
+        widened = any(b.requested is not None for b in self.by_site.values())
+        return (self.asked_start_ns, self.asked_end_ns) if widened else None
+
+    @property
+    def rejects(self) -> int:
+        return sum(b.rejects for b in self.by_site.values())
+
+    @property
+    def committed(self) -> bool:
+        return all(b.committed for b in self.by_site.values())
+
+    @property
+    def failed_units(self) -> list[str]:
+        return [f"site {s}: {u}" for s, b in self.by_site.items() for u in b.failed_units]
+
+    @property
+    def units_total(self) -> int:
+        return sum(b.units_total for b in self.by_site.values())
+
+    @property
+    def rows(self) -> dict[str, int]:
+        """Rows written per table, all sites (for run records; reports stay per site)."""
+        out: dict[str, int] = {}
+        for b in self.by_site.values():
+            for name, n in b.rows.items():
+                out[name] = out.get(name, 0) + n
+        return out
+
+    @property
+    def exit_code(self) -> int:
+        return max((b.exit_code for b in self.by_site.values()), default=0)
+
+    def render(self) -> str:
+        if not self.by_site:
+            return (f"batch window [{_iso(self.asked_start_ns)}, {_iso(self.asked_end_ns)}): "
+                    "no site has "
+                    "data in it; nothing written")
+        return "\n".join(b.render() for b in self.by_site.values())
+
+
+def sites_in(warehouse: Path, start_ns: int, end_ns: int) -> list[str]:
+    """The sites the ingest ledger knows files of (ok or partial) overlapping
+    ``[start_ns, end_ns)``, sorted."""
+    ledger = pl.from_arrow(read_table(warehouse, "ingest_ledger", columns=[
+        "site", "status", "start_time_ns", "end_time_ns"]))
+    hit = ledger.filter(pl.col("status").is_in(["ok", "partial"])
+                        & (pl.col("start_time_ns") < end_ns)
+                        & (pl.col("end_time_ns") >= start_ns))
+    return sorted(hit["site"].unique().to_list())
 
 
 def run_batch(
@@ -311,22 +399,51 @@ def run_batch(
     executor_kind: str | None = None,
     families: tuple[str, ...] | None = None,
     progress: Any = None,
-) -> BatchSummary:
-    """Run the batch for [start_ns, end_ns) and commit it atomically per table.
+    site: str | None = None,
+) -> SitesSummary:
+    """Run the batch for [start_ns, end_ns), site by site, and commit each site's window
+    atomically per table.
 
-    ``families``: names of the families to run (default: every registered family);
-    ``progress``: the CLI's :class:`~jobs.progress.TerminalProgress` (or None)."""
+    ``site``: that site only (its rows are read, replaced and recorded; other sites' rows
+    are untouched); default: every site the ledger knows data of in the window, each
+    batched alone (its own units, ids, commit). ``families``: names of the families to
+    run (default: every registered family); ``progress``: the CLI's
+    :class:`~jobs.progress.TerminalProgress` (or None)."""
     if end_ns <= start_ns:
         raise ValueError("--to must be after --from")
+    sites = [site] if site is not None else sites_in(warehouse, start_ns, end_ns)
+    out = SitesSummary({}, start_ns, end_ns)
+    for name in sites:
+        out.by_site[name] = _run_site(cfg, warehouse, start_ns=start_ns, end_ns=end_ns,
+                                      executor_kind=executor_kind, families=families,
+                                      progress=progress, site=name)
+    with deferred_interrupts():
+        rebuild_views_file(warehouse)
+    return out
+
+
+def _run_site(
+    cfg: Config,
+    warehouse: Path,
+    *,
+    start_ns: int,
+    end_ns: int,
+    executor_kind: str | None,
+    families: tuple[str, ...] | None,
+    progress: Any,
+    site: str,
+) -> BatchSummary:
+    """One site's batch of [start_ns, end_ns) (widened to its committed units)."""
     fams = FAMILIES if families is None else tuple(family(name) for name in families)
     warm_up(warehouse)  # the views file's DuckDB instance, built while the batch runs
     requested = (start_ns, end_ns)
-    start_ns, end_ns, committed_cuts = owned_window(warehouse, start_ns, end_ns)
-    staging = warehouse / "_staging" / f"batch-{start_ns}-{end_ns}"
+    start_ns, end_ns, committed_cuts = owned_window(warehouse, start_ns, end_ns, site)
+    staging = warehouse / "_staging" / f"batch-{_safe(site)}-{start_ns}-{end_ns}"
     shutil.rmtree(staging, ignore_errors=True)
-    units = plan_units(warehouse, cfg, start_ns, end_ns, staging, fams, committed_cuts)
+    units = plan_units(warehouse, cfg, start_ns, end_ns, staging, fams, committed_cuts, site)
     summary = BatchSummary(start_ns=start_ns, end_ns=end_ns, units_total=len(units),
-                           requested=None if requested == (start_ns, end_ns) else requested)
+                           requested=None if requested == (start_ns, end_ns) else requested,
+                           site=site)
     ex = cfg.execution
     executor = make_executor(
         executor_kind or ex.executor, min(ex.max_workers, len(units)), ex.threads_per_worker
@@ -362,9 +479,12 @@ def run_batch(
     shutil.rmtree(staging, ignore_errors=True)
     with contextlib.suppress(OSError):  # only when empty: another job may be staging
         (warehouse / "_staging").rmdir()
-    with deferred_interrupts():
-        rebuild_views_file(warehouse)
     return summary
+
+
+def _safe(site: str) -> str:
+    """A site as a folder name part (any site name is a valid string, not a path)."""
+    return hashlib.sha256(site.encode()).hexdigest()[:12]
 
 
 def _run_units(executor, units: list[BatchUnit], fams: tuple[Family, ...],
@@ -405,11 +525,13 @@ def family_waves(families: tuple[Family, ...], cfg: Config) -> list[list[Family]
     return waves
 
 
-def _stored_before(warehouse: Path, fam: Family, start_ns: int) -> dict[str, pl.DataFrame]:
-    """``fam``'s committed outputs in the ``stitch_lookback_s`` before ``start_ns``: the
-    unit before the window as its ``join_units`` sees a unit (a pseudo-unit)."""
+def _stored_before(warehouse: Path, fam: Family, start_ns: int, site: str | None = None
+                   ) -> dict[str, pl.DataFrame]:
+    """``fam``'s committed outputs (of ``site``) in the ``stitch_lookback_s`` before
+    ``start_ns``: the unit before the window as its ``join_units`` sees a unit."""
     lo = start_ns - round(fam.stitch_lookback_s * NS)
-    return {name: pl.from_arrow(read_table(warehouse, name, start_ns=lo, end_ns=start_ns))
+    return {name: pl.from_arrow(read_table(warehouse, name, start_ns=lo, end_ns=start_ns,
+                                           site=site))
             for name in fam.outputs}
 
 
@@ -426,7 +548,7 @@ def _finalize_units(executor, manifests: list[UnitManifest], families: tuple[Fam
         lead = 0
         if (fam.join_units is not None and fam.unit_seam is not None
                 and fam.stitch_lookback_s and warehouse is not None):
-            before = _stored_before(warehouse, fam, summary.start_ns)
+            before = _stored_before(warehouse, fam, summary.start_ns, summary.site)
             if any(f.height for f in before.values()):
                 seams, lead = [fam.unit_seam(before), *seams], 1
         maps = (fam.join_units(seams)[lead:]
@@ -452,23 +574,25 @@ def _commit(warehouse: Path, manifests: list[UnitManifest], summary: BatchSummar
     in between leaves the marker, and readers the previous rows of every table, until a
     batch covering this window finishes. Only the driver commits."""
     derived = [name for fam in families for name in fam.outputs]
+    site = summary.site
     marker = pending.begin(warehouse, [*derived, "rejects", "batch_units"], job="batch",
-                           window=[summary.start_ns, summary.end_ns])
+                           window=[summary.start_ns, summary.end_ns], site=site)
     for fam in families:
         ours = [m for m in manifests if m.family == fam.name]
         for name in fam.outputs:
             staged = [f for m in ours for f in m.files.get(name, [])]
             commit_window(warehouse, name, staged, start_ns=summary.start_ns,
-                          end_ns=summary.end_ns)
+                          end_ns=summary.end_ns, site=site)
             summary.rows[name] = sum(f.rows for f in staged)
     staged = [f for m in manifests for f in m.files.get("rejects", [])]
     rejects = read_staged("rejects", staged) if staged else tables.empty("rejects")
+    of_site = f"site = {sql_literal(site)} AND " if site is not None else ""
     replace_rows(
         warehouse,
         "rejects",
         rejects,
         predicate_sql=(
-            f"stage = 'batch' AND log_time_ns >= {int(summary.start_ns)} "
+            f"{of_site}stage = 'batch' AND log_time_ns >= {int(summary.start_ns)} "
             f"AND log_time_ns < {int(summary.end_ns)}"
         ),
     )
@@ -477,6 +601,7 @@ def _commit(warehouse: Path, manifests: list[UnitManifest], summary: BatchSummar
         _record_units(warehouse, units, summary)
     lo, hi = summary.start_ns, summary.end_ns
     pending.finish(warehouse, marker, supersedes=lambda doc: doc.get("job") == "batch"
+                   and doc.get("site") in (None, site)
                    and lo <= doc["window"][0] and doc["window"][1] <= hi)
     summary.committed = True
 
@@ -491,8 +616,9 @@ def _record_units(warehouse: Path, units: list[BatchUnit], summary: BatchSummary
     ).with_columns(window_start_ns=pl.lit(summary.start_ns, pl.Int64),
                    window_end_ns=pl.lit(summary.end_ns, pl.Int64),
                    committed_at_ns=pl.lit(now, pl.Int64))
-    replace_window(warehouse, "batch_units", tables.conform("batch_units", rows),
-                   start_ns=summary.start_ns, end_ns=summary.end_ns)
+    site = summary.site if summary.site is not None else tables.default_site()
+    replace_window(warehouse, "batch_units", tables.conform("batch_units", rows, site=site),
+                   start_ns=summary.start_ns, end_ns=summary.end_ns, site=site)
 
 
 def _iso(t_ns: int) -> str:

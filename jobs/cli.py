@@ -28,9 +28,11 @@ from jobs.common import (
     EXIT_INTERRUPTED,
     EXIT_USAGE,
     UsageError,
+    checked_site,
     checked_warehouse,
     parse_duration,
     parse_time_ns,
+    refuse_pre_sites,
     require_warehouse,
     setup_logging,
 )
@@ -65,8 +67,11 @@ class _State:
     @property
     def warehouse(self) -> Path:
         """The warehouse a command writes (``ingest``, ``run``, ``demo`` create it),
-        absolute; exit 2 when Delta cannot use the path."""
-        return checked_warehouse(Path(self.warehouse_option or self.cfg.warehouse_path))
+        absolute; exit 2 when Delta cannot use the path, or when it was written before
+        sites (no ``site`` column: rebuild it)."""
+        path = checked_warehouse(Path(self.warehouse_option or self.cfg.warehouse_path))
+        refuse_pre_sites(path)
+        return path
 
     @property
     def existing_warehouse(self) -> Path:
@@ -198,6 +203,24 @@ _TO_REQUIRED = click.option("--to", required=True, metavar="TIME", help=_TO_HELP
 _SECTOR = click.option("--sector", default=None, shell_complete=_complete_sectors,
                        help="one sector of the config (default: every sector); an unknown "
                             "name lists them")
+def _parse_site(_ctx: click.Context, _param: click.Parameter, value: str | None
+                ) -> str | None:
+    try:
+        return None if value is None else checked_site(value)
+    except UsageError as exc:
+        raise click.BadParameter(str(exc)) from None
+
+
+def _site_option(help_text: str) -> Any:
+    return click.option("--site", default=None, metavar="NAME", callback=_parse_site,
+                        help=help_text)
+
+
+_SITE_READ = _site_option("that site's rows only (default: every site, each reported "
+                          "apart in a `site` column)")
+_SITE_BATCH = _site_option("that site only: its rows are read and replaced, other sites' "
+                           "are untouched (default: every site with data in the window, "
+                           "each batched alone)")
 _WAIT = click.option("--wait", is_flag=True,
                      help="wait for another job holding the warehouse (default: exit 2 "
                           "naming it)")
@@ -259,13 +282,17 @@ def simulate(st: _State, scenario, duration, seed, start, ships, radars, out) ->
 @click.option("--base-time", default="1970-01-01T00:00:00Z", show_default=True,
               help="for files without any date: base of synthetic log times (no time at "
               "all) or the day of time-of-day-only logs (ISO 8601 or ns)")
+@_site_option("the site (deployment) the captures come from, written into each MCAP "
+              "file's metadata (`surveil.import` record, key `site`) for ingest to stamp "
+              "on every row (default: none named: ingest's --site or 'default')")
 @click.pass_obj
-def import_command(st: _State, paths, out_dir, base_time) -> None:
+def import_command(st: _State, paths, out_dir, base_time, site) -> None:
     """Wrap legacy captures (NMEA 0183 text, AIS CSV, raw ASTERIX, pcap) into MCAP with
     honest log times (channel metadata "log_time_source"), so `ingest` reads MCAP only."""
     from jobs.import_legacy import run_import
 
-    summary = run_import(paths, out_dir, base_time_ns=parse_time_ns(base_time), cfg=st.cfg)
+    summary = run_import(paths, out_dir, base_time_ns=parse_time_ns(base_time), cfg=st.cfg,
+                         site=site)
     click.echo(summary.render())
     sys.exit(summary.exit_code)
 
@@ -275,10 +302,12 @@ def import_command(st: _State, paths, out_dir, base_time) -> None:
 @_FROM
 @_TO
 @click.option("--force", is_flag=True, help="re-ingest files the ledger says are unchanged")
+@_site_option("the site of files whose MCAP metadata names none (default 'default'); a "
+              "file naming another site is exit 2")
 @_EXECUTOR
 @_WAIT
 @click.pass_obj
-def ingest(st: _State, paths, from_, to, force, executor, wait) -> None:
+def ingest(st: _State, paths, from_, to, force, site, executor, wait) -> None:
     """Decode MCAP files into the warehouse's raw tables."""
     from jobs.ingest import expand_paths, run_ingest
     from jobs.progress import terminal_progress
@@ -290,7 +319,8 @@ def ingest(st: _State, paths, from_, to, force, executor, wait) -> None:
             progress.ingest_total(expand_paths([Path(p) for p in paths]))
         summary = run_ingest([Path(p) for p in paths], st.cfg, st.warehouse,
                              start_ns=start, end_ns=end, force=force, executor=executor,
-                             on_result=progress.ingest_result if progress else None)
+                             on_result=progress.ingest_result if progress else None,
+                             site=site)
     click.echo(summary.render())
     sys.exit(summary.exit_code)
 
@@ -301,10 +331,11 @@ def ingest(st: _State, paths, from_, to, force, executor, wait) -> None:
 @cli.command()
 @_FROM_REQUIRED
 @_TO_REQUIRED
+@_SITE_BATCH
 @_EXECUTOR
 @_WAIT
 @click.pass_obj
-def batch(st: _State, from_, to, executor, wait) -> None:
+def batch(st: _State, from_, to, site, executor, wait) -> None:
     """Run every sensor family's batch over one window; commit it atomically."""
     from jobs.batch import run_batch
     from jobs.progress import terminal_progress
@@ -315,7 +346,7 @@ def batch(st: _State, from_, to, executor, wait) -> None:
     progress = terminal_progress()
     with _locked(st, wait), progress or contextlib.nullcontext():
         summary = run_batch(st.cfg, warehouse, start_ns=start, end_ns=end,
-                            executor_kind=executor, progress=progress)
+                            executor_kind=executor, progress=progress, site=site)
     click.echo(summary.render())
     sys.exit(summary.exit_code)
 
@@ -323,10 +354,11 @@ def batch(st: _State, from_, to, executor, wait) -> None:
 @cli.command()
 @_FROM_REQUIRED
 @_TO_REQUIRED
+@_SITE_BATCH
 @_EXECUTOR
 @_WAIT
 @click.pass_obj
-def reprocess(st: _State, from_, to, executor, wait) -> None:
+def reprocess(st: _State, from_, to, site, executor, wait) -> None:
     """Re-ingest the archived files overlapping a window and re-run its batch."""
     from jobs.progress import terminal_progress
     from jobs.reprocess import run_reprocess
@@ -337,7 +369,7 @@ def reprocess(st: _State, from_, to, executor, wait) -> None:
     progress = terminal_progress()
     with _locked(st, wait), progress or contextlib.nullcontext():
         summary = run_reprocess(st.cfg, warehouse, start_ns=start, end_ns=end,
-                                executor_kind=executor, progress=progress)
+                                executor_kind=executor, progress=progress, site=site)
     click.echo(summary.render())
     sys.exit(summary.exit_code)
 
@@ -398,8 +430,9 @@ def demo(st: _State, seed, duration, scenarios, executor) -> None:
 @click.option("--param", "params", multiple=True, metavar="NAME=VALUE",
               help="a parameter the report's header declares (repeatable)")
 @click.option("--list", "list_", is_flag=True, help="list the available reports")
+@_SITE_READ
 @click.pass_obj
-def report(st: _State, name, from_, to, sector, fmt, params, list_) -> None:
+def report(st: _State, name, from_, to, sector, fmt, params, list_, site) -> None:
     """Run a report (sql/ or a [reports] dirs folder) over the warehouse."""
     from jobs.report import explain_empty, format_report, run_named_report
     from pipeline.reports import (
@@ -418,7 +451,8 @@ def report(st: _State, name, from_, to, sector, fmt, params, list_) -> None:
     sector = st.sector(sector)
     try:
         table = run_named_report(st.existing_warehouse, name, start_ns=start, end_ns=end,
-                                 sector=sector, cfg=st.cfg, params=_params(params))
+                                 sector=sector, cfg=st.cfg, params=_params(params),
+                                 site=site)
     except UnknownReportError as exc:
         raise UsageError(f"no report {name!r}; available: {', '.join(list_reports(dirs))}"
                          ) from exc

@@ -49,6 +49,35 @@ def require_warehouse(warehouse: Path) -> Path:
     return path
 
 
+_SITE_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}")
+
+
+def checked_site(name: str) -> str:
+    """A ``--site`` name: 1-64 letters, digits, ``.``, ``_``, ``-``, starting with a
+    letter or digit; :class:`UsageError` otherwise."""
+    if not _SITE_NAME.fullmatch(name):
+        raise UsageError(f"--site {name!r}: a site name is 1-64 letters, digits, '.', '_' "
+                         "or '-', starting with a letter or digit")
+    return name
+
+
+def refuse_pre_sites(warehouse: Path) -> None:
+    """:class:`UsageError` when ``warehouse`` was written before rows carried their site
+    (its ``ingest_ledger`` has no ``site`` column): ids of two sites could not be told
+    apart in it, so it is not migrated in place; rebuild it from the archive."""
+    log_dir = Path(warehouse) / "tables" / "ingest_ledger" / "_delta_log"
+    if not log_dir.is_dir():
+        return
+    from deltalake import DeltaTable
+
+    names = {f.name for f in DeltaTable(str(log_dir.parent)).schema().fields}
+    if "site" not in names:
+        raise UsageError(
+            f"warehouse {warehouse} was written before rows carried their site (no `site` "
+            "column); rebuild it: `surveil ingest ARCHIVE --warehouse NEW [--site NAME]` "
+            "then `surveil batch` (docs/operations.md, 'Many sites, one warehouse')")
+
+
 def parse_time_ns(text: str) -> int:
     """ISO 8601 (``2026-01-15T01:00:00Z``, naive means UTC) or an integer ns timestamp."""
     t = text.strip()

@@ -10,7 +10,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from jobs.batch import BatchSummary, run_batch
+from jobs.batch import SitesSummary, run_batch
 from jobs.common import iso
 from jobs.ingest import IngestSummary, run_ingest
 from jobs.report import format_report, run_named_report
@@ -25,7 +25,7 @@ DEMO_SCENARIOS = ("channel", "airfield", "ownship")
 class DemoResult:
     archive: list[Path]
     ingest: IngestSummary
-    batch: BatchSummary
+    batch: SitesSummary
 
     @property
     def exit_code(self) -> int:

@@ -121,9 +121,11 @@ def run_import(
     *,
     base_time_ns: int = 0,
     cfg: Config | None = None,
+    site: str | None = None,
 ) -> ImportSummary:
     """Wrap every input into ``out_dir`` (created); see the module docstring. ``cfg``:
-    its ``[import.csv]`` / ``[asterix]`` sections (defaults without one)."""
+    its ``[import.csv]`` / ``[asterix]`` sections (defaults without one). ``site``: written
+    into every output's metadata (``surveil.import`` record, key ``site``)."""
     options = import_options(cfg)
     if not time_in_range(base_time_ns):
         raise UsageError(
@@ -137,7 +139,8 @@ def run_import(
         if output_path(f, out).resolve() == f:
             raise UsageError(f"output would overwrite the input: {f}")
         try:
-            summary.imported.append(import_file(f, out, base_time_ns=base_time_ns, options=options))
+            summary.imported.append(import_file(f, out, base_time_ns=base_time_ns, options=options,
+                                                 site=site))
         except ValueError as exc:  # damaged or unrecognised content found while wrapping
             summary.failed.append((str(f), str(exc)))
     return summary

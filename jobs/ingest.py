@@ -26,7 +26,7 @@ from pipeline.config import Config
 from pipeline.convert.config import import_options
 from pipeline.executors import Executor, UnitResult, make_executor
 from pipeline.ingest import FileManifest, IngestContext, IngestSummary, commit_file, ingest_file
-from pipeline.ingest.plan import IngestUsageError, expand_paths, plan_units
+from pipeline.ingest.plan import IngestUsageError, check_sites, expand_paths, plan_units
 from pipeline.signals import deferred_interrupts
 from pipeline.warehouse.ledger import same_content
 from pipeline.warehouse.overlaps import record_overlaps
@@ -47,14 +47,16 @@ def run_ingest(
     force: bool = False,
     executor: Executor | str | None = None,
     on_result: Callable[[UnitResult], None] | None = None,
+    site: str | None = None,
 ) -> IngestSummary:
     """Ingest MCAP files (directories expand to ``*.mcap``) into ``warehouse``.
 
     ``[start_ns, end_ns)``: optional window, both bounds or neither (ns, UTC).
     ``executor``: an :class:`Executor`, or a kind (``serial``/``process``/``ray``) sized
     by ``cfg.execution``; ``None`` uses ``cfg.execution`` entirely. ``on_result`` is
-    called per finished unit (progress display). Raises :class:`IngestUsageError` for
-    bad paths or a bad window.
+    called per finished unit (progress display). ``site``: the site of files whose MCAP
+    metadata names none (default: ``default``). Raises :class:`IngestUsageError` for
+    bad paths, a bad window, or a ``site`` a file's metadata contradicts.
     """
     warehouse = Path(warehouse).resolve()
     staging = warehouse / "_staging" / f"ingest-{os.getpid()}-{time.time_ns()}"
@@ -62,7 +64,9 @@ def run_ingest(
         paths, warehouse=warehouse, staging=staging, validation=cfg.validation,
         start_ns=start_ns, end_ns=end_ns, force=force,
         asterix_editions=tuple(sorted(import_options(cfg).asterix_editions.items())),
+        site=site,
     )  # fmt: skip
+    check_sites(units)
     ex = _executor(executor, cfg, len(units))
     summary = IngestSummary(files_total=len(units))
     if start_ns is not None:

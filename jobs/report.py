@@ -41,10 +41,11 @@ def run_named_report(
     sector: str | None = None,
     cfg: Config | None = None,
     params: Mapping[str, Any] | None = None,
+    site: str | None = None,
 ) -> pa.Table:
     """Report ``name`` over the warehouse (all time when no window). ``cfg``: its
     ``[requirements]`` are bound and its ``[reports] dirs`` searched (None: the shipped
-    figures, shipped reports only)."""
+    figures, shipped reports only); ``site``: that site's rows (None: every site, apart)."""
     con = open_warehouse(warehouse)
     try:
         return run_report(
@@ -56,6 +57,7 @@ def run_named_report(
             requirements=requirements_config(cfg) if cfg is not None else None,
             params=params,
             dirs=reports_config(cfg).dirs if cfg is not None else (),
+            site=site,
         )
     finally:
         con.close()

@@ -13,7 +13,7 @@ from typing import Any
 import pyarrow as pa
 import pyarrow.compute as pc
 
-from jobs.batch import BatchSummary, run_batch
+from jobs.batch import SitesSummary, run_batch
 from jobs.common import UsageError
 from jobs.ingest import IngestSummary, run_ingest
 from pipeline.config import Config
@@ -23,7 +23,7 @@ from pipeline.warehouse.delta import read_table
 @dataclass
 class ReprocessSummary:
     ingest: IngestSummary | None
-    batch: BatchSummary
+    batch: SitesSummary
     missing_files: list[str]
 
     @property
@@ -40,9 +40,11 @@ class ReprocessSummary:
         return "\n".join(parts)
 
 
-def files_overlapping(warehouse: Path, start_ns: int, end_ns: int) -> list[str]:
-    """Archived files (from the ingest ledger) whose time span overlaps the window."""
-    ledger = read_table(warehouse, "ingest_ledger")
+def files_overlapping(warehouse: Path, start_ns: int, end_ns: int, site: str | None = None
+                      ) -> list[str]:
+    """Archived files (from the ingest ledger; of ``site`` when given) whose time span
+    overlaps the window."""
+    ledger = read_table(warehouse, "ingest_ledger", site=site)
     if ledger.num_rows == 0:
         return []
     overlaps = pc.and_(
@@ -56,13 +58,14 @@ def files_overlapping(warehouse: Path, start_ns: int, end_ns: int) -> list[str]:
 
 def run_reprocess(
     cfg: Config, warehouse: Path, *, start_ns: int, end_ns: int, executor_kind: str | None = None,
-    progress: Any = None,
+    progress: Any = None, site: str | None = None,
 ) -> ReprocessSummary:
-    """Re-ingest the files overlapping the window, then batch it. ``progress``: the
+    """Re-ingest the files overlapping the window, then batch it. ``site``: that site's
+    files and rows only (default: every site, each batched alone). ``progress``: the
     CLI's :class:`~jobs.progress.TerminalProgress` (or None)."""
     if end_ns <= start_ns:
         raise UsageError("--to must be after --from")
-    files = files_overlapping(warehouse, start_ns, end_ns)
+    files = files_overlapping(warehouse, start_ns, end_ns, site)
     present = [f for f in files if Path(f).is_file()]
     missing = [f for f in files if not Path(f).is_file()]
     ingest = None
@@ -75,5 +78,5 @@ def run_reprocess(
             on_result=progress.ingest_result if progress is not None else None,
         )
     batch = run_batch(cfg, warehouse, start_ns=start_ns, end_ns=end_ns,
-                      executor_kind=executor_kind, progress=progress)
+                      executor_kind=executor_kind, progress=progress, site=site)
     return ReprocessSummary(ingest=ingest, batch=batch, missing_files=missing)

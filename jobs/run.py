@@ -27,7 +27,7 @@ from typing import Any
 
 import polars as pl
 
-from jobs.batch import BatchSummary, run_batch
+from jobs.batch import SitesSummary, run_batch
 from jobs.common import UsageError, iso
 from jobs.ingest import expand_paths, run_ingest
 from pipeline import tables
@@ -49,7 +49,7 @@ class RunSummary:
     files_skipped: int = 0
     ingest: IngestSummary | None = None
     windows: list[tuple[int, int]] = field(default_factory=list)
-    batches: list[BatchSummary] = field(default_factory=list)
+    batches: list[SitesSummary] = field(default_factory=list)
     failures: list[str] = field(default_factory=list)
     ended_at_ns: int = 0
 
@@ -90,8 +90,9 @@ class RunSummary:
 
 def pending_windows(warehouse: Path) -> list[tuple[int, int]]:
     """Windows to batch: the spans of ledger files (ok or partial) not covered by
-    ``batch_units`` committed after the file was ingested, cut out to whole UTC hours and
-    merged; ascending."""
+    ``batch_units`` of the file's site committed after the file was ingested, cut out to
+    whole UTC hours and merged; ascending. (The batch then runs every site with data in
+    a window, each alone.)"""
     ledger = pl.from_arrow(read_table(warehouse, "ingest_ledger")).filter(
         pl.col("status").is_in(["ok", "partial"]) & pl.col("start_time_ns").is_not_null()
         & pl.col("end_time_ns").is_not_null())
@@ -99,7 +100,8 @@ def pending_windows(warehouse: Path) -> list[tuple[int, int]]:
     spans = []
     for f in ledger.iter_rows(named=True):
         lo, hi = f["start_time_ns"], f["end_time_ns"] + 1
-        fresh = units.filter((pl.col("committed_at_ns") >= f["ingested_at_ns"])
+        fresh = units.filter((pl.col("site") == f["site"])
+                             & (pl.col("committed_at_ns") >= f["ingested_at_ns"])
                              & (pl.col("start_ns") < hi) & (pl.col("end_ns") > lo))
         if not _covers(fresh, lo, hi):
             spans.append((lo // HOUR_NS * HOUR_NS, -(-hi // HOUR_NS) * HOUR_NS))

@@ -13,7 +13,11 @@ Header (every file, shipped or user's)::
     -- name: <the file stem>
     -- description: what the report answers (continuation lines start with "--  ")
     -- grain: what one row is
-    -- params: $start_ns (BIGINT, inclusive), $end_ns (BIGINT, exclusive), $sector (VARCHAR)
+    -- params: $start_ns (BIGINT, inclusive), $end_ns (BIGINT, exclusive), $sector (VARCHAR),
+    --         $site (VARCHAR, NULL = every site)
+
+``$site`` is bound too (None: every site); a report over per-site rows filters on it and
+groups by ``site`` so that sites are reported apart, never summed.
 """
 
 from __future__ import annotations
@@ -35,7 +39,7 @@ _HEADER = re.compile(r"^--\s*(\w[\w ]*?):\s*(.*)$")
 _PARAM = re.compile(r"\$(\w+)\s*(?:\(([^)]*)\))?")
 _COMMENT = re.compile(r"--[^\n]*")
 _NAME = re.compile(r"[A-Za-z0-9_]+")
-WINDOW_PARAMS = ("start_ns", "end_ns", "sector")
+WINDOW_PARAMS = ("start_ns", "end_ns", "sector", "site")
 REQUIRED_HEADER = ("name", "description", "params")
 
 
@@ -243,6 +247,7 @@ def bind_params(
     sector: str | None,
     requirements: RequirementsConfig | None = None,
     params: Mapping[str, Any] | None = None,
+    site: str | None = None,
 ) -> dict[str, Any]:
     """The values of every ``$name`` the report's SQL uses: the window and sector, the
     requirement figures, the caller's ``params`` (text is converted to the declared
@@ -253,7 +258,11 @@ def bind_params(
         raise ReportError(f"report {report.name} has no parameter(s) "
                           f"{', '.join('$' + u for u in sorted(unknown))}; it takes "
                           + ", ".join("$" + p.name for p in report.params))
-    values: dict[str, Any] = {"start_ns": int(start_ns), "end_ns": int(end_ns), "sector": sector}
+    if site is not None and "site" not in report.used:
+        raise ReportError(f"report {report.name} does not take $site (its rows are not per "
+                          "site); run it without --site")
+    values: dict[str, Any] = {"start_ns": int(start_ns), "end_ns": int(end_ns), "sector": sector,
+                              "site": site}
     values.update((requirements or RequirementsConfig()).sql_params())
     for p in report.params:
         if p.name in given:
@@ -277,10 +286,13 @@ def run_report(
     requirements: RequirementsConfig | None = None,
     params: Mapping[str, Any] | None = None,
     dirs: Sequence[Path] = (),
+    site: str | None = None,
 ) -> pa.Table:
     """Run a report on a connection whose views expose the warehouse tables.
-    ``requirements``: the config's ``[requirements]`` (None: the shipped figures)."""
+    ``requirements``: the config's ``[requirements]`` (None: the shipped figures);
+    ``site``: that site's rows (None: every site, each its own rows: reports group by
+    ``site``)."""
     report = name if isinstance(name, ReportSql) else load_report(name, dirs)
     bound = bind_params(report, start_ns=start_ns, end_ns=end_ns, sector=sector,
-                        requirements=requirements, params=params)
+                        requirements=requirements, params=params, site=site)
     return con.sql(report.text, params=bound).to_arrow_table()

@@ -46,9 +46,44 @@ class TableSpec:
         return ("date",) if "date" in self.schema.names else ()
 
 
+SITE = "site"
+"""The site column's name (declared once, ``schemas/tables.toml [site]``)."""
+
+
+@dataclass(frozen=True)
+class SiteColumn:
+    """``tables.toml [site]``: the column every raw and derived table (and the ledgers in
+    ``ledgers``) carries, and the site of rows whose file and command name none."""
+
+    column: tuple[str, str, bool, str]
+    default: str
+    ledgers: frozenset[str]
+
+    def carried_by(self, name: str, kind: str) -> bool:
+        return kind in ("raw", "derived") or name in self.ledgers
+
+
+@cache
+def site_column() -> SiteColumn:
+    doc = tomllib.loads((resource_path("schemas") / "tables.toml").read_text())["site"]
+    return SiteColumn(tuple(doc["column"]), str(doc["default"]),  # type: ignore[arg-type]
+                      frozenset(doc.get("ledgers", ())))
+
+
+def default_site() -> str:
+    """The site of rows whose MCAP file and command name none (``default``)."""
+    return site_column().default
+
+
+def has_site(name: str) -> bool:
+    """Whether table ``name`` carries the ``site`` column."""
+    return SITE in spec(name).schema.names
+
+
 @cache
 def table_specs() -> dict[str, TableSpec]:
     root = resource_path("schemas")
+    site = site_column()
     declared: dict[str, dict] = {}
     # tables.toml holds the spine's tables; each sensor family adds tables.d/<family>.toml
     for path in [root / "tables.toml", *sorted((root / "tables.d").glob("*.toml"))]:
@@ -58,16 +93,20 @@ def table_specs() -> dict[str, TableSpec]:
             declared[name] = t
     specs = {}
     for name, t in declared.items():
+        columns, sort_by = list(t["columns"]), list(t["sort_by"])
+        if site.carried_by(name, t["kind"]):  # second column (Delta keeps its statistics)
+            columns.insert(1, list(site.column))
+            sort_by.append(SITE)
         fields = [
             pa.field(col, _ARROW_TYPES[typ], nullable=nullable, metadata={"doc": doc})
-            for col, typ, nullable, doc in t["columns"]
+            for col, typ, nullable, doc in columns
         ]
         specs[name] = TableSpec(
             name=name,
             kind=t["kind"],
             doc=t["doc"],
             time_column=t["time_column"],
-            sort_by=tuple(t["sort_by"]),
+            sort_by=tuple(sort_by),
             schema=pa.schema(fields, metadata={"doc": t["doc"]}),
         )
     return specs
@@ -149,30 +188,37 @@ def _repeated(value: str, n: int) -> pa.Array:
     return pa.Array.from_buffers(pa.string(), n, buffers, null_count=0)
 
 
-def shape(name: str, data: pa.Table | pl.DataFrame) -> pa.Table:
+def shape(name: str, data: pa.Table | pl.DataFrame, *, site: str | None = None) -> pa.Table:
     """Cast ``data`` to table ``name``'s schema: select and order columns, add ``date``.
     Missing nullable columns are filled with nulls; a missing non-nullable column
-    raises ``KeyError``. Row order is kept (see :func:`conform` to sort)."""
+    raises ``KeyError``. Row order is kept (see :func:`conform` to sort).
+
+    ``site``: the value of every row's ``site`` column (replacing any). Without it, a
+    missing ``site`` is left null: decoders and stages are site-agnostic, and the job
+    stamps the site where it stages the rows (``TableStager(site=...)``)."""
     s = spec(name)
     table = data.to_arrow() if isinstance(data, pl.DataFrame) else data
     if "date" in s.schema.names:
         table = with_date(table, s.time_column)
     have = dict(zip(table.column_names, table.columns, strict=True))
+    if site is not None and SITE in s.schema.names:
+        have[SITE] = _repeated(site, table.num_rows)
     cols = []
     for f in s.schema:
         col = have.get(f.name)
         if col is not None:  # cast only what differs (a no-op cast costs ~20 us of Python)
             cols.append(col if col.type == f.type else col.cast(f.type))
-        elif f.nullable:
+        elif f.nullable or f.name == SITE:
             cols.append(pa.nulls(table.num_rows, f.type))
         else:
             raise KeyError(f"table {name}: missing required column {f.name!r}")
     return pa.Table.from_arrays(cols, schema=s.schema)
 
 
-def conform(name: str, data: pa.Table | pl.DataFrame) -> pa.Table:
+def conform(name: str, data: pa.Table | pl.DataFrame, *, site: str | None = None
+            ) -> pa.Table:
     """:func:`shape`, then sort by the table's sort key."""
-    out = shape(name, data)
+    out = shape(name, data, site=site)
     sort_by = spec(name).sort_by
     if out.num_rows and sort_by:
         out = out.sort_by([(c, "ascending") for c in sort_by])

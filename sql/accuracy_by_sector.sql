@@ -2,12 +2,13 @@
 -- description: horizontal position accuracy of each radar's synchronised picture and of
 --   the fused picture, per sector, against the reference (simulated truth when the log
 --   has it, else the identified ship's own AIS positions).
--- grain: one row per (sector, source, reference)
+-- grain: one row per (site, sector, source, reference)
 -- params: $start_ns (BIGINT, inclusive), $end_ns (BIGINT, exclusive),
---         $sector (VARCHAR, NULL = every sector)
+--         $sector (VARCHAR, NULL = every sector), $site (VARCHAR, NULL = every site)
 -- source table: track_errors (written by `surveil batch`)
 WITH points AS (
     SELECT
+        site,
         coalesce(sector, '(outside sectors)') AS sector,
         source,
         reference,
@@ -17,8 +18,10 @@ WITH points AS (
     WHERE time_ns >= $start_ns
       AND time_ns < $end_ns
       AND (CAST($sector AS VARCHAR) IS NULL OR sector = CAST($sector AS VARCHAR))
+      AND (CAST($site AS VARCHAR) IS NULL OR site = CAST($site AS VARCHAR))
 )
 SELECT
+    site::VARCHAR                                     AS site,          -- site (deployment)
     sector::VARCHAR                                   AS sector,        -- sector polygon name
     source::VARCHAR                                   AS source,        -- radar site id or 'fused'
     reference::VARCHAR                                AS reference,     -- truth | ais
@@ -28,5 +31,5 @@ SELECT
     round(max(error_m), 2)::DOUBLE                    AS max_error_m,   -- worst point, m
     round(avg(nees), 3)::DOUBLE                       AS mean_nees      -- ~2 when sigmas are honest
 FROM points
-GROUP BY sector, source, reference
-ORDER BY sector, reference, (source = 'fused') DESC, source;
+GROUP BY site, sector, source, reference
+ORDER BY site, sector, reference, (source = 'fused') DESC, source;

@@ -3,11 +3,12 @@
 --   synchronised picture per minute (all sectors together, or one): 95th percentile, RMS
 --   and sample count, against the reference (truth, else AIS). The audit's "error over
 --   time" chart.
--- grain: one row per (minute, source)
+-- grain: one row per (site, minute, source)
 -- params: $start_ns (BIGINT, inclusive), $end_ns (BIGINT, exclusive),
---         $sector (VARCHAR, NULL = every sector)
+--         $sector (VARCHAR, NULL = every sector), $site (VARCHAR, NULL = every site)
 -- source table: track_errors (written by `surveil batch`)
 SELECT
+    site::VARCHAR                                     AS site,          -- site (deployment)
     make_timestamp(((time_ns // 60000000000) * 60000000)::BIGINT)::TIMESTAMP AS minute_utc,  -- start of the minute
     source::VARCHAR                                   AS source,        -- radar site id or 'fused'
     count(*)::BIGINT                                  AS samples,       -- synchronised points
@@ -17,5 +18,6 @@ FROM track_errors
 WHERE time_ns >= $start_ns
   AND time_ns < $end_ns
   AND (CAST($sector AS VARCHAR) IS NULL OR sector = CAST($sector AS VARCHAR))
-GROUP BY time_ns // 60000000000, source
-ORDER BY minute_utc, (source = 'fused') DESC, source;
+  AND (CAST($site AS VARCHAR) IS NULL OR site = CAST($site AS VARCHAR))
+GROUP BY site, time_ns // 60000000000, source
+ORDER BY site, minute_utc, (source = 'fused') DESC, source;

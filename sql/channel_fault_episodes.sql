@@ -7,13 +7,13 @@
 --   ships it missed, the time since its last scan; an AIS transponder's offset from the
 --   radar-only track; an airfield channel's innovation. `isolated` marks an episode of
 --   one flagged decision followed by readmission: at the nominal rate q, a false alarm.
--- grain: one row per (family, sector, channel, episode)
+-- grain: one row per (site, family, sector, channel, episode)
 -- params: $start_ns (BIGINT, inclusive), $end_ns (BIGINT, exclusive),
---         $sector (VARCHAR, NULL = every sector)
+--         $sector (VARCHAR, NULL = every sector), $site (VARCHAR, NULL = every site)
 -- source tables: channel_health (airfield), maritime_channel_health (maritime),
 --   nav_solution (nav)
 WITH d AS (
-    SELECT 'airfield' AS family, sensor_kind, channel, sector, track_id AS unit, time_ns,
+    SELECT site, 'airfield' AS family, sensor_kind, channel, sector, track_id AS unit, time_ns,
            eta, excluded, "check" AS chk, nis / dof AS nis_per_dof, innovation_m,
            NULL::DOUBLE AS range_bias_m, NULL::DOUBLE AS azimuth_bias_rad,
            NULL::DOUBLE AS time_offset_s, NULL::DOUBLE AS offset_east_m,
@@ -22,13 +22,13 @@ WITH d AS (
     FROM channel_health
     WHERE time_ns >= $start_ns AND time_ns < $end_ns
     UNION ALL
-    SELECT 'maritime', sensor_kind, channel, sector, '', time_ns, eta, excluded, "check",
+    SELECT site, 'maritime', sensor_kind, channel, sector, '', time_ns, eta, excluded, "check",
            nis / nullif(dof, 0), innovation_m, range_bias_m, azimuth_bias_rad, time_offset_s,
            offset_east_m, offset_north_m, missed, expected, scan_gap_s
     FROM maritime_channel_health
     WHERE time_ns >= $start_ns AND time_ns < $end_ns
     UNION ALL
-    SELECT 'nav', 'gnss', platform_id, sector, '', time_ns, gnss_eta, gnss_excluded,
+    SELECT site, 'nav', 'gnss', platform_id, sector, '', time_ns, gnss_eta, gnss_excluded,
            CASE WHEN mode = 'emergency' THEN 'outage' WHEN gate = 'reject' THEN 'gate'
                 ELSE 'position' END,
            gnss_nis / 2.0, NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL
@@ -40,18 +40,19 @@ h AS (
     SELECT * REPLACE (coalesce(sector, '(outside sectors)') AS sector,
                       coalesce(excluded, FALSE) AS excluded)
     FROM d
-    WHERE CAST($sector AS VARCHAR) IS NULL OR sector = CAST($sector AS VARCHAR)
+    WHERE (CAST($sector AS VARCHAR) IS NULL OR sector = CAST($sector AS VARCHAR))
+      AND (CAST($site AS VARCHAR) IS NULL OR site = CAST($site AS VARCHAR))
 ),
 step AS (   -- each channel's decision step, ns (median spacing of one unit's decisions)
-    SELECT family, channel, coalesce(median(dt) FILTER (WHERE dt > 0), 1000000000)::BIGINT AS step_ns
-    FROM (SELECT family, channel, time_ns - lag(time_ns) OVER (
-              PARTITION BY family, sector, channel, unit ORDER BY time_ns) AS dt FROM h) AS g
-    GROUP BY family, channel
+    SELECT site, family, channel, coalesce(median(dt) FILTER (WHERE dt > 0), 1000000000)::BIGINT AS step_ns
+    FROM (SELECT site, family, channel, time_ns - lag(time_ns) OVER (
+              PARTITION BY site, family, sector, channel, unit ORDER BY time_ns) AS dt FROM h) AS g
+    GROUP BY site, family, channel
 ),
 per_time AS (   -- the channel is down at a time when at least half of its targets are excluded
-    SELECT family, sector, channel, time_ns, avg(CASE WHEN excluded THEN 1.0 ELSE 0.0 END) >= 0.5 AS down
+    SELECT site, family, sector, channel, time_ns, avg(CASE WHEN excluded THEN 1.0 ELSE 0.0 END) >= 0.5 AS down
     FROM h
-    GROUP BY family, sector, channel, time_ns
+    GROUP BY site, family, sector, channel, time_ns
 ),
 marked AS (
     SELECT p.*, s.step_ns,
@@ -59,19 +60,19 @@ marked AS (
                     coalesce(NOT lag(down) OVER w, TRUE)
                     OR time_ns - lag(time_ns) OVER w > 3 * s.step_ns)
                 THEN 1 ELSE 0 END AS starts
-    FROM per_time AS p JOIN step AS s USING (family, channel)
-    WINDOW w AS (PARTITION BY p.family, p.sector, p.channel ORDER BY p.time_ns)
+    FROM per_time AS p JOIN step AS s USING (site, family, channel)
+    WINDOW w AS (PARTITION BY p.site, p.family, p.sector, p.channel ORDER BY p.time_ns)
 ),
 episodes AS (
-    SELECT family, sector, channel, ep, min(time_ns) AS start_ns,
+    SELECT site, family, sector, channel, ep, min(time_ns) AS start_ns,
            max(time_ns) + any_value(step_ns) AS end_ns
-    FROM (SELECT marked.*, sum(starts) OVER (PARTITION BY family, sector, channel
+    FROM (SELECT marked.*, sum(starts) OVER (PARTITION BY site, family, sector, channel
                                              ORDER BY time_ns) AS ep FROM marked) AS x
     WHERE down
-    GROUP BY family, sector, channel, ep
+    GROUP BY site, family, sector, channel, ep
 ),
 evidence AS (   -- the decisions of the channel in the sector from the first flag before the episode on
-    SELECT e.family, e.sector, e.channel, e.start_ns, e.end_ns,
+    SELECT e.site, e.family, e.sector, e.channel, e.start_ns, e.end_ns,
            any_value(h.sensor_kind) AS sensor_kind,
            count(h.eta) AS decisions,
            count(*) FILTER (WHERE h.eta = 1) AS flags,
@@ -87,11 +88,12 @@ evidence AS (   -- the decisions of the channel in the sector from the first fla
            max(h.scan_gap_s) FILTER (WHERE h.eta = 1) AS max_scan_gap_s,
            string_agg(DISTINCT h.chk, ',' ORDER BY h.chk) FILTER (WHERE h.eta = 1) AS checks
     FROM episodes AS e
-    JOIN h ON h.family = e.family AND h.sector = e.sector AND h.channel = e.channel
+    JOIN h ON h.site = e.site AND h.family = e.family AND h.sector = e.sector AND h.channel = e.channel
           AND h.time_ns >= e.start_ns AND h.time_ns < e.end_ns
-    GROUP BY e.family, e.sector, e.channel, e.start_ns, e.end_ns
+    GROUP BY e.site, e.family, e.sector, e.channel, e.start_ns, e.end_ns
 )
 SELECT
+    site::VARCHAR                                               AS site,              -- site (deployment)
     family::VARCHAR                                             AS family,            -- airfield | maritime | nav
     sector::VARCHAR                                             AS sector,            -- sector of the decisions
     sensor_kind::VARCHAR                                        AS sensor_kind,       -- smr | mlat | vasn | radar | ais | gnss
@@ -115,4 +117,4 @@ SELECT
     round(offset_north_m, 1)::DOUBLE                            AS offset_north_m,    -- AIS: ... north, m
     round(innovation_m, 1)::DOUBLE                              AS innovation_m       -- AIS, airfield: mean |innovation|, m
 FROM evidence
-ORDER BY start_ns, family, sector, channel;
+ORDER BY site, start_ns, family, sector, channel;

@@ -10,63 +10,64 @@
 --   decisions after which the channel was excluded. p_chance: the probability of at least
 --   as many flags from false alarms alone (Poisson, mean decisions x q): a channel in
 --   fault has p_chance ~0, a healthy one shows a flagged share above q now and then.
--- grain: one row per (sector, family, channel)
+-- grain: one row per (site, sector, family, channel)
 -- params: $start_ns (BIGINT, inclusive), $end_ns (BIGINT, exclusive),
---         $sector (VARCHAR, NULL = every sector)
+--         $sector (VARCHAR, NULL = every sector), $site (VARCHAR, NULL = every site)
 -- source tables: channel_health (airfield family), maritime_channel_health (maritime
 --   family), nav_solution (nav family), all written by `surveil batch`
 WITH d AS (   -- every decision of every family: one unit = one target (airfield) or the channel
-    SELECT 'airfield' AS family, sensor_kind, channel, sector, track_id AS unit, time_ns,
+    SELECT site, 'airfield' AS family, sensor_kind, channel, sector, track_id AS unit, time_ns,
            eta, excluded,
            (1.0 - exp(-d1 / 2.0)) + exp(-d2 / 2.0) AS q      -- chi2(2): P(xi <= d1) + P(xi >= d2)
     FROM channel_health
     WHERE time_ns >= $start_ns AND time_ns < $end_ns
     UNION ALL
-    SELECT 'maritime', sensor_kind, channel, sector, '', time_ns, eta, excluded, q
+    SELECT site, 'maritime', sensor_kind, channel, sector, '', time_ns, eta, excluded, q
     FROM maritime_channel_health
     WHERE time_ns >= $start_ns AND time_ns < $end_ns
     UNION ALL
-    SELECT 'nav', 'gnss', platform_id, sector, '', time_ns, gnss_eta, gnss_excluded, gnss_q
+    SELECT site, 'nav', 'gnss', platform_id, sector, '', time_ns, gnss_eta, gnss_excluded, gnss_q
     FROM nav_solution
     WHERE time_ns >= $start_ns AND time_ns < $end_ns
       AND (gnss_eta IS NOT NULL OR gnss_excluded)
 ),
 h AS (
-    SELECT family, sensor_kind, channel, coalesce(sector, '(outside sectors)') AS sector,
+    SELECT site, family, sensor_kind, channel, coalesce(sector, '(outside sectors)') AS sector,
            unit, time_ns, eta, coalesce(excluded, FALSE) AS excluded, q
     FROM d
-    WHERE CAST($sector AS VARCHAR) IS NULL OR sector = CAST($sector AS VARCHAR)
+    WHERE (CAST($sector AS VARCHAR) IS NULL OR sector = CAST($sector AS VARCHAR))
+      AND (CAST($site AS VARCHAR) IS NULL OR site = CAST($site AS VARCHAR))
 ),
 gaps AS (   -- time to the previous decision of the same unit
     SELECT h.*,
-           time_ns - lag(time_ns) OVER (PARTITION BY family, sector, channel, unit ORDER BY time_ns) AS dt
+           time_ns - lag(time_ns) OVER (PARTITION BY site, family, sector, channel, unit ORDER BY time_ns) AS dt
     FROM h
 ),
 step AS (   -- each channel's decision step, ns (median spacing of one unit's decisions)
-    SELECT family, channel, coalesce(median(dt) FILTER (WHERE dt > 0), 1000000000)::BIGINT AS step_ns
+    SELECT site, family, channel, coalesce(median(dt) FILTER (WHERE dt > 0), 1000000000)::BIGINT AS step_ns
     FROM gaps
-    GROUP BY family, channel
+    GROUP BY site, family, channel
 ),
 marked AS (   -- gaps and islands: an episode starts at an excluded decision after a non-excluded one or a gap
     SELECT g.*, s.step_ns,
            CASE WHEN excluded AND (
                     coalesce(NOT lag(excluded) OVER w, TRUE) OR dt > 3 * s.step_ns)
                 THEN 1 ELSE 0 END AS starts
-    FROM gaps AS g JOIN step AS s USING (family, channel)
-    WINDOW w AS (PARTITION BY g.family, g.sector, g.channel, g.unit ORDER BY g.time_ns)
+    FROM gaps AS g JOIN step AS s USING (site, family, channel)
+    WINDOW w AS (PARTITION BY g.site, g.family, g.sector, g.channel, g.unit ORDER BY g.time_ns)
 ),
 target_episodes AS (
-    SELECT family, sector, channel, unit, ep,
+    SELECT site, family, sector, channel, unit, ep,
            max(time_ns) - min(time_ns) + any_value(step_ns) AS dur_ns
-    FROM (SELECT marked.*, sum(starts) OVER (PARTITION BY family, sector, channel, unit
+    FROM (SELECT marked.*, sum(starts) OVER (PARTITION BY site, family, sector, channel, unit
                                              ORDER BY time_ns) AS ep FROM marked) AS x
     WHERE excluded
-    GROUP BY family, sector, channel, unit, ep
+    GROUP BY site, family, sector, channel, unit, ep
 ),
 per_time AS (   -- channel-wide: at least half of the channel's targets in the sector excluded
-    SELECT family, sector, channel, time_ns, avg(CASE WHEN excluded THEN 1.0 ELSE 0.0 END) >= 0.5 AS down
+    SELECT site, family, sector, channel, time_ns, avg(CASE WHEN excluded THEN 1.0 ELSE 0.0 END) >= 0.5 AS down
     FROM h
-    GROUP BY family, sector, channel, time_ns
+    GROUP BY site, family, sector, channel, time_ns
 ),
 per_time_marked AS (
     SELECT p.*, s.step_ns,
@@ -74,19 +75,19 @@ per_time_marked AS (
                     coalesce(NOT lag(down) OVER w, TRUE)
                     OR time_ns - lag(time_ns) OVER w > 3 * s.step_ns)
                 THEN 1 ELSE 0 END AS starts
-    FROM per_time AS p JOIN step AS s USING (family, channel)
-    WINDOW w AS (PARTITION BY p.family, p.sector, p.channel ORDER BY p.time_ns)
+    FROM per_time AS p JOIN step AS s USING (site, family, channel)
+    WINDOW w AS (PARTITION BY p.site, p.family, p.sector, p.channel ORDER BY p.time_ns)
 ),
 channel_episodes AS (
-    SELECT family, sector, channel, ep, max(time_ns) - min(time_ns) + any_value(step_ns) AS dur_ns
-    FROM (SELECT per_time_marked.*, sum(starts) OVER (PARTITION BY family, sector, channel
+    SELECT site, family, sector, channel, ep, max(time_ns) - min(time_ns) + any_value(step_ns) AS dur_ns
+    FROM (SELECT per_time_marked.*, sum(starts) OVER (PARTITION BY site, family, sector, channel
                                                       ORDER BY time_ns) AS ep
           FROM per_time_marked) AS x
     WHERE down
-    GROUP BY family, sector, channel, ep
+    GROUP BY site, family, sector, channel, ep
 ),
 checks AS (
-    SELECT family, sector, channel,
+    SELECT site, family, sector, channel,
            any_value(sensor_kind) AS sensor_kind,
            count(*) AS rows_total,
            count(eta) AS decisions,
@@ -94,24 +95,25 @@ checks AS (
            avg(q) AS q,
            count(*) FILTER (WHERE excluded) AS excluded_rows
     FROM h
-    GROUP BY family, sector, channel
+    GROUP BY site, family, sector, channel
 ),
 chance AS (   -- P(X >= flagged), X ~ Poisson(decisions q): 1 - sum_{j < flagged} pmf(j)
-    SELECT c.family, c.sector, c.channel,
+    SELECT c.site, c.family, c.sector, c.channel,
            greatest(0.0, 1.0 - coalesce(sum(exp(-lam + j * ln(lam) - lgamma(j + 1))), 0.0)) AS p
     FROM (SELECT *, decisions * q AS lam FROM checks WHERE decisions > 0) AS c
     LEFT JOIN LATERAL (SELECT unnest(range(c.flagged)) AS j) AS r ON TRUE
-    GROUP BY c.family, c.sector, c.channel
+    GROUP BY c.site, c.family, c.sector, c.channel
 ),
 te AS (
-    SELECT family, sector, channel, count(*) AS n, sum(dur_ns) AS total, max(dur_ns) AS longest
-    FROM target_episodes GROUP BY family, sector, channel
+    SELECT site, family, sector, channel, count(*) AS n, sum(dur_ns) AS total, max(dur_ns) AS longest
+    FROM target_episodes GROUP BY site, family, sector, channel
 ),
 ce AS (
-    SELECT family, sector, channel, count(*) AS n, sum(dur_ns) AS total, max(dur_ns) AS longest
-    FROM channel_episodes GROUP BY family, sector, channel
+    SELECT site, family, sector, channel, count(*) AS n, sum(dur_ns) AS total, max(dur_ns) AS longest
+    FROM channel_episodes GROUP BY site, family, sector, channel
 )
 SELECT
+    c.site::VARCHAR                                                AS site,              -- site (deployment)
     c.sector::VARCHAR                                              AS sector,            -- sector (airfield or VTS)
     c.family::VARCHAR                                              AS family,            -- airfield | maritime | nav
     c.sensor_kind::VARCHAR                                         AS sensor_kind,       -- smr | mlat | vasn | radar | ais | gnss
@@ -128,7 +130,7 @@ SELECT
     round(coalesce(ce.longest, 0) / 1e9, 1)::DOUBLE                AS channel_longest_s, -- longest, s
     round(c.excluded_rows / nullif(c.rows_total, 0), 5)::DOUBLE    AS excluded_share     -- share of decisions excluded
 FROM checks AS c
-LEFT JOIN chance AS p ON p.family = c.family AND p.sector = c.sector AND p.channel = c.channel
-LEFT JOIN te ON te.family = c.family AND te.sector = c.sector AND te.channel = c.channel
-LEFT JOIN ce ON ce.family = c.family AND ce.sector = c.sector AND ce.channel = c.channel
-ORDER BY sector, family, sensor_kind, channel;
+LEFT JOIN chance AS p ON p.site = c.site AND p.family = c.family AND p.sector = c.sector AND p.channel = c.channel
+LEFT JOIN te ON te.site = c.site AND te.family = c.family AND te.sector = c.sector AND te.channel = c.channel
+LEFT JOIN ce ON ce.site = c.site AND ce.family = c.family AND ce.sector = c.sector AND ce.channel = c.channel
+ORDER BY site, sector, family, sensor_kind, channel;

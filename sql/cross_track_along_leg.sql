@@ -3,11 +3,12 @@
 --   radar (multi-radar paper, figures 1-2): per 500-m stretch of the leg (by the
 --   reference position along it), the mean and the 95th percentile of the 60-s sliding
 --   RMS error, with the radars' mean observation aspect (0 deg: looking along the leg).
--- grain: one row per (leg, source, 500-m stretch)
+-- grain: one row per (site, leg, source, 500-m stretch)
 -- params: $start_ns (BIGINT, inclusive), $end_ns (BIGINT, exclusive),
---         $sector (VARCHAR, NULL = every sector)
+--         $sector (VARCHAR, NULL = every sector), $site (VARCHAR, NULL = every site)
 -- source table: cross_track_by_leg (written by `surveil batch`)
 SELECT
+    site::VARCHAR                                              AS site,
     leg_id::VARCHAR                                            AS leg_id,
     source::VARCHAR                                            AS source,           -- site id or 'fused'
     (floor(along_track_m / 500.0) * 0.5 + 0.25)::DOUBLE        AS along_track_km,   -- middle of the stretch, km from the leg start
@@ -20,5 +21,6 @@ FROM cross_track_by_leg
 WHERE time_ns >= $start_ns
   AND time_ns < $end_ns
   AND (CAST($sector AS VARCHAR) IS NULL OR sector = CAST($sector AS VARCHAR))
-GROUP BY leg_id, source, floor(along_track_m / 500.0)
-ORDER BY leg_id, (source = 'fused') DESC, source, along_track_km;
+  AND (CAST($site AS VARCHAR) IS NULL OR site = CAST($site AS VARCHAR))
+GROUP BY site, leg_id, source, floor(along_track_m / 500.0)
+ORDER BY site, leg_id, (source = 'fused') DESC, source, along_track_km;

@@ -5,9 +5,9 @@
 --   radar's observation aspect (0 deg = looking along the fairway) and range. The last
 --   column compares, at each epoch where the fused point and every radar of the track are
 --   present, the fused 60-s RMS with the best radar's.
--- grain: one row per (leg, source)
+-- grain: one row per (site, leg, source)
 -- params: $start_ns (BIGINT, inclusive), $end_ns (BIGINT, exclusive),
---         $sector (VARCHAR, NULL = every sector)
+--         $sector (VARCHAR, NULL = every sector), $site (VARCHAR, NULL = every site)
 -- source table: cross_track_by_leg (written by `surveil batch`)
 WITH pts AS (
     SELECT *
@@ -15,25 +15,28 @@ WITH pts AS (
     WHERE time_ns >= $start_ns
       AND time_ns < $end_ns
       AND (CAST($sector AS VARCHAR) IS NULL OR sector = CAST($sector AS VARCHAR))
+      AND (CAST($site AS VARCHAR) IS NULL OR site = CAST($site AS VARCHAR))
 ),
 best AS (   -- per epoch and track: fused sliding RMS vs the best radar's
     SELECT
+        site,
         leg_id,
         max(CASE WHEN source = 'fused' THEN rms_error_60s_m END)   AS fused_rms,
         min(CASE WHEN source <> 'fused' THEN rms_error_60s_m END)  AS best_radar_rms,
         max(CASE WHEN source = 'fused' THEN n_sources END)         AS n_fused,
         count(*) FILTER (WHERE source <> 'fused')                  AS n_radars
     FROM pts
-    GROUP BY time_ns, system_track_id, leg_id
+    GROUP BY site, time_ns, system_track_id, leg_id
 ),
 share AS (
-    SELECT leg_id,
+    SELECT site, leg_id,
            avg(CASE WHEN fused_rms <= best_radar_rms THEN 1.0 ELSE 0.0 END) AS not_worse
     FROM best
     WHERE fused_rms IS NOT NULL AND n_radars >= 2 AND n_fused = n_radars
-    GROUP BY leg_id
+    GROUP BY site, leg_id
 )
 SELECT
+    p.site::VARCHAR                                               AS site,
     p.leg_id::VARCHAR                                             AS leg_id,
     p.source::VARCHAR                                             AS source,          -- site id or 'fused'
     count(*)::BIGINT                                              AS samples,
@@ -48,6 +51,6 @@ SELECT
     CASE WHEN p.source = 'fused' THEN round(any_value(s.not_worse), 4) END::DOUBLE
                                                                   AS fused_not_worse_share
 FROM pts AS p
-LEFT JOIN share AS s USING (leg_id)
-GROUP BY p.leg_id, p.source
-ORDER BY p.leg_id, (p.source = 'fused') DESC, p.source;
+LEFT JOIN share AS s USING (site, leg_id)
+GROUP BY p.site, p.leg_id, p.source
+ORDER BY p.site, p.leg_id, (p.source = 'fused') DESC, p.source;

@@ -4,9 +4,10 @@
 --   references inside the forecast's 90% region (should be near 0.90), the error of the
 --   particle mean (median, RMS, 95th percentile), the mean forecast probability of the
 --   zone the vessel was actually in, and how often the most likely zone was the right one.
--- grain: one row per (lead band, reference kind)
+-- grain: one row per (site, lead band, reference kind)
 -- params: $start_ns (BIGINT, inclusive, on the forecast time), $end_ns (BIGINT, exclusive),
---         $sector (VARCHAR, NULL = every sector; the sector of the forecast mean)
+--         $sector (VARCHAR, NULL = every sector; the sector of the forecast mean),
+--         $site (VARCHAR, NULL = every site)
 -- source table: gap_forecasts (written by `surveil batch`, family "gaps")
 WITH f AS (
     SELECT
@@ -23,8 +24,10 @@ WITH f AS (
       AND forecast_time_ns < $end_ns
       AND reference IS NOT NULL
       AND (CAST($sector AS VARCHAR) IS NULL OR sector = CAST($sector AS VARCHAR))
+      AND (CAST($site AS VARCHAR) IS NULL OR site = CAST($site AS VARCHAR))
 )
 SELECT
+    site::VARCHAR                                                     AS site,          -- site (deployment)
     lead_band::VARCHAR                                                AS lead_band,
     reference::VARCHAR                                                AS reference,     -- truth | observation
     count(*)::BIGINT                                                  AS forecasts,
@@ -38,5 +41,5 @@ SELECT
     round(avg(CASE WHEN most_likely_zone = true_zone THEN 1.0 ELSE 0.0 END), 3)::DOUBLE
                                                                       AS most_likely_zone_hit
 FROM f
-GROUP BY lead_band, reference
-ORDER BY lead_band, reference;
+GROUP BY site, lead_band, reference
+ORDER BY site, lead_band, reference;

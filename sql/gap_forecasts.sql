@@ -8,9 +8,10 @@
 --   area constrained the forecast, and, when the log has truth (or at the reappearance,
 --   the reappearing message), the error and whether the true position fell in the 90%
 --   region and how probable its zone was.
--- grain: one row per (vessel, gap, forecast time)
+-- grain: one row per (site, vessel, gap, forecast time)
 -- params: $start_ns (BIGINT, inclusive, on the forecast time), $end_ns (BIGINT, exclusive),
---         $sector (VARCHAR, NULL = every sector; the sector of the forecast mean)
+--         $sector (VARCHAR, NULL = every sector; the sector of the forecast mean),
+--         $site (VARCHAR, NULL = every site)
 -- source table: gap_forecasts (written by `surveil batch`, family "gaps")
 WITH f AS (
     SELECT *
@@ -18,6 +19,7 @@ WITH f AS (
     WHERE forecast_time_ns >= $start_ns
       AND forecast_time_ns < $end_ns
       AND (CAST($sector AS VARCHAR) IS NULL OR sector = CAST($sector AS VARCHAR))
+      AND (CAST($site AS VARCHAR) IS NULL OR site = CAST($site AS VARCHAR))
 ),
 axes AS (   -- eigenvalues of the 2x2 position covariance: the sigma ellipse's semi-axes
     SELECT
@@ -28,6 +30,7 @@ axes AS (   -- eigenvalues of the 2x2 position covariance: the sigma ellipse's s
     FROM f
 )
 SELECT
+    site::VARCHAR                                                    AS site,           -- site (deployment)
     mmsi::BIGINT                                                     AS mmsi,
     make_timestamp((gap_start_ns // 1000)::BIGINT)::TIMESTAMP        AS gap_start_utc,
     make_timestamp((gap_end_ns // 1000)::BIGINT)::TIMESTAMP          AS gap_end_utc,    -- NULL: still open
@@ -53,4 +56,4 @@ SELECT
     true_zone::VARCHAR                                               AS true_zone,
     round(true_zone_probability, 3)::DOUBLE                          AS true_zone_p
 FROM axes
-ORDER BY forecast_utc, mmsi, gap_start_utc, forecast_kind;
+ORDER BY site, forecast_utc, mmsi, gap_start_utc, forecast_kind;

@@ -4,12 +4,13 @@
 --   point belongs to; ships without AIS count as correct when they carry no MMSI. Without
 --   truth (real logs), "correct" means consistent: the track's majority MMSI in the window.
 --   Fused points come at uniform synchronised epochs, so shares of points are shares of time.
--- grain: one row per (sector, vessel_class)
+-- grain: one row per (site, sector, vessel_class)
 -- params: $start_ns (BIGINT, inclusive), $end_ns (BIGINT, exclusive),
---         $sector (VARCHAR, NULL = every sector)
+--         $sector (VARCHAR, NULL = every sector), $site (VARCHAR, NULL = every site)
 -- source tables: system_tracks, track_errors (written by `surveil batch`)
 WITH fused AS (
     SELECT
+        s.site,
         s.time_ns,
         s.system_track_id,
         coalesce(s.sector, '(outside sectors)') AS sector,
@@ -18,21 +19,24 @@ WITH fused AS (
         e.reference_mmsi
     FROM system_tracks AS s
     JOIN track_errors AS e
-      ON e.time_ns = s.time_ns
+      ON e.site = s.site
+     AND e.time_ns = s.time_ns
      AND e.system_track_id = s.system_track_id
      AND e.source = 'fused'
     WHERE s.time_ns >= $start_ns
       AND s.time_ns < $end_ns
       AND (CAST($sector AS VARCHAR) IS NULL OR s.sector = CAST($sector AS VARCHAR))
+      AND (CAST($site AS VARCHAR) IS NULL OR s.site = CAST($site AS VARCHAR))
 ),
 majority AS (
-    SELECT system_track_id, mode(mmsi) AS majority_mmsi
+    SELECT site, system_track_id, mode(mmsi) AS majority_mmsi
     FROM fused
     WHERE mmsi IS NOT NULL
-    GROUP BY system_track_id
+    GROUP BY site, system_track_id
 ),
 judged AS (
     SELECT
+        f.site,
         f.sector,
         CASE
             WHEN f.reference = 'ais' THEN 'ais-identified (no truth)'
@@ -48,9 +52,10 @@ judged AS (
             ELSE 'wrong'
         END AS verdict
     FROM fused AS f
-    LEFT JOIN majority AS m USING (system_track_id)
+    LEFT JOIN majority AS m USING (site, system_track_id)
 )
 SELECT
+    site::VARCHAR                                                     AS site,
     sector::VARCHAR                                                   AS sector,
     vessel_class::VARCHAR                                             AS vessel_class,
     count(*)::BIGINT                                                  AS samples,       -- fused points
@@ -58,5 +63,5 @@ SELECT
     round(avg(CASE WHEN verdict = 'wrong' THEN 1 ELSE 0 END), 4)::DOUBLE   AS wrong_share,
     round(avg(CASE WHEN verdict = 'none' THEN 1 ELSE 0 END), 4)::DOUBLE    AS none_share
 FROM judged
-GROUP BY sector, vessel_class
-ORDER BY sector, vessel_class;
+GROUP BY site, sector, vessel_class
+ORDER BY site, sector, vessel_class;

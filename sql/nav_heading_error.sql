@@ -3,11 +3,12 @@
 --   the integrated solution's heading error and the gyrocompass alone against truth
 --   (simulated logs), the filter's own 1-sigma, and the share of steps in emergency mode
 --   (no valid GNSS fix).
--- grain: one row per (platform, 10-s step)
+-- grain: one row per (site, platform, 10-s step)
 -- params: $start_ns (BIGINT, inclusive), $end_ns (BIGINT, exclusive),
---         $sector (VARCHAR, NULL = every sector)
+--         $sector (VARCHAR, NULL = every sector), $site (VARCHAR, NULL = every site)
 -- source table: nav_solution (written by `surveil batch`, family nav)
 SELECT
+    site::VARCHAR                                                               AS site,
     platform_id::VARCHAR                                                        AS platform_id,
     make_timestamp(((time_ns // 10000000000) * 10000000)::BIGINT)::TIMESTAMP    AS time_utc,            -- start of the step
     round(degrees(avg(heading_error_rad)), 4)::DOUBLE                           AS heading_error_deg,   -- integrated (truth)
@@ -19,5 +20,6 @@ FROM nav_solution
 WHERE time_ns >= $start_ns
   AND time_ns < $end_ns
   AND (CAST($sector AS VARCHAR) IS NULL OR sector = CAST($sector AS VARCHAR))
-GROUP BY platform_id, time_ns // 10000000000
-ORDER BY platform_id, time_utc;
+  AND (CAST($site AS VARCHAR) IS NULL OR site = CAST($site AS VARCHAR))
+GROUP BY site, platform_id, time_ns // 10000000000
+ORDER BY site, platform_id, time_utc;

@@ -3,12 +3,13 @@
 --   sector: heading error of the integrated solution and of the gyro alone against
 --   truth (simulated logs), else innovation statistics of the GNSS acceleration; eq. 3
 --   gate rejections; emergency-mode share; GNSS outages and their dead-reckoning error.
--- grain: one row per (platform_id, sector)
+-- grain: one row per (site, platform_id, sector)
 -- params: $start_ns (BIGINT, inclusive), $end_ns (BIGINT, exclusive),
---         $sector (VARCHAR, NULL = every sector)
+--         $sector (VARCHAR, NULL = every sector), $site (VARCHAR, NULL = every site)
 -- source tables: nav_solution, nav_outages (written by `surveil batch`, family nav)
 WITH steps AS (
     SELECT
+        site,
         platform_id,
         coalesce(sector, '(outside sectors)') AS sector,
         mode,
@@ -23,9 +24,11 @@ WITH steps AS (
     WHERE time_ns >= $start_ns
       AND time_ns < $end_ns
       AND (CAST($sector AS VARCHAR) IS NULL OR sector = CAST($sector AS VARCHAR))
+      AND (CAST($site AS VARCHAR) IS NULL OR site = CAST($site AS VARCHAR))
 ),
 per_vessel AS (
     SELECT
+        site,
         platform_id,
         sector,
         count(*) AS steps,
@@ -41,10 +44,11 @@ per_vessel AS (
         avg(power(w_innovation_mps2 / w_innovation_sigma_mps2, 2)) FILTER (WHERE gate = 'pass') AS innov_sq,
         avg(nis) AS mean_nis
     FROM steps
-    GROUP BY platform_id, sector
+    GROUP BY site, platform_id, sector
 ),
 outages AS (
     SELECT
+        site,
         platform_id,
         coalesce(sector, '(outside sectors)') AS sector,
         count(*) AS n,
@@ -56,9 +60,11 @@ outages AS (
     WHERE start_ns >= $start_ns
       AND start_ns < $end_ns
       AND (CAST($sector AS VARCHAR) IS NULL OR sector = CAST($sector AS VARCHAR))
-    GROUP BY platform_id, sector
+      AND (CAST($site AS VARCHAR) IS NULL OR site = CAST($site AS VARCHAR))
+    GROUP BY site, platform_id, sector
 )
 SELECT
+    coalesce(v.site, o.site)::VARCHAR                AS site,               -- site (deployment)
     coalesce(v.platform_id, o.platform_id)::VARCHAR AS platform_id,        -- vessel
     coalesce(v.sector, o.sector)::VARCHAR            AS sector,             -- sector polygon
     coalesce(v.steps, 0)::BIGINT                     AS steps,              -- filter steps
@@ -81,5 +87,5 @@ SELECT
     round(o.worst_ratio, 3)::DOUBLE                  AS worst_dr_error_to_bound  -- <= 1: inside the bound
 FROM per_vessel v
 FULL OUTER JOIN outages o
-    ON v.platform_id = o.platform_id AND v.sector = o.sector
-ORDER BY platform_id, sector;
+    ON v.site = o.site AND v.platform_id = o.platform_id AND v.sector = o.sector
+ORDER BY site, platform_id, sector;

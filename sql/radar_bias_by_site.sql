@@ -4,10 +4,12 @@
 --   (north alignment) bias and time offset with their 95% confidence intervals, the
 --   reports and ships used and the fit's residuals. One row per estimation window whose
 --   start lies in the window. Radar sites are not in sectors: the sector parameter is unused.
--- grain: one row per (estimation window, site)
--- params: $start_ns (BIGINT, inclusive), $end_ns (BIGINT, exclusive)
+-- grain: one row per (site, estimation window, radar site)
+-- params: $start_ns (BIGINT, inclusive), $end_ns (BIGINT, exclusive),
+--         $site (VARCHAR, NULL = every site)
 -- source table: radar_bias_by_site (written by `surveil calibrate-radars`)
 SELECT
+    site::VARCHAR                                           AS site,           -- site (deployment)
     site_id::VARCHAR                                        AS site_id,
     make_timestamp((time_ns // 1000)::BIGINT)::TIMESTAMP    AS window_start_utc,
     make_timestamp((end_time_ns // 1000)::BIGINT)::TIMESTAMP AS window_end_utc,
@@ -29,4 +31,5 @@ SELECT
 FROM radar_bias_by_site
 WHERE time_ns >= $start_ns
   AND time_ns < $end_ns
-ORDER BY time_ns, site_id;
+  AND (CAST($site AS VARCHAR) IS NULL OR site = CAST($site AS VARCHAR))
+ORDER BY site, time_ns, site_id;

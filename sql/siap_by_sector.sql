@@ -5,9 +5,9 @@
 --   ambiguity (MMSI, ships carrying AIS). Sums of the batch work units that start in the
 --   window are added before dividing, so any window and the '(all sectors)' row are exact.
 --   Empty for logs without truth.
--- grain: one row per sector, plus one '(all sectors)' row
+-- grain: one row per (site, sector), plus one '(all sectors)' row per site
 -- params: $start_ns (BIGINT, inclusive), $end_ns (BIGINT, exclusive),
---         $sector (VARCHAR, NULL = every sector)
+--         $sector (VARCHAR, NULL = every sector), $site (VARCHAR, NULL = every site)
 -- source table: siap_by_sector (written by `surveil batch`)
 WITH rows_in AS (
     SELECT *, coalesce(sector, '(outside sectors)') AS sector_name
@@ -15,9 +15,11 @@ WITH rows_in AS (
     WHERE time_ns >= $start_ns
       AND time_ns < $end_ns
       AND (CAST($sector AS VARCHAR) IS NULL OR sector = CAST($sector AS VARCHAR))
+      AND (CAST($site AS VARCHAR) IS NULL OR site = CAST($site AS VARCHAR))
 ),
 sums AS (
     SELECT
+        site,
         coalesce(sector_name, '(all sectors)')     AS sector,
         sum(truth_epochs)                          AS j,
         sum(tracked_truth_epochs)                  AS jt,
@@ -36,9 +38,10 @@ sums AS (
         sum(id_correct_epochs)                     AS id_jc,
         sum(id_ambiguous_epochs)                   AS id_ja
     FROM rows_in
-    GROUP BY GROUPING SETS ((sector_name), ())
+    GROUP BY GROUPING SETS ((site, sector_name), (site))
 )
 SELECT
+    site::VARCHAR                                                AS site,
     sector::VARCHAR                                              AS sector,
     j::BIGINT                                                    AS truth_epochs,       -- sum of J
     round(jt / nullif(j, 0), 4)::DOUBLE                          AS completeness,       -- target 1
@@ -55,4 +58,4 @@ SELECT
     round(id_ja / nullif(id_jt, 0), 4)::DOUBLE                   AS id_ambiguity        -- target 0
 FROM sums
 WHERE j IS NOT NULL
-ORDER BY (sector = '(all sectors)'), sector;
+ORDER BY site, (sector = '(all sectors)'), sector;

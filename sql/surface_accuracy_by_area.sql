@@ -5,29 +5,31 @@
 --   cooperative targets), share of updates after a gap of 3-5 s and of more than 5 s, beside
 --   the ED-87 requirements per area and the sensor level (ED-116/117), bound from the
 --   config's [requirements] (shipped: 95% <= 12 / 20 / 25 m, 7.5 m; P(ID) >= 0.999).
--- grain: one row per (area, source); source = a channel's sensor id or 'fused'
+-- grain: one row per (site, area, source); source = a channel's sensor id or 'fused'
 -- params: $start_ns (BIGINT, inclusive), $end_ns (BIGINT, exclusive),
---         $sector (VARCHAR, NULL = every sector),
+--         $sector (VARCHAR, NULL = every sector), $site (VARCHAR, NULL = every site),
 --         $ed87_manoeuvring_p95_m, $ed87_apron_taxiway_p95_m, $ed87_stand_p95_m,
 --         $sensor_p95_m, $p_identification_min (DOUBLE, from [requirements])
 -- source tables: airfield_tracks, channel_health (written by `surveil batch`)
 WITH updates AS (   -- one row per update of a target by a source
-    SELECT coalesce(area, '(outside areas)') AS area, channel AS source, track_id, time_ns,
+    SELECT site, coalesce(area, '(outside areas)') AS area, channel AS source, track_id, time_ns,
            error_m, CAST(NULL AS BOOLEAN) AS identity_correct, CAST(NULL AS BOOLEAN) AS cooperative
     FROM channel_health
     WHERE report_x_m IS NOT NULL
       AND time_ns >= $start_ns AND time_ns < $end_ns
       AND (CAST($sector AS VARCHAR) IS NULL OR sector = CAST($sector AS VARCHAR))
+      AND (CAST($site AS VARCHAR) IS NULL OR site = CAST($site AS VARCHAR))
     UNION ALL
-    SELECT coalesce(area, '(outside areas)'), 'fused', track_id, time_ns, error_m,
+    SELECT site, coalesce(area, '(outside areas)'), 'fused', track_id, time_ns, error_m,
            identity_correct, cooperative
     FROM airfield_tracks
     WHERE n_channels > 0
       AND time_ns >= $start_ns AND time_ns < $end_ns
       AND (CAST($sector AS VARCHAR) IS NULL OR sector = CAST($sector AS VARCHAR))
+      AND (CAST($site AS VARCHAR) IS NULL OR site = CAST($site AS VARCHAR))
 ),
 gaps AS (
-    SELECT *, (time_ns - lag(time_ns) OVER (PARTITION BY source, track_id ORDER BY time_ns)) / 1e9 AS gap_s
+    SELECT *, (time_ns - lag(time_ns) OVER (PARTITION BY site, source, track_id ORDER BY time_ns)) / 1e9 AS gap_s
     FROM updates
 ),
 req AS (
@@ -37,6 +39,7 @@ req AS (
         AS r(area, ed87_p95_m)
 )
 SELECT
+    g.site::VARCHAR                                                           AS site,              -- site (deployment)
     g.area::VARCHAR                                                           AS area,              -- manoeuvring | apron_taxiway | stand
     g.source::VARCHAR                                                         AS source,            -- sensor id or 'fused'
     count(*)::BIGINT                                                          AS updates,           -- target updates
@@ -59,5 +62,5 @@ SELECT
           FILTER (WHERE g.gap_s IS NOT NULL), 5)::DOUBLE                      AS gap_over_5s_share  -- updates after a > 5 s gap
 FROM gaps AS g
 LEFT JOIN req AS r ON r.area = g.area
-GROUP BY g.area, g.source
-ORDER BY g.area, (g.source = 'fused') DESC, g.source;
+GROUP BY g.site, g.area, g.source
+ORDER BY g.site, g.area, (g.source = 'fused') DESC, g.source;

@@ -55,7 +55,7 @@ from pipeline.convert.asterix_framing import (
     walk_hdlc,
     walk_resync,
 )
-from pipeline.convert.output import Message, write_converted
+from pipeline.convert.output import Message, site_metadata, write_converted
 from pipeline.decode.asterix import (
     EXTRACTORS,
     INSTALL_HINT,
@@ -144,6 +144,7 @@ def wrap_asterix(
     *,
     day: date | None = None,
     editions: Mapping[int, str] | None = None,
+    site: str | None = None,
 ) -> WrappedAsterix:
     """Wrap a raw ASTERIX file, a framed recording (GPS, FINAL, IOSS, HDLC, ORADIS) or a
     pcap/pcapng capture into ``out_dir/<name>.mcap``.
@@ -174,7 +175,8 @@ def wrap_asterix(
     if not msgs.rows:
         raise ValueError(f"{path}: {kind} file holds no UDP payload to wrap as ASTERIX")
     out = Path(out_dir) / f"{path.name}.mcap"
-    meta = {"source": path.name, "input_format": kind, "messages": str(len(msgs.rows))}
+    meta = {"source": path.name, "input_format": kind, "messages": str(len(msgs.rows)),
+            **site_metadata(site)}
     meta |= {f"packets_skipped_{k}": str(v) for k, v in sorted(msgs.skipped.items())}
     if editions:
         text = ",".join(f"{c:03d}={e}" for c, e in sorted(editions.items()))

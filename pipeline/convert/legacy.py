@@ -61,7 +61,7 @@ import polars as pl
 from pipeline.convert.ais_csv import CsvOptions, looks_like_ais_csv, read_ais_csv
 from pipeline.convert.asterix_framing import ASTERIX_CATEGORIES, detect_framing
 from pipeline.convert.config import ImportOptions
-from pipeline.convert.output import REJECTS_TOPIC, Message, write_converted
+from pipeline.convert.output import REJECTS_TOPIC, Message, site_metadata, write_converted
 from pipeline.io.mcap_write import ChannelSpec
 from pipeline.resources import resource_path
 from pipeline.units import NS, TIME_MAX_NS, describe_time, time_in_range
@@ -147,11 +147,13 @@ def detect_format(path: Path) -> str:
 
 
 def import_file(
-    path: Path, out_dir: Path, *, base_time_ns: int = 0, options: ImportOptions | None = None
+    path: Path, out_dir: Path, *, base_time_ns: int = 0, options: ImportOptions | None = None,
+    site: str | None = None,
 ) -> ImportedFile:
     """Wrap one file (see module docstring); raises ``ValueError`` when it is not an
     importable format, or ``base_time_ns`` is not a representable time. ``options``: the
-    config's ``[import.csv]`` / ``[asterix]`` (:mod:`pipeline.convert.config`)."""
+    config's ``[import.csv]`` / ``[asterix]`` (:mod:`pipeline.convert.config`); ``site``:
+    written into the MCAP file's ``surveil.import`` metadata (key ``site``) for ingest."""
     options = options or ImportOptions()
     if not time_in_range(base_time_ns):
         raise ValueError(f"base time {describe_time(base_time_ns)} is outside 1970-01-01 .. "
@@ -159,23 +161,24 @@ def import_file(
     path = Path(path)
     kind = detect_format(path)
     if kind == "nmea_text":
-        return wrap_nmea_text(path, out_dir, base_time_ns=base_time_ns)
+        return wrap_nmea_text(path, out_dir, base_time_ns=base_time_ns, site=site)
     if kind == "ais_csv":
-        return wrap_ais_csv(path, out_dir, options=options.csv)
+        return wrap_ais_csv(path, out_dir, options=options.csv, site=site)
     if kind == "asterix":
         from datetime import UTC, datetime
 
         from pipeline.convert.asterix import wrap_asterix
 
         day = datetime.fromtimestamp(base_time_ns // NS, tz=UTC).date()
-        w = wrap_asterix(path, Path(out_dir), day=day, editions=options.asterix_editions)
+        w = wrap_asterix(path, Path(out_dir), day=day, editions=options.asterix_editions,
+                         site=site)
         return ImportedFile(
             str(path), str(w.output), f"asterix:{w.kind}", w.messages, w.log_time_source
         )
     if kind == "ros1_bag":
         from pipeline.convert.rosbag import wrap_ros1_bag
 
-        return wrap_ros1_bag(path, Path(out_dir))
+        return wrap_ros1_bag(path, Path(out_dir), site=site)
     raise ValueError(
         f"{path}: not an importable file (neither NMEA 0183 text, an AIS CSV, ASTERIX "
         "(raw, framed or pcap/pcapng) nor a ROS 1 bag)"
@@ -330,7 +333,8 @@ def nmea_log_times(
     return times, "none:synthetic", meta
 
 
-def wrap_nmea_text(path: Path, out_dir: Path, *, base_time_ns: int = 0) -> ImportedFile:
+def wrap_nmea_text(path: Path, out_dir: Path, *, base_time_ns: int = 0,
+                   site: str | None = None) -> ImportedFile:
     """Wrap an NMEA 0183 text log (see module docstring)."""
     from pipeline.decode.nmea import AIS_FORMATTERS, frame
 
@@ -355,6 +359,7 @@ def wrap_nmea_text(path: Path, out_dir: Path, *, base_time_ns: int = 0) -> Impor
     skipped = dict(Counter(lines.filter(pl.col("kind") != "content")["kind"].to_list()))
     header = _header(lines)
     file_meta = {
+        **site_metadata(site),
         "format": "nmea_text",
         "source_file": path.name,
         "lines_total": str(lines.height),
@@ -395,7 +400,8 @@ def _header(lines: pl.DataFrame) -> str:
 # -- AIS CSV -----------------------------------------------------------------------------
 
 
-def wrap_ais_csv(path: Path, out_dir: Path, *, options: CsvOptions | None = None) -> ImportedFile:
+def wrap_ais_csv(path: Path, out_dir: Path, *, options: CsvOptions | None = None,
+                 site: str | None = None) -> ImportedFile:
     """Wrap an AIS CSV table (:mod:`pipeline.convert.ais_csv`) as ``surveil.AisReport``
     JSON, one message per row, log time = the row's time (rows whose time is outside the
     representable range go to the rejects channel)."""
@@ -415,6 +421,7 @@ def wrap_ais_csv(path: Path, out_dir: Path, *, options: CsvOptions | None = None
         "source_format": table.flavor,
     }
     file_meta = {
+        **site_metadata(site),
         "format": "ais_csv",
         "source_file": path.name,
         "source_format": table.flavor,

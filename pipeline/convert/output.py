@@ -22,6 +22,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from pipeline.io.mcap_site import METADATA_KEY
 from pipeline.io.mcap_write import ChannelSpec, write_messages
 from pipeline.resources import resource_path
 from pipeline.units import TIME_MAX_NS, TIME_MIN_NS, describe_time
@@ -51,6 +52,12 @@ def time_problem(t_ns: int) -> tuple[str, str] | None:
         f"log time {t_ns} ns ({describe_time(t_ns)}) is outside the representable range "
         "1970-01-01 .. 2262-04-11 UTC",
     )
+
+
+def site_metadata(site: str | None) -> dict[str, str]:
+    """``{"site": site}`` for the ``surveil.import`` metadata record (empty without one):
+    ingest stamps it on the file's rows (:mod:`pipeline.io.mcap_site`)."""
+    return {METADATA_KEY: site} if site else {}
 
 
 def write_converted(

@@ -24,7 +24,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from pipeline.convert.legacy import ImportedFile, output_path
-from pipeline.convert.output import Message, write_converted
+from pipeline.convert.output import Message, site_metadata, write_converted
 from pipeline.io.mcap_write import ChannelSpec
 
 BAG_MAGIC = b"#ROSBAG V2.0\n"
@@ -36,7 +36,7 @@ def is_ros1_bag(head: bytes) -> bool:
     return head.startswith(BAG_MAGIC)
 
 
-def wrap_ros1_bag(path: Path, out_dir: Path) -> ImportedFile:
+def wrap_ros1_bag(path: Path, out_dir: Path, *, site: str | None = None) -> ImportedFile:
     """Wrap a ROS 1 bag into ``<out_dir>/<name>.mcap`` (module docstring)."""
     from rosbags.rosbag1 import Reader, ReaderError
 
@@ -86,7 +86,7 @@ def wrap_ros1_bag(path: Path, out_dir: Path) -> ImportedFile:
     if not channels:
         raise ValueError(f"{path}: ROS 1 bag holds no connection (no messages to wrap)")
     out = output_path(path, out_dir)
-    file_meta = {"format": "ros1_bag", "source_file": path.name,
+    file_meta = {**site_metadata(site), "format": "ros1_bag", "source_file": path.name,
                  "log_time_source": LOG_TIME_SOURCE, "messages": str(len(messages))}  # fmt: skip
     counts = write_converted(out, channels, messages, metadata={"surveil.import": file_meta})
     return ImportedFile(str(path), str(out), "ros1_bag", counts,

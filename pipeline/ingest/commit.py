@@ -18,7 +18,7 @@ from pathlib import Path
 
 from pipeline.decode.registry import RAW_TABLES
 from pipeline.ingest.worker import FileManifest
-from pipeline.tables import empty
+from pipeline.tables import conform, default_site, empty
 from pipeline.warehouse import pending
 from pipeline.warehouse.delta import replace_source_file
 from pipeline.warehouse.ledger import ledger_entry, write_entry
@@ -56,6 +56,7 @@ def _commit_tables(warehouse: Path, m: FileManifest, names: list[str],
             )
     if start_ns is None:
         index = m.index_rows if m.index_rows is not None else empty("mcap_index")
+        index = conform("mcap_index", index, site=m.site or default_site())
         replace_source_file(warehouse, "mcap_index", index, source_file=m.source_file)
         entry = ledger_entry(
             m.source_file,
@@ -69,5 +70,6 @@ def _commit_tables(warehouse: Path, m: FileManifest, names: list[str],
             start_time_ns=m.start_time_ns,
             end_time_ns=m.end_time_ns,
             not_stored=m.not_stored,
+            site=m.site or None,
         )
         write_entry(warehouse, entry)

@@ -8,6 +8,7 @@ from pathlib import Path
 from pipeline.config import ValidationConfig
 from pipeline.errors import UsageError
 from pipeline.ingest.worker import IngestUnit
+from pipeline.io.mcap_site import SiteConflictError, declared_site
 
 
 class IngestUsageError(UsageError):
@@ -45,6 +46,7 @@ def plan_units(
     end_ns: int | None = None,
     force: bool = False,
     asterix_editions: tuple[tuple[int, str], ...] = (),
+    site: str | None = None,
 ) -> list[IngestUnit]:
     """One unit per file of ``paths`` (:func:`expand_paths`), in path order, staging
     under ``staging``. ``[start_ns, end_ns)``: both bounds or neither, a non-empty
@@ -55,6 +57,28 @@ def plan_units(
         raise IngestUsageError(f"empty window [{start_ns}, {end_ns})")
     wh, stage = str(warehouse), str(staging)
     return [
-        IngestUnit(str(f), wh, stage, validation, start_ns, end_ns, force, asterix_editions)
+        IngestUnit(str(f), wh, stage, validation, start_ns, end_ns, force, asterix_editions,
+                   site)
         for f in expand_paths(paths)
     ]
+
+
+def check_sites(units: list[IngestUnit]) -> None:
+    """:class:`IngestUsageError` when ``--site`` contradicts the site a file's metadata
+    names (refused before any work: a file is never stamped with a site it denies)."""
+    bad = []
+    for u in units:
+        if u.site is None:
+            continue
+        try:
+            named = declared_site(u.path)
+        except SiteConflictError as exc:
+            bad.append(str(exc))
+            continue
+        if named is not None and named != u.site:
+            bad.append(f"{u.path} names site {named!r} in its metadata")
+    if bad:
+        raise IngestUsageError(
+            f"--site {units[0].site!r} contradicts the files' own metadata: "
+            + "; ".join(bad[:5]) + (f" (and {len(bad) - 5} more)" if len(bad) > 5 else "")
+            + ". Leave --site out (each file keeps its site) or ingest those files apart")

@@ -76,8 +76,9 @@ class IngestSummary:
         for text in self.overlaps[:10]:
             lines.append(f"WARNING: two sources overlap: {text}")
         if self.overlaps:
-            lines.append("  (recorded in source_overlaps: rows of the two would mix; give "
-                         "each site its own warehouse, or remove the duplicate file)")
+            lines.append("  (recorded in source_overlaps: both files are of one site, so "
+                         "their rows mix; give each source its own site (MCAP metadata "
+                         "`site` or ingest --site) or remove the duplicate file)")
         for path, err in self.failed[:10]:
             lines.append(f"FAILED {path}: {err}")
         if len(self.failed) > 10:

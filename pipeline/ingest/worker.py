@@ -43,7 +43,8 @@ from pipeline.decode.registry import RAW_TABLES, FileDecoder, make_rejects
 from pipeline.ingest.context import IngestContext
 from pipeline.io.mcap_index import mcap_index_rows
 from pipeline.io.mcap_read import ReadStatus, read_mcap_batches
-from pipeline.tables import conform, empty, spec
+from pipeline.io.mcap_site import declared_site
+from pipeline.tables import conform, default_site, empty, spec
 from pipeline.warehouse.ledger import SKIP_STATUSES, file_fingerprint, lookup
 from pipeline.warehouse.staged import StagedFile, TableStager
 
@@ -65,6 +66,7 @@ class IngestUnit:
     end_ns: int | None = None
     force: bool = False
     asterix_editions: tuple[tuple[int, str], ...] = ()  # config [asterix] editions
+    site: str | None = None  # `surveil ingest --site`: for files whose metadata names none
 
     @property
     def windowed(self) -> bool:
@@ -93,6 +95,14 @@ class FileManifest:
     index_rows: pa.Table | None = None
     bytes_read: int = 0
     chunks_decompressed: int = 0
+    site: str = ""  # the site stamped on every row of the file
+
+
+def file_site(unit: IngestUnit) -> str:
+    """The file's site: its MCAP metadata's (:mod:`pipeline.io.mcap_site`), else the
+    command's ``--site``, else the default (``schemas/tables.toml [site]``). The driver
+    refuses an explicit ``--site`` that contradicts a file's metadata before any work."""
+    return declared_site(unit.path) or unit.site or default_site()
 
 
 def ingest_file(unit: IngestUnit, ctx: IngestContext) -> FileManifest:
@@ -133,7 +143,8 @@ def _decode_and_stage(
         parse_pool=ctx.parse_pool,
         strings=ctx.strings,
     )
-    stager = TableStager(_stage_folder(unit))
+    site = file_site(unit)
+    stager = TableStager(_stage_folder(unit), site=site)
     reasons: Counter = Counter()
 
     def stage(name: str, table: pa.Table) -> None:
@@ -160,8 +171,9 @@ def _decode_and_stage(
     status = scan.status
     index = None
     if not unit.windowed:
-        index = mcap_index_rows(unit.path, size, scan.summary, scan.channels, status,
-                                decoder.not_stored_by_channel)  # fmt: skip
+        index = conform("mcap_index", mcap_index_rows(
+            unit.path, size, scan.summary, scan.channels, status,
+            decoder.not_stored_by_channel), site=site)  # fmt: skip
     file_status, error = status.status, status.error
     if decoder.missing_decoders:  # partly read: exit 1, and read again once installed
         missing = f"{MISSING_DECODER}: {', '.join(sorted(decoder.missing_decoders))}"
@@ -183,6 +195,7 @@ def _decode_and_stage(
         index_rows=index,
         bytes_read=status.bytes_read,
         chunks_decompressed=status.chunks_decompressed,
+        site=site,
     )
 
 

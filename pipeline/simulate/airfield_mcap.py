@@ -143,6 +143,7 @@ def write_airfield_archive(
     schemas = {VASN_SCHEMA: vasn_schema, TRUTH_SCHEMA: truth_schema}
     meta = {
         "name": "airfield",
+        "site": "airfield",  # each scenario its own site (pipeline.io.mcap_site)
         "seed": str(scenario.seed),
         "start_ns": str(scenario.start_ns),
         "duration_s": repr(float(scenario.duration_s)),

@@ -145,6 +145,7 @@ def write_channel_archive(
 
     metadata = {
         "name": scenario_name,
+        "site": scenario_name,  # each scenario its own site (pipeline.io.mcap_site)
         "seed": str(scenario.seed),
         "start_ns": str(scenario.start_ns),
         "duration_s": repr(float(scenario.duration_s)),

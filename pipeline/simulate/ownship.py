@@ -486,8 +486,9 @@ def write_ownship_archive(sc: OwnshipScenario, out_dir: Path, *, sample_period_s
                FAULT_TRUTH_SCHEMA_NAME: _schema("fault_truth.schema.json")[0]}
     messages = ownship_messages(sc, sample_period_s).with_columns(
         (pl.col("log_time_ns") // period_ns).alias("file_index"))
-    meta = {"name": "ownship", "seed": str(sc.seed), "start_ns": str(sc.start_ns),
-            "duration_s": repr(float(sc.duration_s)), "platform_id": sc.platform_id}
+    meta = {"name": "ownship", "site": "ownship", "seed": str(sc.seed),
+            "start_ns": str(sc.start_ns), "duration_s": repr(float(sc.duration_s)),
+            "platform_id": sc.platform_id}
     paths = []
     for (file_index,), df in messages.group_by(["file_index"], maintain_order=True):
         start = int(file_index) * period_ns

@@ -89,6 +89,7 @@ def simulate_region_archive(
     schemas = {RADAR_SCHEMA_NAME: radar_schema, TRUTH_SCHEMA_NAME: truth_schema}
     metadata = {
         "name": SCENARIO,
+        "site": SCENARIO,  # each scenario its own site (pipeline.io.mcap_site)
         "seed": str(seed),
         "start_ns": str(start_ns),
         "duration_s": repr(float(duration_s)),

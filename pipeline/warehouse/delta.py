@@ -93,9 +93,12 @@ def _check_window(start_ns: int, end_ns: int) -> None:
         raise ValueError(f"empty time window [{start_ns}, {end_ns})")
 
 
-def window_predicate(name: str, start_ns: int, end_ns: int) -> str:
+def window_predicate(name: str, start_ns: int, end_ns: int, site: str | None = None) -> str:
     """SQL predicate of ``[start_ns, end_ns)`` on ``name``'s time column, plus the ``date``
-    range (when partitioned) so that Delta leaves files of other days untouched."""
+    range (when partitioned) so that Delta leaves files of other days untouched; and
+    ``site = <site>`` when a site is given."""
+    if site is not None:
+        return f"site = {sql_literal(site)} AND {window_predicate(name, start_ns, end_ns)}"
     s = spec(name)
     if not s.time_column:
         raise ValueError(f"table {name} has no time column; it cannot be windowed")
@@ -154,12 +157,14 @@ def read_table(
     columns: list[str] | None = None,
     predicate: pc.Expression | None = None,
     sort: bool = True,
+    site: str | None = None,
 ) -> pa.Table:
     """Rows of the current snapshot of ``name`` with the time column in ``[start_ns, end_ns)``,
     sorted by the table's sort key (when the selected columns include it and ``sort``).
 
     The window also filters the ``date`` partition, so files of other days are pruned.
-    ``predicate`` is an extra Arrow filter. Returns an empty table with the canonical
+    ``predicate`` is an extra Arrow filter; ``site``: that site's rows only. Returns an
+    empty table with the canonical
     schema (or the selected ``columns``) when the table does not exist yet.
     """
     target = spec(name).schema
@@ -169,6 +174,9 @@ def read_table(
     if delta_table is None:
         return target.empty_table()
     expr = window_filter(name, start_ns, end_ns)
+    if site is not None:
+        predicate = (pds.field("site") == site if predicate is None
+                     else predicate & (pds.field("site") == site))
     if predicate is not None:
         expr = predicate if expr is None else expr & predicate
     dataset = _snapshot_dataset(delta_table, table_path(warehouse, name), spec(name).schema)
@@ -255,10 +263,13 @@ def _with_table_metadata(warehouse: Path, name: str, data: pa.Table) -> pa.Table
 
 
 def replace_window(
-    warehouse: Path, name: str, table: pa.Table, *, start_ns: int, end_ns: int
+    warehouse: Path, name: str, table: pa.Table, *, start_ns: int, end_ns: int,
+    site: str | None = None,
 ) -> None:
-    """Replace the rows of ``name`` whose time column is in ``[start_ns, end_ns)``."""
-    replace_rows(warehouse, name, table, predicate_sql=window_predicate(name, start_ns, end_ns))
+    """Replace the rows of ``name`` whose time column is in ``[start_ns, end_ns)`` (of
+    ``site`` only, when given: other sites' rows are untouched)."""
+    replace_rows(warehouse, name, table,
+                 predicate_sql=window_predicate(name, start_ns, end_ns, site))
 
 
 def source_file_predicate(
@@ -309,13 +320,15 @@ def empty_table(name: str) -> pa.Table:
     return empty(name)
 
 
-def volume_profile(warehouse: Path, name: str, start_ns: int, end_ns: int
-                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def volume_profile(warehouse: Path, name: str, start_ns: int, end_ns: int,
+                   site: str | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Where ``name``'s rows lie in time, from metadata only: per Parquet row group of the
     current snapshot overlapping ``[start_ns, end_ns)``, its (first time, last time, rows)
     on the table's time column (the footers' statistics; no row is read). Row groups of
     ingested tables hold ~64 Ki rows sorted by time, so this locates the rows to a few
-    seconds in a busy hour. Empty arrays when the table does not exist."""
+    seconds in a busy hour. Empty arrays when the table does not exist. ``site``: files
+    of other sites (by their ``site`` statistics) are left out, so a site's units are cut
+    by its own volume."""
     s = spec(name)
     empty = (np.empty(0, np.int64), np.empty(0, np.int64), np.empty(0, np.int64))
     if not table_exists(warehouse, name) or not s.time_column:
@@ -328,10 +341,15 @@ def volume_profile(warehouse: Path, name: str, start_ns: int, end_ns: int
     lo = adds[lo_col].to_numpy(zero_copy_only=False) if lo_col in adds.column_names else None
     hi = adds[hi_col].to_numpy(zero_copy_only=False) if hi_col in adds.column_names else None
     root = table_path(warehouse, name)
+    names = adds.column_names
+    s_lo = adds["min.site"].to_pylist() if site is not None and "min.site" in names else None
+    s_hi = adds["max.site"].to_pylist() if site is not None and "max.site" in names else None
     first, last, rows = [], [], []
     for k, path in enumerate(adds["path"].to_pylist()):
         if lo is not None and hi is not None and (hi[k] < start_ns or lo[k] >= end_ns):
             continue
+        if s_lo is not None and s_hi is not None and (s_hi[k] < site or s_lo[k] > site):
+            continue  # another site's file
         md = pq.ParquetFile(root / path).metadata
         idx = md.schema.names.index(s.time_column)
         for g in range(md.num_row_groups):

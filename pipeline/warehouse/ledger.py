@@ -19,7 +19,7 @@ from pathlib import Path
 import pyarrow as pa
 import pyarrow.dataset as pds
 
-from pipeline.tables import conform
+from pipeline.tables import conform, default_site
 from pipeline.warehouse.delta import read_table, replace_source_file
 
 LEDGER = "ingest_ledger"
@@ -49,6 +49,7 @@ def ledger_entry(
     end_time_ns: int | None,
     ingested_at_ns: int | None = None,
     not_stored: dict[str, int] | None = None,
+    site: str | None = None,
 ) -> pa.Table:
     """One conformed ledger row. ``rows`` (rows written per table) and ``not_stored``
     (valid messages not kept, per type: ``nmea_GSV``, ``ais_type_4``, ...) are stored as
@@ -69,7 +70,7 @@ def ledger_entry(
         "ingested_at_ns": time.time_ns() if ingested_at_ns is None else ingested_at_ns,
         "not_stored_json": json.dumps(not_stored or {}, sort_keys=True),
     }
-    return conform(LEDGER, pa.Table.from_pylist([row]))
+    return conform(LEDGER, pa.Table.from_pylist([row]), site=site or default_site())
 
 
 def write_entry(warehouse: Path, entry: pa.Table) -> None:

@@ -6,6 +6,10 @@ estuaries, truth ids that collide. Ingest looks each new file's channels up in
 ``mcap_index`` (per file and topic: the span of the chunks holding it) and records every
 other file with the same topic over an overlapping span in ``source_overlaps``; the
 ingest summary warns.
+
+Only files of the same site overlap: two sites' archives over the same hours are the
+normal case (each site's rows are batched and reported apart, ids unique per site); two
+sources of one site over the same topic and times are the mixing this guards against.
 """
 
 from __future__ import annotations
@@ -23,17 +27,17 @@ from pipeline.warehouse.delta import read_table, replace_rows, sql_literal
 def find_overlaps(warehouse: Path, files: Iterable[str]) -> pl.DataFrame:
     """``source_overlaps`` rows of ``files`` against every other file of ``mcap_index``."""
     wanted = sorted(set(files))
-    cols = ["source_file", "topic", "start_time_ns", "end_time_ns"]
+    cols = ["source_file", "site", "topic", "start_time_ns", "end_time_ns"]
     index = pl.from_arrow(read_table(warehouse, "mcap_index", columns=cols)).drop_nulls()
     mine = index.filter(pl.col("source_file").is_in(wanted))
     if mine.height == 0:
         return pl.from_arrow(empty("source_overlaps"))
-    pairs = mine.join(index, on="topic", suffix="_other").filter(
+    pairs = mine.join(index, on=["site", "topic"], suffix="_other").filter(
         (pl.col("source_file") != pl.col("source_file_other"))
         & (pl.col("start_time_ns") < pl.col("end_time_ns_other"))
         & (pl.col("start_time_ns_other") < pl.col("end_time_ns")))
     return pairs.select(
-        "source_file", "topic", pl.col("source_file_other").alias("other_file"),
+        "source_file", "site", "topic", pl.col("source_file_other").alias("other_file"),
         pl.max_horizontal("start_time_ns", "start_time_ns_other").alias("overlap_start_ns"),
         pl.min_horizontal("end_time_ns", "end_time_ns_other").alias("overlap_end_ns"),
         pl.lit(time.time_ns(), pl.Int64).alias("detected_at_ns"),

@@ -44,7 +44,7 @@ from deltalake import DeltaTable
 from deltalake import Schema as DeltaSchema
 from deltalake.transaction import AddAction, RemoveAction, create_table_with_add_actions
 
-from pipeline.tables import conform, spec
+from pipeline.tables import SITE, conform, constant_strings, spec
 from pipeline.threads import WRITER_NICE, helper_pool
 from pipeline.warehouse.delta import replace_source_file, table_exists, table_path
 
@@ -291,10 +291,15 @@ class TableStager:
         row_group_rows: int = ROW_GROUP_ROWS,
         threaded: bool = True,
         presorted: bool = False,
+        site: str | None = None,
     ):
         """``presorted``: the caller adds each table's rows in the order of its sort key
-        (e.g. a batch stage's outputs), so row groups are not checked nor sorted."""
+        (e.g. a batch stage's outputs), so row groups are not checked nor sorted.
+        ``site``: stamped on every row of a table carrying ``site`` (the ingested file's,
+        the batch's); without it, rows must carry their site already (a row without one
+        raises ``ValueError``: nothing is staged without its site)."""
         self.folder = Path(folder)
+        self.site = site
         self.row_group_rows = row_group_rows
         self.threaded = threaded
         self.presorted = presorted
@@ -306,6 +311,14 @@ class TableStager:
             return
         s = spec(name)
         data = table if table.schema.equals(s.schema) else conform(name, table)
+        if SITE in s.schema.names:
+            i = s.schema.get_field_index(SITE)
+            if self.site is not None:
+                data = data.set_column(i, s.schema.field(i),
+                                       constant_strings(self.site, data.num_rows))
+            elif data.column(i).null_count:
+                raise ValueError(f"rows of {name} without a site: stage them with "
+                                 "TableStager(site=...)")
         self.rows[name] = self.rows.get(name, 0) + data.num_rows
         if PARTITION not in s.partition_by:
             self._append(name, "", {}, data)
@@ -526,7 +539,8 @@ def _drop_added(table: Path, adds: list[AddAction]) -> None:
 
 
 def commit_window(
-    warehouse: Path, name: str, staged: list[StagedFile], *, start_ns: int, end_ns: int
+    warehouse: Path, name: str, staged: list[StagedFile], *, start_ns: int, end_ns: int,
+    site: str | None = None,
 ) -> str:
     """Replace the rows of ``name`` whose time is in ``[start_ns, end_ns)`` by the staged
     files: ONE Delta commit (the batch's window replace, without re-encoding the rows).
@@ -536,6 +550,10 @@ def commit_window(
     wider window) is rewritten without the window's rows (read, filtered, staged again)
     and swapped in the same commit; a file without usable time statistics is treated
     like one that overlaps. Returns ``noop``, ``create`` or ``swap``.
+
+    ``site``: only that site's rows of the window are replaced; a file of another site
+    (by its ``site`` statistics) is untouched, a file holding several sites is rewritten
+    without this site's rows of the window.
     """
     uri = table_path(warehouse, name)
     s = spec(name)
@@ -553,7 +571,7 @@ def commit_window(
             raise
         return "create"
     dt = DeltaTable(str(uri))
-    removes, partial = files_in_window(dt, s.time_column, start_ns, end_ns)
+    removes, partial = files_in_window(dt, s.time_column, start_ns, end_ns, site)
     kept: list[StagedFile] = []
     scratch = Path(warehouse) / "_staging" / f"rewrite-{uuid.uuid4().hex}"
     if partial:
@@ -564,6 +582,8 @@ def commit_window(
                 t = t.append_column(k, pa.array([v] * t.num_rows, pa.string()).cast(pa.date32()))
             col = t[s.time_column]
             outside = pc.or_(pc.less(col, start_ns), pc.greater_equal(col, end_ns))
+            if site is not None and SITE in t.column_names:
+                outside = pc.or_(outside, pc.not_equal(t[SITE], site))
             stager.add(name, conform(name, t.filter(outside)))
         kept = stager.close()
     if not staged and not removes and not kept:
@@ -582,10 +602,11 @@ def commit_window(
 
 
 def files_in_window(
-    dt: DeltaTable, time_column: str, start_ns: int, end_ns: int
+    dt: DeltaTable, time_column: str, start_ns: int, end_ns: int, site: str | None = None
 ) -> tuple[list[RemoveAction], list[tuple[str, dict[str, str]]]]:
-    """Remove actions for every data file holding rows of ``[start_ns, end_ns)``, and the
-    (path, partition values) of those that also hold rows outside it (to rewrite)."""
+    """Remove actions for every data file holding rows of ``[start_ns, end_ns)`` (of
+    ``site`` when given), and the (path, partition values) of those that also hold rows
+    outside it, or of another site (to rewrite)."""
     adds = pa.table(dt.get_add_actions(flatten=True))
     if adds.num_rows == 0:
         return [], []
@@ -595,6 +616,8 @@ def files_in_window(
     lo = adds[lo_col].to_pylist() if lo_col in names else [None] * n
     hi = adds[hi_col].to_pylist() if hi_col in names else [None] * n
     rows = adds["num_records"].to_pylist() if "num_records" in names else [None] * n
+    s_lo = adds[f"min.{SITE}"].to_pylist() if f"min.{SITE}" in names else [None] * n
+    s_hi = adds[f"max.{SITE}"].to_pylist() if f"max.{SITE}" in names else [None] * n
     part_cols = [c for c in names if c.startswith("partition.")]
     now_ms = int(time.time() * 1000)
     removes, partial = [], []
@@ -607,9 +630,15 @@ def files_in_window(
         known = a is not None and b is not None
         if known and (b < start_ns or a >= end_ns):
             continue  # wholly outside: untouched
+        only_site = True
+        if site is not None:
+            sa, sb = s_lo[i], s_hi[i]
+            if sa is not None and sb is not None and (sb < site or sa > site):
+                continue  # other sites only: untouched
+            only_site = sa == site and sb == site
         pv = {c.removeprefix("partition."): _part_str(adds[c][i].as_py()) for c in part_cols}
         path = adds["path"][i].as_py()
         removes.append(RemoveAction(path, True, now_ms, adds["size_bytes"][i].as_py(), pv))
-        if not (known and a >= start_ns and b < end_ns):
+        if not (known and a >= start_ns and b < end_ns and only_site):
             partial.append((path, {k: v for k, v in pv.items() if v is not None}))
     return removes, partial

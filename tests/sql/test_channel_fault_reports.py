@@ -29,6 +29,7 @@ def con():
     # airfield: SMR1 on two targets, both excluded at epochs 10-19 (1 Hz)
     t = epochs(40, 1.0)
     air = pl.DataFrame({
+        "site": "harbour",
         "time_ns": t * 2, "track_id": ["a"] * 40 + ["b"] * 40, "channel": "SMR1",
         "sensor_kind": "smr", "sector": "runway", "check": "nis",
         "nis": 1.0, "dof": 2, "d1": 0.01003, "d2": 10.5966, "innovation_m": 2.0,
@@ -39,6 +40,7 @@ def con():
     # with one isolated false alarm (excluded for its next 5 reports)
     r = epochs(30, 4.0)
     radar = pl.DataFrame({
+        "site": "harbour",
         "time_ns": r, "channel": "R1", "sensor_kind": "radar", "sector": "inner_channel",
         "check": "nis", "nis": 10.0, "dof": 10, "q": 0.001,
         "eta": [1 if 5 <= i < 10 else 0 for i in range(30)],
@@ -50,6 +52,7 @@ def con():
     }, schema_overrides=FLOATS)
     a = epochs(20, 10.0, 1.0)
     ais = pl.DataFrame({
+        "site": "harbour",
         "time_ns": a, "channel": "211000001", "sensor_kind": "ais", "sector": "inner_channel",
         "check": "ais", "nis": 2.0, "dof": 2, "q": 0.01,
         "eta": [1 if i == 3 else 0 for i in range(20)],
@@ -61,6 +64,7 @@ def con():
     # GNSS: 1 Hz, an outage (emergency) at steps 50-79
     g = epochs(100, 1.0)
     nav = pl.DataFrame({
+        "site": "harbour",
         "time_ns": g, "platform_id": "ownship", "sector": "approach_sw",
         "mode": ["emergency" if 50 <= i < 80 else "main" for i in range(100)],
         "gate": [None if 50 <= i < 80 else "pass" for i in range(100)],
