@@ -44,11 +44,17 @@ def audit_name(start_ns: int, end_ns: int, sector: str | None) -> str:
 
 
 def run_audit(cfg: Config, warehouse: Path, out_dir: Path, *, start_ns: int, end_ns: int,
-              sector: str | None = None, pdf: bool = False) -> AuditResult:
-    """Write ``<out_dir>/audit_<from>_<to>[_<sector>].html`` (and ``.pdf``)."""
+              sector: str | None = None, pdf: bool = False, site: str | None = None
+              ) -> AuditResult:
+    """Write ``<out_dir>/audit_<from>_<to>[_<sector>].html`` (and ``.pdf``) over ``site``
+    (None: every site; each report row keeps its ``site``)."""
+    from jobs.common import one_site
+
+    site = one_site(warehouse, site, start_ns, end_ns)
     con = open_warehouse(warehouse)
     try:
-        data = collect(con, cfg, warehouse, start_ns=start_ns, end_ns=end_ns, sector=sector)
+        data = collect(con, cfg, warehouse, start_ns=start_ns, end_ns=end_ns, sector=sector,
+                       site=site)
     finally:
         con.close()
     out_dir.mkdir(parents=True, exist_ok=True)

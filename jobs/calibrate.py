@@ -29,22 +29,32 @@ from pipeline.warehouse.delta import read_table, replace_window
 from pipeline.warehouse.views import rebuild_views_file
 
 
-def run_calibration(cfg: Config, warehouse: Path, *, start_ns: int, end_ns: int) -> pl.DataFrame:
-    """Estimate the biases of [start_ns, end_ns), commit them, return the rows."""
+def run_calibration(cfg: Config, warehouse: Path, *, start_ns: int, end_ns: int,
+                    site: str | None = None) -> pl.DataFrame:
+    """Estimate the biases of [start_ns, end_ns), site by site (``site``: that one only),
+    commit each site's, return the rows (with their ``site``)."""
     gap_ns = round(radar_bias_config(cfg).max_ais_gap_s * NS)
-    radar = pl.from_arrow(read_table(warehouse, "radar_tracks", start_ns=start_ns, end_ns=end_ns))
+    radar = pl.from_arrow(read_table(warehouse, "radar_tracks", start_ns=start_ns, end_ns=end_ns,
+                                     site=site))
     ais = pl.from_arrow(read_table(warehouse, "ais_reports", start_ns=start_ns - gap_ns,
-                                   end_ns=end_ns + gap_ns))
+                                   end_ns=end_ns + gap_ns, site=site))
     if radar.height == 0 or ais.height == 0:
         raise UsageError(f"no radar or no AIS reports in [{iso(start_ns)}, {iso(end_ns)}): "
                          "ingest the archive of that window first")
-    est = estimate_biases(radar, ais, cfg, start_ns=start_ns, end_ns=end_ns)
-    if est.height == 0:
+    out = []
+    for name in sorted(radar["site"].unique().to_list()):
+        est = estimate_biases(radar.filter(pl.col("site") == name),
+                              ais.filter(pl.col("site") == name), cfg, start_ns=start_ns,
+                              end_ns=end_ns)
+        if est.height:
+            table = tables.conform("radar_bias_by_site", est, site=name)
+            replace_window(warehouse, "radar_bias_by_site", table, start_ns=start_ns,
+                           end_ns=end_ns, site=name)
+            out.append(pl.from_arrow(table))
+    if not out:
         raise UsageError("no radar track followed an AIS ship in the window: nothing to fit")
-    replace_window(warehouse, "radar_bias_by_site", tables.conform("radar_bias_by_site", est),
-                   start_ns=start_ns, end_ns=end_ns)
     rebuild_views_file(warehouse)
-    return est
+    return pl.concat(out)
 
 
 def render(est: pl.DataFrame) -> str:
@@ -81,25 +91,39 @@ class CalibrateSummary:
 
 
 def run_calibrate(cfg: Config, warehouse: Path, *, start_ns: int, end_ns: int,
-                  max_order: int = 4, min_speed_mps: float = 0.0) -> CalibrateSummary:
-    """Fit and store every configured airfield sensor's error models for the window."""
+                  max_order: int = 4, min_speed_mps: float = 0.0,
+                  site: str | None = None) -> CalibrateSummary:
+    """Fit and store every configured airfield sensor's error models for the window,
+    site by site (``site``: that one only): each site's sensors against its own
+    reference, stored with its ``site`` (the airfield batch of a site reads its own)."""
     acfg = airfield_config(cfg)
-    obs = pl.from_arrow(read_table(warehouse, "airfield_obs", start_ns=start_ns, end_ns=end_ns))
+    obs = pl.from_arrow(read_table(warehouse, "airfield_obs", start_ns=start_ns, end_ns=end_ns,
+                                   site=site))
     truth = pl.from_arrow(read_table(warehouse, "airfield_truth", start_ns=start_ns,
-                                     end_ns=end_ns))
+                                     end_ns=end_ns, site=site))
     if obs.height == 0:
         raise UsageError("no airfield_obs rows in the window: ingest the archive first")
     if truth.height == 0:
         raise UsageError("no airfield_truth rows in the window: calibrate needs a reference "
                          "(simulated truth, or DGNSS reference vehicles on the truth channel)")
-    rows, fits = calibration(obs, truth, acfg, start_ns=start_ns, end_ns=end_ns,
-                             max_order=max_order, min_speed_mps=min_speed_mps)
-    if rows.height == 0:
+    sites = sorted(set(obs["site"].unique().to_list()) & set(truth["site"].unique().to_list()))
+    n_rows, desc = 0, {}
+    for name in sites:
+        rows, fits = calibration(obs.filter(pl.col("site") == name),
+                                 truth.filter(pl.col("site") == name), acfg,
+                                 start_ns=start_ns, end_ns=end_ns, max_order=max_order,
+                                 min_speed_mps=min_speed_mps)
+        if rows.height == 0:
+            continue
+        table = tables.conform("sensor_error_models", rows, site=name)
+        replace_window(warehouse, "sensor_error_models", table, start_ns=start_ns,
+                       end_ns=end_ns, site=name)
+        n_rows += table.num_rows
+        at = f"{name}/" if len(sites) > 1 else ""
+        desc |= {f"{at}{k}": f"AR({f.model.order}) on {f.n_rows} rows, BIC "
+                 + ", ".join(f"{p}:{b:.0f}" for p, b in sorted(f.bic_by_order.items()))
+                 for k, f in fits.items()}
+    if n_rows == 0:
         raise UsageError("too few matched reports in the window to fit any error model")
-    table = tables.conform("sensor_error_models", rows)
-    replace_window(warehouse, "sensor_error_models", table, start_ns=start_ns, end_ns=end_ns)
     rebuild_views_file(warehouse)
-    desc = {k: f"AR({f.model.order}) on {f.n_rows} rows, BIC "
-               + ", ".join(f"{p}:{b:.0f}" for p, b in sorted(f.bic_by_order.items()))
-            for k, f in fits.items()}
-    return CalibrateSummary(start_ns, end_ns, table.num_rows, desc)
+    return CalibrateSummary(start_ns, end_ns, n_rows, desc)

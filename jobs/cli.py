@@ -221,6 +221,8 @@ _SITE_READ = _site_option("that site's rows only (default: every site, each repo
 _SITE_BATCH = _site_option("that site only: its rows are read and replaced, other sites' "
                            "are untouched (default: every site with data in the window, "
                            "each batched alone)")
+_SITE_CAL = _site_option("that site only (default: every site with data in the window, "
+                          "each fitted against its own rows and stored with its site)")
 _WAIT = click.option("--wait", is_flag=True,
                      help="wait for another job holding the warehouse (default: exit 2 "
                           "naming it)")
@@ -496,15 +498,16 @@ def _params(items: tuple[str, ...]) -> dict[str, str]:
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), required=True,
               help="folder for audit_<from>_<to>[_<sector>].html (and .pdf)")
 @click.option("--pdf", is_flag=True, help="also print the page to PDF with headless Chromium")
+@_SITE_READ
 @click.pass_obj
-def audit(st: _State, from_, to, sector, out_dir, pdf) -> None:
+def audit(st: _State, from_, to, sector, out_dir, pdf, site) -> None:
     """One self-contained HTML page (opens without a network): requirement verdicts,
     accuracy, identification, SIAP, cross-track, bias, faults, heading, gaps and a map."""
     from jobs.audit import run_audit
 
     start, end = _window(from_, to, required=True)
     result = run_audit(st.cfg, st.existing_warehouse, Path(out_dir), start_ns=start, end_ns=end,
-                       sector=st.sector(sector), pdf=pdf)
+                       sector=st.sector(sector), pdf=pdf, site=site)
     click.echo(result.render())
     sys.exit(EXIT_USAGE if pdf and result.pdf is None else 0)
 
@@ -514,15 +517,16 @@ def audit(st: _State, from_, to, sector, out_dir, pdf) -> None:
 @_TO_REQUIRED
 @click.option("--out", "out_path", type=click.Path(dir_okay=False), required=True,
               help="the MCAP file to write")
+@_SITE_READ
 @click.pass_obj
-def export(st: _State, from_, to, out_path) -> None:
+def export(st: _State, from_, to, out_path, site) -> None:
     """Fused, per-radar, AIS and airfield tracks and the config's geometry as an MCAP file
     in Foxglove's schemas (protobuf): open it in Foxglove's Map and 3D panels."""
     from jobs.export import run_export
 
     start, end = _window(from_, to, required=True)
     summary = run_export(st.cfg, st.existing_warehouse, Path(out_path), start_ns=start,
-                         end_ns=end)
+                         end_ns=end, site=site)
     click.echo(summary.render())
 
 
@@ -613,15 +617,16 @@ def schema(table, fmt) -> None:
               help="highest AR order compared by BIC")
 @click.option("--min-speed", type=float, default=0.0, show_default=True,
               help="use only reports of reference targets at least this fast, m/s")
+@_SITE_CAL
 @click.pass_obj
-def calibrate(st: _State, from_, to, max_order, min_speed) -> None:
+def calibrate(st: _State, from_, to, max_order, min_speed, site) -> None:
     """Fit each airfield sensor's coloured-error AR model against the reference channel
     (airfield paper eq. 2, 7, 8; order by BIC) into sensor_error_models."""
     from jobs.calibrate import run_calibrate
 
     start, end = _window(from_, to, required=True)
     summary = run_calibrate(st.cfg, st.existing_warehouse, start_ns=start, end_ns=end,
-                            max_order=max_order, min_speed_mps=min_speed)
+                            max_order=max_order, min_speed_mps=min_speed, site=site)
     click.echo(summary.render())
 
 
@@ -630,14 +635,16 @@ def calibrate(st: _State, from_, to, max_order, min_speed) -> None:
 @_TO_REQUIRED
 @click.option("--format", "fmt", type=click.Choice(["text", "json"]), default="text",
               show_default=True)
+@_SITE_CAL
 @click.pass_obj
-def calibrate_radars(st: _State, from_, to, fmt) -> None:
+def calibrate_radars(st: _State, from_, to, fmt, site) -> None:
     """Estimate each radar's range, azimuth and time bias from AIS ships in a window,
     with 95 % intervals; write radar_bias_by_site and print the config lines."""
     from jobs.calibrate import render, run_calibration
 
     start, end = _window(from_, to, required=True)
-    est = run_calibration(st.cfg, st.existing_warehouse, start_ns=start, end_ns=end)
+    est = run_calibration(st.cfg, st.existing_warehouse, start_ns=start, end_ns=end,
+                          site=site)
     click.echo(est.write_json() if fmt == "json" else render(est))
 
 

@@ -78,6 +78,22 @@ def refuse_pre_sites(warehouse: Path) -> None:
             "then `surveil batch` (docs/operations.md, 'Many sites, one warehouse')")
 
 
+def one_site(warehouse: Path, site: str | None, start_ns: int, end_ns: int) -> str | None:
+    """``site`` as given (None: every site). A command drawing one picture (audit,
+    export) over several sites without ``--site`` warns: their rows are drawn together
+    (each report row keeps its ``site``), fine for sites of different families (the demo's
+    channel, airfield and own ship), confusing for two VTS sites."""
+    if site is None:
+        from jobs.batch import sites_in
+
+        found = sites_in(warehouse, start_ns, end_ns)
+        if len(found) > 1:
+            logging.getLogger(__name__).warning(
+                "the window holds data of %d sites (%s), drawn together; --site NAME for one",
+                len(found), ", ".join(found))
+    return site
+
+
 def parse_time_ns(text: str) -> int:
     """ISO 8601 (``2026-01-15T01:00:00Z``, naive means UTC) or an integer ns timestamp."""
     t = text.strip()

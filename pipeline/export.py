@@ -85,12 +85,12 @@ def _col(t: pa.Table, name: str) -> list:
     return t[name].to_pylist()
 
 
-def location_points(warehouse: Path, cfg: Config, start_ns: int, end_ns: int
-                    ) -> dict[str, dict[str, list]]:
+def location_points(warehouse: Path, cfg: Config, start_ns: int, end_ns: int,
+                    site: str | None = None) -> dict[str, dict[str, list]]:
     """Topic -> columns (``time_ns``, ``frame_id``, ``lat_deg``, ``lon_deg``, ``sigma_x_m``,
     ``sigma_y_m``, ``cov_xy_m2``) of every LocationFix the export writes, in time order."""
     out: dict[str, dict[str, list]] = {}
-    st = read_table(warehouse, "system_tracks", start_ns=start_ns, end_ns=end_ns,
+    st = read_table(warehouse, "system_tracks", start_ns=start_ns, end_ns=end_ns, site=site,
                     columns=["time_ns", "system_track_id", "lat_deg", "lon_deg", "sigma_x_m",
                              "sigma_y_m", "cov_xy_m2"])
     out["/fused/location"] = {
@@ -98,7 +98,7 @@ def location_points(warehouse: Path, cfg: Config, start_ns: int, end_ns: int
         "lat_deg": _col(st, "lat_deg"), "lon_deg": _col(st, "lon_deg"),
         "sigma_x_m": _col(st, "sigma_x_m"), "sigma_y_m": _col(st, "sigma_y_m"),
         "cov_xy_m2": _col(st, "cov_xy_m2")}
-    assoc = read_table(warehouse, "associations", start_ns=start_ns, end_ns=end_ns,
+    assoc = read_table(warehouse, "associations", start_ns=start_ns, end_ns=end_ns, site=site,
                        columns=["time_ns", "site_id", "local_track_id", "x_enu_m", "y_enu_m",
                                 "sigma_x_m", "sigma_y_m", "cov_xy_m2"])
     if assoc.num_rows:
@@ -114,14 +114,14 @@ def location_points(warehouse: Path, cfg: Config, start_ns: int, end_ns: int
                 "lat_deg": lat[idx].tolist(), "lon_deg": lon[idx].tolist(),
                 "sigma_x_m": _col(sub, "sigma_x_m"), "sigma_y_m": _col(sub, "sigma_y_m"),
                 "cov_xy_m2": _col(sub, "cov_xy_m2")}
-    ais = read_table(warehouse, "ais_reports", start_ns=start_ns, end_ns=end_ns,
+    ais = read_table(warehouse, "ais_reports", start_ns=start_ns, end_ns=end_ns, site=site,
                      columns=["time_ns", "mmsi", "lat_deg", "lon_deg"])
     n = ais.num_rows
     out["/ais/location"] = {
         "time_ns": _col(ais, "time_ns"), "frame_id": [str(v) for v in _col(ais, "mmsi")],
         "lat_deg": _col(ais, "lat_deg"), "lon_deg": _col(ais, "lon_deg"),
         "sigma_x_m": [None] * n, "sigma_y_m": [None] * n, "cov_xy_m2": [None] * n}
-    af = read_table(warehouse, "airfield_tracks", start_ns=start_ns, end_ns=end_ns,
+    af = read_table(warehouse, "airfield_tracks", start_ns=start_ns, end_ns=end_ns, site=site,
                     columns=["time_ns", "track_id", "lat_deg", "lon_deg", "sigma_x_m",
                              "sigma_y_m", "cov_xy_m2"])
     out["/airfield/location"] = {
@@ -207,8 +207,9 @@ def geometry_scene(cfg: Config, t_ns: int) -> SceneUpdate:
     return SceneUpdate(entities=[entity])
 
 
-def _scenes(warehouse: Path, start_ns: int, end_ns: int) -> Iterator[Message]:
-    st = read_table(warehouse, "system_tracks", start_ns=start_ns, end_ns=end_ns,
+def _scenes(warehouse: Path, start_ns: int, end_ns: int, site: str | None = None
+            ) -> Iterator[Message]:
+    st = read_table(warehouse, "system_tracks", start_ns=start_ns, end_ns=end_ns, site=site,
                     columns=["time_ns", "system_track_id", "x_enu_m", "y_enu_m", "mmsi"])
     if st.num_rows == 0:
         return
@@ -235,15 +236,16 @@ def _scenes(warehouse: Path, start_ns: int, end_ns: int) -> Iterator[Message]:
         yield t, "/fused/scene", update
 
 
-def write_export(cfg: Config, warehouse: Path, out: Path, *, start_ns: int, end_ns: int
-                 ) -> ExportSummary:
-    """Write the window's tracks and the config's geometry to ``out`` (see the module)."""
+def write_export(cfg: Config, warehouse: Path, out: Path, *, start_ns: int, end_ns: int,
+                 site: str | None = None) -> ExportSummary:
+    """Write the window's tracks (of ``site``; None: every row) and the config's geometry
+    to ``out`` (see the module)."""
     summary = ExportSummary(out, start_ns, end_ns)
-    points = location_points(warehouse, cfg, start_ns, end_ns)
+    points = location_points(warehouse, cfg, start_ns, end_ns, site)
     first = [(start_ns, "/geometry", GeoJSON(geojson=json.dumps(geometry_geojson(cfg)))),
              (start_ns, "/geometry/scene", geometry_scene(cfg, start_ns))]
     streams = [iter(first), *(_fixes(topic, cols) for topic, cols in points.items()),
-               _scenes(warehouse, start_ns, end_ns)]
+               _scenes(warehouse, start_ns, end_ns, site)]
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = out.with_name(out.name + ".tmp")
     with open(tmp, "wb") as f:

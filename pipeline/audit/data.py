@@ -56,8 +56,9 @@ def map_step_s(start_ns: int, end_ns: int) -> float:
 
 
 def collect(con: duckdb.DuckDBPyConnection, cfg: Config, warehouse: Path, *, start_ns: int,
-            end_ns: int, sector: str | None = None) -> AuditData:
-    """Run every audit report over ``[start_ns, end_ns)`` (one sector, or all)."""
+            end_ns: int, sector: str | None = None, site: str | None = None) -> AuditData:
+    """Run every audit report over ``[start_ns, end_ns)`` (one sector, or all) of
+    ``site`` (None: every row, for a warehouse of one site)."""
     req = requirements_config(cfg)
     reports: dict[str, pa.Table] = {}
     reasons: dict[str, str] = {}
@@ -67,7 +68,7 @@ def collect(con: duckdb.DuckDBPyConnection, cfg: Config, warehouse: Path, *, sta
         extra = {"step_s": map_step_s(start_ns, end_ns)} if name == "map_tracks" else {}
         params[name] = extra
         table = run_report(con, report, start_ns=start_ns, end_ns=end_ns, sector=sector,
-                           requirements=req, params=extra)
+                           requirements=req, params=extra, site=site)
         reports[name] = table
         if table.num_rows == 0:
             reasons[name] = explain_empty_report(con, report, start_ns=start_ns, end_ns=end_ns,
