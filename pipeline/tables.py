@@ -194,21 +194,22 @@ def shape(name: str, data: pa.Table | pl.DataFrame, *, site: str | None = None) 
     raises ``KeyError``. Row order is kept (see :func:`conform` to sort).
 
     ``site``: the value of every row's ``site`` column (replacing any). Without it, a
-    missing ``site`` is left null: decoders and stages are site-agnostic, and the job
-    stamps the site where it stages the rows (``TableStager(site=...)``)."""
+    missing ``site`` is the default site (``tables.toml [site] default``), as for a file
+    naming none: decoders and stages are site-agnostic, and the jobs stamp the file's or
+    the batch's site where they stage the rows (``TableStager(site=...)``)."""
     s = spec(name)
     table = data.to_arrow() if isinstance(data, pl.DataFrame) else data
     if "date" in s.schema.names:
         table = with_date(table, s.time_column)
     have = dict(zip(table.column_names, table.columns, strict=True))
-    if site is not None and SITE in s.schema.names:
-        have[SITE] = _repeated(site, table.num_rows)
+    if SITE in s.schema.names and (site is not None or SITE not in have):
+        have[SITE] = _repeated(site if site is not None else default_site(), table.num_rows)
     cols = []
     for f in s.schema:
         col = have.get(f.name)
         if col is not None:  # cast only what differs (a no-op cast costs ~20 us of Python)
             cols.append(col if col.type == f.type else col.cast(f.type))
-        elif f.nullable or f.name == SITE:
+        elif f.nullable:
             cols.append(pa.nulls(table.num_rows, f.type))
         else:
             raise KeyError(f"table {name}: missing required column {f.name!r}")

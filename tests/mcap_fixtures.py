@@ -186,7 +186,8 @@ TYPE5_FRAGMENTS = [
 # -- warehouse rows ---------------------------------------------------------------------
 
 
-def truth_rows(t_ns: np.ndarray, *, speed: float = 5.0, source: str = "/a.mcap") -> pa.Table:
+def truth_rows(t_ns: np.ndarray, *, speed: float = 5.0, source: str = "/a.mcap",
+               site: str = "harbour") -> pa.Table:
     n = len(t_ns)
     return conform(
         "truth",
@@ -204,6 +205,7 @@ def truth_rows(t_ns: np.ndarray, *, speed: float = 5.0, source: str = "/a.mcap")
                 "log_time_ns": pa.array(t_ns, pa.int64()),
             }
         ),
+        site=site,
     )
 
 

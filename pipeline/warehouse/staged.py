@@ -296,8 +296,7 @@ class TableStager:
         """``presorted``: the caller adds each table's rows in the order of its sort key
         (e.g. a batch stage's outputs), so row groups are not checked nor sorted.
         ``site``: stamped on every row of a table carrying ``site`` (the ingested file's,
-        the batch's); without it, rows must carry their site already (a row without one
-        raises ``ValueError``: nothing is staged without its site)."""
+        the batch's); without it, rows keep theirs (a null site raises ``ValueError``)."""
         self.folder = Path(folder)
         self.site = site
         self.row_group_rows = row_group_rows

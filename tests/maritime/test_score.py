@@ -117,12 +117,14 @@ def test_chain_outputs_conform_to_the_canonical_schemas(chain):
     for name, frame in (("associations", associations), ("system_tracks", chain.fused),
                         ("identifications", chain.identifications),
                         ("track_errors", chain.errors)):
-        # associations.used comes from the integrity step (tests/maritime/test_channel_integrity.py)
-        expected = set(tables.schema(name).names) - {"date", "used"}
+        # associations.used comes from the integrity step
+        # (tests/maritime/test_channel_integrity.py); the batch stamps the site on a stage's
+        # outputs (stages are site-agnostic)
+        expected = set(tables.schema(name).names) - {"date", "used", "site"}
         assert expected <= set(frame.columns), (name, expected - set(frame.columns))
         assert tables.conform(name, frame).num_rows == frame.height
-    assert set(chain.fused.columns) == set(tables.schema("system_tracks").names) - {"date"}
-    assert set(chain.errors.columns) == set(tables.schema("track_errors").names) - {"date"}
+    assert set(chain.fused.columns) == set(tables.schema("system_tracks").names) - {"date", "site"}
+    assert set(chain.errors.columns) == set(tables.schema("track_errors").names) - {"date", "site"}
 
 
 def test_empty_inputs_give_empty_conforming_outputs(chain, cfg):

@@ -134,7 +134,8 @@ def test_stats_of_every_column_match_the_written_rows(tmp_path):
         mm = pa.compute.min_max(col).as_py()
         assert (stats["minValues"][name], stats["maxValues"][name]) == (mm["min"], mm["max"])
     assert set(stats["minValues"]) == {
-        "time_ns", "vessel_id", "lat_deg", "lon_deg", "course_rad", "source_file", "log_time_ns"
+        "time_ns", "site", "vessel_id", "lat_deg", "lon_deg", "course_rad", "source_file",
+        "log_time_ns"
     }  # fmt: skip
 
     rej = TableStager(tmp_path / "r")
@@ -159,7 +160,7 @@ def test_stats_of_every_column_match_the_written_rows(tmp_path):
     assert rstats["nullCount"]["topic"] == 1 and rstats["minValues"]["topic"] == "/s"
     assert rstats["minValues"]["reason_code"] == "bad_checksum"
     assert rstats["maxValues"]["reason_code"] == "undecodable"
-    assert not pq.read_metadata(r.path).row_group(0).column(6).is_stats_set
+    assert not pq.read_metadata(r.path).row_group(0).column(7).is_stats_set
 
 
 def test_constant_string_read_off_the_buffers():

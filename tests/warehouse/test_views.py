@@ -158,7 +158,7 @@ def test_views_file_documents_every_column_with_its_unit(tmp_path):
         assert comments["time_ns"].startswith("[ns (UTC, since 1970)] ")
         described = con.execute("FROM describe_table('radar_tracks')").fetchall()
         assert [r[0] for r in described] == schema("radar_tracks").names
-        assert described[3] == ("range_m", "DOUBLE", "[m] slant range from the site, m")
+        assert described[4] == ("range_m", "DOUBLE", "[m] slant range from the site, m")
         table_doc = con.execute("SELECT comment FROM duckdb_views() "
                                 "WHERE schema_name = 'main' AND view_name = 'truth'").fetchone()
         assert table_doc[0].startswith("Simulated ground truth")
