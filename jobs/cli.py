@@ -175,12 +175,13 @@ def _window(from_: str | None, to: str | None, required: bool) -> tuple[int | No
     return start, end
 
 
-def _bounded(st: _State, start: int | None, end: int | None) -> tuple[int, int]:
-    """A batch/reprocess window clipped to the data the ledger knows, or exit 2 when it
-    is too long or too big for the memory budget (:mod:`jobs.window`)."""
+def _bounded(st: _State, start: int | None, end: int | None, site: str | None = None
+             ) -> tuple[int, int]:
+    """A batch/reprocess window clipped to the data the ledger knows (of ``site``), or
+    exit 2 when it is too long or too big for the memory budget (:mod:`jobs.window`)."""
     from jobs.window import bounded_window
 
-    w = bounded_window(st.cfg, st.warehouse, start, end)  # type: ignore[arg-type]
+    w = bounded_window(st.cfg, st.warehouse, start, end, site)  # type: ignore[arg-type]
     if w.note:
         click.echo(w.note, err=True)
     return w.start_ns, w.end_ns
@@ -344,7 +345,7 @@ def batch(st: _State, from_, to, site, executor, wait) -> None:
 
     window = _window(from_, to, required=True)
     warehouse = st.existing_warehouse
-    start, end = _bounded(st, *window)
+    start, end = _bounded(st, *window, site)
     progress = terminal_progress()
     with _locked(st, wait), progress or contextlib.nullcontext():
         summary = run_batch(st.cfg, warehouse, start_ns=start, end_ns=end,
@@ -367,7 +368,7 @@ def reprocess(st: _State, from_, to, site, executor, wait) -> None:
 
     window = _window(from_, to, required=True)
     warehouse = st.existing_warehouse
-    start, end = _bounded(st, *window)
+    start, end = _bounded(st, *window, site)
     progress = terminal_progress()
     with _locked(st, wait), progress or contextlib.nullcontext():
         summary = run_reprocess(st.cfg, warehouse, start_ns=start, end_ns=end,

@@ -48,12 +48,14 @@ def _memory_total_mb() -> int:
         return 8192
 
 
-def bounded_window(cfg: Config, warehouse: Path, start_ns: int, end_ns: int) -> Window:
-    """``[start_ns, end_ns)`` clipped to the ledger's data hours, or refused (module
-    docstring)."""
+def bounded_window(cfg: Config, warehouse: Path, start_ns: int, end_ns: int,
+                   site: str | None = None) -> Window:
+    """``[start_ns, end_ns)`` clipped to the ledger's data hours (of ``site``, when given),
+    or refused (module docstring)."""
     cols = ["status", "start_time_ns", "end_time_ns", "rows_json"]
     try:
-        ledger = read_table(Path(warehouse), "ingest_ledger", columns=cols).to_pylist()
+        ledger = read_table(Path(warehouse), "ingest_ledger", columns=cols,
+                            site=site).to_pylist()
     except Exception:  # no warehouse / ledger yet: nothing known, nothing to clip to
         ledger = []
     files = [
