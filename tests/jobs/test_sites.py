@@ -17,9 +17,10 @@ from pathlib import Path
 
 import polars as pl
 import pyarrow as pa
+import pyarrow.compute as pc
 import pytest
 from click.testing import CliRunner
-from deltalake import write_deltalake
+from deltalake import DeltaTable, write_deltalake
 from mcap.reader import make_reader
 from polars.testing import assert_frame_equal
 
@@ -34,7 +35,7 @@ from jobs.simulate import run_simulate
 from pipeline import tables
 from pipeline.families import FAMILIES
 from pipeline.io.mcap_site import declared_site
-from pipeline.warehouse.delta import read_table
+from pipeline.warehouse.delta import read_table, table_exists, table_path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "decode"))
 from nmea_builders import sentence
@@ -63,6 +64,19 @@ def _site_rows(wh: Path, site: str) -> dict[str, pl.DataFrame]:
     for name in DERIVED:
         frame = pl.from_arrow(read_table(wh, name, site=site))
         out[name] = frame.sort(frame.columns)
+    return out
+
+
+def _site_files(wh: Path, site: str) -> dict[str, set[str]]:
+    """Per derived table, the data files (of the current snapshot) holding ``site``'s
+    rows only, by the files' ``site`` statistics: untouched files are the same bytes."""
+    out = {}
+    for name in DERIVED:
+        if not table_exists(wh, name):
+            continue
+        adds = pa.table(DeltaTable(str(table_path(wh, name))).get_add_actions(flatten=True))
+        keep = pc.and_(pc.equal(adds["min.site"], site), pc.equal(adds["max.site"], site))
+        out[name] = set(adds.filter(keep)["path"].to_pylist())
     return out
 
 
@@ -162,7 +176,9 @@ def test_batch_and_reprocess_of_one_site_leave_the_other_untouched(e2e, two_site
     wh = tmp_path / "wh"
     shutil.copytree(shared, wh)
     gaps_before = _site_rows(wh, "gaps")
+    gaps_files = _site_files(wh, "gaps")
     chan8_before = _site_rows(wh, "channel")
+    chan8_files = _site_files(wh, "channel")
     gaps_ledger = pl.from_arrow(read_table(wh, "ingest_ledger", site="gaps"))
     gaps_units = pl.from_arrow(read_table(wh, "batch_units", site="gaps"))
     chan_before = _site_rows(wh, "channel-clean")
@@ -172,13 +188,18 @@ def test_batch_and_reprocess_of_one_site_leave_the_other_untouched(e2e, two_site
     assert s.exit_code == 0 and list(s.by_site) == ["channel-clean"], s.render()
     assert not _same_rows(_site_rows(wh, "gaps"), gaps_before)
     assert not _same_rows(_site_rows(wh, "channel"), chan8_before)
+    assert _site_files(wh, "gaps") == gaps_files  # the same files: byte-identical
+    assert _site_files(wh, "channel") == chan8_files
     assert not _same_rows(_site_rows(wh, "channel-clean"), chan_before)
+    chan_files = _site_files(wh, "channel-clean")
     r = run_reprocess(e2e.cfg, wh, start_ns=e2e.start_ns + 300 * 10**9,
                       end_ns=e2e.start_ns + 900 * 10**9, executor_kind="serial", site="gaps")
     assert r.exit_code == 0, r.render()
     assert list(r.batch.by_site) == ["gaps"]
     assert not _same_rows(_site_rows(wh, "channel-clean"), chan_before)
+    assert _site_files(wh, "channel-clean") == chan_files
     assert not _same_rows(_site_rows(wh, "channel"), chan8_before)
+    assert _site_files(wh, "channel") == chan8_files
     assert not _same_rows(_site_rows(wh, "gaps"), gaps_before)  # exact reprocess
     # the other site's ledger rows and units were not rewritten either
     assert pl.from_arrow(read_table(wh, "ingest_ledger", site="channel-clean")).height == len(
