@@ -105,12 +105,12 @@ def location_points(warehouse: Path, cfg: Config, start_ns: int, end_ns: int,
         lat, lon = enu_to_geodetic(assoc["x_enu_m"].to_numpy(), assoc["y_enu_m"].to_numpy(),
                                    cfg.region.origin_lat_deg, cfg.region.origin_lon_deg)
         sites = np.asarray(_col(assoc, "site_id"), dtype=object)
-        for site in sorted(set(sites)):
-            idx = np.flatnonzero(sites == site)
+        for radar in sorted(set(sites)):
+            idx = np.flatnonzero(sites == radar)
             sub = assoc.take(pa.array(idx))
-            out[f"/radar/{site}/location"] = {
+            out[f"/radar/{radar}/location"] = {
                 "time_ns": _col(sub, "time_ns"),
-                "frame_id": [f"{site}-{v}" for v in _col(sub, "local_track_id")],
+                "frame_id": [f"{radar}-{v}" for v in _col(sub, "local_track_id")],
                 "lat_deg": lat[idx].tolist(), "lon_deg": lon[idx].tolist(),
                 "sigma_x_m": _col(sub, "sigma_x_m"), "sigma_y_m": _col(sub, "sigma_y_m"),
                 "cov_xy_m2": _col(sub, "cov_xy_m2")}
