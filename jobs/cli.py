@@ -415,8 +415,10 @@ def demo(st: _State, seed, duration, scenarios, executor) -> None:
     if unknown or not chosen:
         raise UsageError(f"--scenarios: unknown {', '.join(unknown) or '(none given)'}; "
                          f"choose from {', '.join(DEMO_CHOICES)}")
-    result = run_demo(st.cfg, st.warehouse, seed=seed, duration_s=_duration_s(duration),
-                      echo=click.echo, executor_kind=executor, scenarios=chosen)
+    duration_s = _duration_s(duration)
+    with _locked(st):
+        result = run_demo(st.cfg, st.warehouse, seed=seed, duration_s=duration_s,
+                          echo=click.echo, executor_kind=executor, scenarios=chosen)
     sys.exit(result.exit_code)
 
 
@@ -626,8 +628,10 @@ def calibrate(st: _State, from_, to, max_order, min_speed, site) -> None:
     from jobs.calibrate import run_calibrate
 
     start, end = _window(from_, to, required=True)
-    summary = run_calibrate(st.cfg, st.existing_warehouse, start_ns=start, end_ns=end,
-                            max_order=max_order, min_speed_mps=min_speed, site=site)
+    warehouse = st.existing_warehouse
+    with _locked(st):
+        summary = run_calibrate(st.cfg, warehouse, start_ns=start, end_ns=end,
+                                max_order=max_order, min_speed_mps=min_speed, site=site)
     click.echo(summary.render())
 
 
@@ -644,8 +648,9 @@ def calibrate_radars(st: _State, from_, to, fmt, site) -> None:
     from jobs.calibrate import render, run_calibration
 
     start, end = _window(from_, to, required=True)
-    est = run_calibration(st.cfg, st.existing_warehouse, start_ns=start, end_ns=end,
-                          site=site)
+    warehouse = st.existing_warehouse
+    with _locked(st):
+        est = run_calibration(st.cfg, warehouse, start_ns=start, end_ns=end, site=site)
     click.echo(est.write_json() if fmt == "json" else render(est))
 
 

@@ -20,6 +20,7 @@ from pipeline.decode.registry import RAW_TABLES
 from pipeline.ingest.worker import FileManifest
 from pipeline.tables import conform, default_site, empty
 from pipeline.warehouse import pending
+from pipeline.warehouse.crashpoints import crash_point
 from pipeline.warehouse.delta import replace_source_file
 from pipeline.warehouse.ledger import ledger_entry, write_entry
 from pipeline.warehouse.staged import commit_staged, read_staged
@@ -54,10 +55,12 @@ def _commit_tables(warehouse: Path, m: FileManifest, names: list[str],
                 start_ns=start_ns,
                 end_ns=end_ns,
             )
+        crash_point(f"ingest.{name}")
     if start_ns is None:
         index = m.index_rows if m.index_rows is not None else empty("mcap_index")
         index = conform("mcap_index", index, site=m.site or default_site())
         replace_source_file(warehouse, "mcap_index", index, source_file=m.source_file)
+        crash_point("ingest.mcap_index")
         entry = ledger_entry(
             m.source_file,
             size_bytes=m.size_bytes,
@@ -73,3 +76,4 @@ def _commit_tables(warehouse: Path, m: FileManifest, names: list[str],
             site=m.site or None,
         )
         write_entry(warehouse, entry)
+        crash_point("ingest.ingest_ledger")
