@@ -95,6 +95,7 @@ from pipeline.maritime.config import ChannelIntegrityConfig, MaritimeConfig
 from pipeline.maritime.fuse import channel_information
 from pipeline.maritime.identity import ais_at_epochs
 from pipeline.maritime.sync import extrapolation_covariance
+from pipeline.spatial import pairs_within
 from pipeline.units import NS
 
 #: wide prior on (range bias m, azimuth bias rad, time offset s): conditions A when the
@@ -341,7 +342,8 @@ def _ais_arrays(
     kk = rep["k"].to_numpy()
     rt = rep["time_ns"].to_numpy()
     rxy = rep.select("x_enu_m", "y_enu_m").to_numpy()
-    cand, cand_d2 = _nearest_slots(rxy, kk, rad, ic.ais_sigma_position_m**2)
+    cand, cand_d2 = nearest_slots(rxy, kk, rad, ic.ais_sigma_position_m**2,
+                                  gate_threshold(cfg.ais.gate_probability))
     rsector = sectors_of(rep)
     C = geo.site_xy.shape[0]
     rnd = (pl.int_range(pl.len()).over("k", "mmsi")).alias("_r")
@@ -406,10 +408,53 @@ def _kinematics(ic: ChannelIntegrityConfig) -> tuple[pl.Expr, pl.Expr]:
     return xi.alias("self_xi"), jump.alias("jump")
 
 
-def _nearest_slots(xy: np.ndarray, k: np.ndarray, rad: _Radar, var: float
+def nearest_slots(xy: np.ndarray, k: np.ndarray, rad: _Radar, var: float, gate: float
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """The NEAREST tracks (slots, every radar row's estimate) of each point at its epoch
+    k among those in the gate, by squared Mahalanobis distance d2 = r^T S^-1 r with
+    S = P + var I (eq. 21); -1 / inf when fewer than NEAREST are in the gate.
+
+    The slots are found with a grid join (:func:`pipeline.spatial.pairs_within`): a slot
+    can hold d2 < gate only within |r| < sqrt(gate * lambda_max(S)), lambda_max the larger
+    eigenvalue of the 2x2 S, so each slot reaches that far and no farther. The decisions
+    use only candidates with d2 < gate (``_ais_epoch``), so this gives the same decisions
+    as :func:`nearest_slots_dense` (every slot of the epoch, quadratic in the targets)
+    and the same (slot, d2) for every gated candidate, in the same order (d2, then slot).
+    """
+    n = xy.shape[0]
+    cand = np.full((n, NEAREST), -1, np.int64)
+    cd2 = np.full((n, NEAREST), np.inf)
+    N = rad.p_all.shape[0]
+    if n == 0 or N == 0:
+        return cand, cd2
+    S_all = rad.P_all + np.array([var, var, 0.0])
+    half_trace = 0.5 * (S_all[:, 0] + S_all[:, 1])
+    lam_max = half_trace + np.hypot(0.5 * (S_all[:, 0] - S_all[:, 1]), S_all[:, 2])
+    # a margin for rounding: pairs beyond the exact gate are dropped below
+    reach = np.sqrt(gate * lam_max) * (1.0 + 1e-6) + 1e-6
+    slot_epoch = np.repeat(np.arange(rad.slot_bounds.size - 1), np.diff(rad.slot_bounds))
+    finite = reach[np.isfinite(reach)]
+    cell_m = float(np.clip(np.median(finite), 10.0, 1e5)) if finite.size else 1e3
+    slot, row, _ = pairs_within(slot_epoch, rad.p_all[:, 0], rad.p_all[:, 1], reach,
+                                k, xy[:, 0], xy[:, 1], cell_m)
+    d2 = _d2(xy[row] - rad.p_all[slot], S_all[slot])
+    keep = d2 < gate
+    row, slot, d2 = row[keep], slot[keep], d2[keep]
+    order = np.lexsort((slot, d2, row))
+    row, slot, d2 = row[order], slot[order], d2[order]
+    counts = np.bincount(row, minlength=n)
+    rank = np.arange(row.size) - np.repeat(np.cumsum(counts) - counts, counts)
+    top = rank < NEAREST
+    cand[row[top], rank[top]] = slot[top]
+    cd2[row[top], rank[top]] = d2[top]
+    return cand, cd2
+
+
+def nearest_slots_dense(xy: np.ndarray, k: np.ndarray, rad: _Radar, var: float
                    ) -> tuple[np.ndarray, np.ndarray]:
     """The NEAREST tracks (slots, every radar row's estimate) of each point at its epoch
-    k, by squared Mahalanobis distance (covariance + var I); -1 / inf when fewer."""
+    k, by squared Mahalanobis distance (covariance + var I); -1 / inf when fewer. Every
+    slot of the epoch against every point: the reference for :func:`nearest_slots`."""
     n = xy.shape[0]
     cand = np.full((n, NEAREST), -1, np.int64)
     cd2 = np.full((n, NEAREST), np.inf)
