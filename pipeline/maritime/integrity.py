@@ -234,9 +234,10 @@ def coasted_reports(aligned: pl.DataFrame) -> pl.DataFrame:
     return (
         aligned.select(*key, "time_ns", "course_rad", "speed_mps")
         .sort(*key, "time_ns")
-        .with_columns(
-            ((pl.col("course_rad") == pl.col("course_rad").shift(1).over(key))
-             & (pl.col("speed_mps") == pl.col("speed_mps").shift(1).over(key)))
+        .with_columns(  # sorted by track: the previous row, when of the same track
+            ((pl.col("course_rad") == pl.col("course_rad").shift(1))
+             & (pl.col("speed_mps") == pl.col("speed_mps").shift(1))
+             & _same_as_previous(key))
             .fill_null(False).alias("coasted")
         )
         .select(*key, "time_ns", "coasted")
@@ -379,10 +380,21 @@ def _ais_arrays(
     )
 
 
+def _same_as_previous(key: list[str]) -> pl.Expr:
+    """True where the row's ``key`` equals the previous row's (False on the first row): on
+    rows sorted by ``key``, ``pl.col(c).shift(1)`` masked by it is ``shift(1).over(key)``
+    without the window's group-by."""
+    same = pl.int_range(pl.len()) > 0  # (a null key is a group of its own, as in over)
+    for c in key:
+        same = same & pl.col(c).eq_missing(pl.col(c).shift(1))
+    return same
+
+
 def _kinematics(ic: ChannelIntegrityConfig) -> tuple[pl.Expr, pl.Expr]:
-    """The transponder against itself: each report against the previous one moved on by
-    the two reports' SOG and COG along the chord of the arc they describe (mean course,
-    length mean SOG x dt x sinc(half the course change): exact for a steady turn),
+    """On rows sorted by (mmsi, time_ns), the transponder against itself: each report
+    against the previous one moved on by the two reports' SOG and COG along the chord of
+    the arc they describe (mean course, length mean SOG x dt x sinc(half the course
+    change): exact for a steady turn),
 
     .. math:: \\xi_{self} = \\frac{|p_k - p_{k-1} - c_k|^2}{2\\sigma_p^2
               + \\tfrac12(\\sigma_V \\Delta t)^2 + \\tfrac12(\\bar V \\Delta t \\sigma_C)^2}
@@ -391,7 +403,8 @@ def _kinematics(ic: ChannelIntegrityConfig) -> tuple[pl.Expr, pl.Expr]:
     ``ais_max_gap_s`` old or a SOG/COG is missing): a stuck position (SOG says it moves,
     it does not), and ``jump``: the report farther than ``ais_jump_m`` from there (an MMSI
     now sent by another ship, a position fault) as opposed to the radar tracks changing."""
-    prev = {c: pl.col(c).shift(1).over("mmsi") for c in
+    same = _same_as_previous(["mmsi"])  # rows sorted by (mmsi, time_ns)
+    prev = {c: pl.when(same).then(pl.col(c).shift(1)) for c in
             ("time_ns", "x_enu_m", "y_enu_m", "sog_mps", "cog_rad")}
     dt = (pl.col("time_ns") - prev["time_ns"]) / NS
     half = ((pl.col("cog_rad") - prev["cog_rad"] + np.pi) % (2 * np.pi) - np.pi) / 2.0

@@ -258,3 +258,19 @@ def test_nearest_slots_equal_dense_reference_in_the_gate(seed: int) -> None:
     np.testing.assert_array_equal(cand[gated], ref_c[gated])
     np.testing.assert_array_equal(d2[gated], ref_d2[gated])
     assert (cand[~gated] == -1).all() and np.isinf(d2[~gated]).all()
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_shift_masked_by_same_key_equals_shift_over(seed: int) -> None:
+    """integrity._same_as_previous: on rows sorted by the key, shift(1) masked by it is
+    shift(1).over(key), null keys included."""
+    from pipeline.maritime.integrity import _same_as_previous
+
+    rng = np.random.default_rng(seed)
+    n = 500
+    a = pl.Series("a", rng.integers(0, 5, n)).set(pl.Series(rng.random(n) < 0.1), None)
+    df = pl.DataFrame({"a": a, "b": rng.integers(0, 3, n), "v": rng.normal(size=n)}).sort(
+        "a", "b")
+    got = df.with_columns(pl.when(_same_as_previous(["a", "b"])).then(pl.col("v").shift(1)))
+    want = df.with_columns(pl.col("v").shift(1).over(["a", "b"]))
+    assert_frame_equal(got, want, check_exact=True)
