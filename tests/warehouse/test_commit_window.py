@@ -62,3 +62,55 @@ def test_window_across_midnight(tmp_path):
     tt, v = _rows(wh)
     np.testing.assert_array_equal(tt, t)
     assert (v[40:60] == 5.0).all() and (v[:40] == 1.0).all() and (v[60:] == 1.0).all()
+
+
+def _sorted_rows(wh):
+    import polars as pl
+
+    return pl.from_arrow(read_table(wh, "truth")).sort("source_file", "time_ns", "speed_mps")
+
+
+def test_source_window_equals_replace_source_file(tmp_path):
+    """commit_source_window (the windowed re-ingest) leaves the rows replace_source_file
+    leaves: other sources in the window kept, the source's rows outside it kept, files
+    written by delta-rs (its own, possibly truncated string statistics) and by the stager,
+    sources whose names share a long prefix."""
+    import pyarrow as pa
+    from polars.testing import assert_frame_equal
+
+    from pipeline.warehouse.delta import replace_rows, replace_source_file
+    from pipeline.warehouse.staged import commit_source_window
+
+    long = "/archive/" + "x" * 60
+    a, b, c = f"{long}/region_a.mcap", f"{long}/region_b.mcap", "/z.mcap"
+    t = T0_NS + np.arange(0, 100) * S
+    lo, hi = T0_NS + 30 * S, T0_NS + 60 * S
+    new = t[(t >= lo) & (t < hi)]
+    whs = []
+    for k, how in enumerate(("staged", "reference")):
+        wh = tmp_path / f"wh{k}"
+        # a: staged whole-file (our statistics); b: through delta-rs; c: a file mixing a/c
+        commit_source_window(wh, "truth", _stage_src(tmp_path / f"a{k}", t, 1.0, a),
+                             source_file=a, start_ns=T0_NS, end_ns=T0_NS + 100 * S)
+        replace_rows(wh, "truth", truth_rows(t[::2], speed=2.0, source=b),
+                     predicate_sql="speed_mps = 2.0")
+        mixed = pa.concat_tables([truth_rows(t[1::7], speed=3.0, source=a),
+                                  truth_rows(t[::5], speed=4.0, source=c)])
+        replace_rows(wh, "truth", mixed, predicate_sql="speed_mps > 2.5 AND speed_mps < 4.5")
+        if how == "staged":
+            got = commit_source_window(wh, "truth", _stage_src(tmp_path / f"n{k}", new, 9.0, a),
+                                       source_file=a, start_ns=lo, end_ns=hi)
+            assert got == "swap"
+        else:
+            replace_source_file(wh, "truth", truth_rows(new, speed=9.0, source=a),
+                                source_file=a, start_ns=lo, end_ns=hi)
+        whs.append(wh)
+    ref = _sorted_rows(whs[1])
+    assert ref.height > 100
+    assert_frame_equal(_sorted_rows(whs[0]), ref, check_exact=True)
+
+
+def _stage_src(folder, t_ns, speed, source):
+    st = TableStager(folder, threaded=False)
+    st.add("truth", truth_rows(t_ns, speed=speed, source=source))
+    return st.close()
