@@ -95,7 +95,7 @@ from pipeline.maritime.config import ChannelIntegrityConfig, MaritimeConfig
 from pipeline.maritime.fuse import channel_information
 from pipeline.maritime.identity import ais_at_epochs
 from pipeline.maritime.sync import extrapolation_covariance
-from pipeline.spatial import pairs_within
+from pipeline.spatial import MAX_CELLS, pairs_within
 from pipeline.units import NS
 
 #: wide prior on (range bias m, azimuth bias rad, time offset s): conditions A when the
@@ -187,6 +187,7 @@ class _Ais:
 
 
 NEAREST = 4  # candidate tracks kept per AIS report
+_MAX_SCALE = 8  # grids for the AIS candidates: cells of 4^0 .. 4^8 x the median reach / 4
 COVERAGE_MARGIN = 0.97  # share of a radar's max range where it is expected to see a ship
 _UNIT = np.array([1.0, 1.0, 0.0])  # a covariance (xx, yy, xy) that is never singular
 
@@ -446,10 +447,23 @@ def nearest_slots(xy: np.ndarray, k: np.ndarray, rad: _Radar, var: float, gate: 
     # a margin for rounding: pairs beyond the exact gate are dropped below
     reach = np.sqrt(gate * lam_max) * (1.0 + 1e-6) + 1e-6
     slot_epoch = np.repeat(np.arange(rad.slot_bounds.size - 1), np.diff(rad.slot_bounds))
-    finite = reach[np.isfinite(reach)]
-    cell_m = float(np.clip(np.median(finite), 10.0, 1e5)) if finite.size else 1e3
-    slot, row, _ = pairs_within(slot_epoch, rad.p_all[:, 0], rad.p_all[:, 1], reach,
-                                k, xy[:, 0], xy[:, 1], cell_m)
+    finite = np.isfinite(reach)
+    base_m = float(np.clip(np.median(reach[finite]), 10.0, 1e5)) if finite.any() else 1e3
+    # slots by reach, each scale on its own grid (cell = reach / MAX_CELLS): a coasting
+    # track's wide gate is paired with the points of a few of its cells, not every point
+    # of the epoch (the pairs of one grid for all held ~1 GB at 3,000 ships)
+    scale = np.zeros(N, np.int64)
+    scale[finite] = np.ceil(np.log(np.maximum(reach[finite] / (MAX_CELLS * base_m), 1.0))
+                            / np.log(4.0))
+    scale = np.minimum(scale, _MAX_SCALE)
+    parts = []
+    for sc in np.unique(scale):
+        sel = np.flatnonzero(scale == sc)
+        i, j, _ = pairs_within(slot_epoch[sel], rad.p_all[sel, 0], rad.p_all[sel, 1],
+                               reach[sel], k, xy[:, 0], xy[:, 1], base_m * 4.0 ** int(sc))
+        parts.append((sel[i], j))
+    slot = np.concatenate([p[0] for p in parts])
+    row = np.concatenate([p[1] for p in parts])
     d2 = _d2(xy[row] - rad.p_all[slot], S_all[slot])
     keep = d2 < gate
     row, slot, d2 = row[keep], slot[keep], d2[keep]
