@@ -46,7 +46,12 @@ from deltalake.transaction import AddAction, RemoveAction, create_table_with_add
 
 from pipeline.tables import conform, spec
 from pipeline.threads import WRITER_NICE, helper_pool
-from pipeline.warehouse.delta import replace_source_file, table_exists, table_path
+from pipeline.warehouse.delta import (
+    checkpoint_if_due,
+    replace_source_file,
+    table_exists,
+    table_path,
+)
 
 # 64 Ki rows: a file's last row group is encoded after its last chunk is decoded (~50 ms
 # here, against ~100 ms for 128 Ki); same instructions and file size (47.95 MB per 1 M
@@ -503,6 +508,7 @@ def commit_staged(warehouse: Path, name: str, staged: list[StagedFile], *, sourc
     if not staged and not removes:
         return "noop"
     adds = _add_actions(uri, staged)
+    version = dt.version() + 1
     try:
         dt.create_write_transaction(
             [*removes, *adds],
@@ -513,6 +519,7 @@ def commit_staged(warehouse: Path, name: str, staged: list[StagedFile], *, sourc
     except Exception:
         _drop_added(uri, adds)
         raise
+    checkpoint_if_due(dt, version)
     return "swap"
 
 
@@ -569,6 +576,7 @@ def commit_window(
     if not staged and not removes and not kept:
         return "noop"
     adds = _add_actions(uri, [*staged, *kept])
+    version = dt.version() + 1
     try:
         dt.create_write_transaction(
             [*removes, *adds], mode="append", schema=dt.schema(), partition_by=list(s.partition_by)
@@ -578,6 +586,7 @@ def commit_window(
         raise
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
+    checkpoint_if_due(dt, version)
     return "swap"
 
 
@@ -631,6 +640,7 @@ def commit_source_window(
         if not staged and not removes and not kept:
             return "noop"
         adds = _add_actions(uri, [*staged, *kept])
+        version = dt.version() + 1
         try:
             dt.create_write_transaction([*removes, *adds], mode="append", schema=dt.schema(),
                                         partition_by=list(s.partition_by))
@@ -639,6 +649,7 @@ def commit_source_window(
             raise
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
+    checkpoint_if_due(dt, version)
     return "swap"
 
 

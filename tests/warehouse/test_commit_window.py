@@ -114,3 +114,35 @@ def _stage_src(folder, t_ns, speed, source):
     st = TableStager(folder, threaded=False)
     st.add("truth", truth_rows(t_ns, speed=speed, source=source))
     return st.close()
+
+
+def test_a_checkpoint_every_ten_versions_same_rows(tmp_path):
+    """commit_window and replace_rows write a Delta checkpoint at versions 10, 20, ...
+    (opening a table replays only the entries after it); the rows are unchanged and an
+    older version still reads as it was."""
+    from pipeline.warehouse.delta import CHECKPOINT_EVERY, replace_rows
+
+    wh = tmp_path / "wh"
+    t = T0_NS + np.arange(0, 100) * S
+    commit_window(wh, "truth", _stage(tmp_path / "a", t, 1.0), start_ns=T0_NS,
+                  end_ns=T0_NS + 100 * S)
+    for v in range(1, 2 * CHECKPOINT_EVERY + 3):
+        lo = T0_NS + (v % 10) * 10 * S
+        sub = lo + np.arange(10) * S
+        if v % 2:
+            commit_window(wh, "truth", _stage(tmp_path / f"s{v}", sub, float(v)), start_ns=lo,
+                          end_ns=lo + 10 * S)
+        else:
+            replace_rows(wh, "truth", truth_rows(sub, speed=float(v)),
+                         predicate_sql=f"time_ns >= {lo} AND time_ns < {lo + 10 * S}")
+        if v == 5:
+            at5 = read_table(wh, "truth")
+    log = table_path(wh, "truth") / "_delta_log"
+    assert sorted(p.name for p in log.glob("*.checkpoint.parquet")) == [
+        f"{v:020d}.checkpoint.parquet" for v in (CHECKPOINT_EVERY, 2 * CHECKPOINT_EVERY)]
+    tt, v = _rows(wh)
+    np.testing.assert_array_equal(tt, t)
+    last = {(i % 10): i for i in range(1, 2 * CHECKPOINT_EVERY + 3)}
+    np.testing.assert_array_equal(v, [float(last[k]) for k in np.repeat(np.arange(10), 10)])
+    old = DeltaTable(str(table_path(wh, "truth")), version=5).to_pyarrow_table()
+    assert sorted(old["speed_mps"].to_pylist()) == sorted(at5["speed_mps"].to_pylist())
