@@ -56,6 +56,7 @@ from pipeline.family import Family, Relabel, Window, relabel
 from pipeline.signals import deferred_interrupts
 from pipeline.units import NS
 from pipeline.warehouse import pending
+from pipeline.warehouse.crashpoints import crash_point
 from pipeline.warehouse.delta import (
     read_table,
     replace_rows,
@@ -494,6 +495,7 @@ def _commit(warehouse: Path, manifests: list[UnitManifest], summary: BatchSummar
             commit_window(warehouse, name, staged, start_ns=summary.start_ns,
                           end_ns=summary.end_ns)
             summary.rows[name] = sum(f.rows for f in staged)
+            crash_point(f"batch.{name}")
     staged = [f for m in manifests for f in m.files.get("rejects", [])]
     rejects = read_staged("rejects", staged) if staged else tables.empty("rejects")
     replace_rows(
@@ -506,8 +508,10 @@ def _commit(warehouse: Path, manifests: list[UnitManifest], summary: BatchSummar
         ),
     )
     summary.rejects = rejects.num_rows
+    crash_point("batch.rejects")
     if units is not None:
         _record_units(warehouse, units, summary)
+        crash_point("batch.batch_units")
     lo, hi = summary.start_ns, summary.end_ns
     pending.finish(warehouse, marker, supersedes=lambda doc: doc.get("job") == "batch"
                    and lo <= doc["window"][0] and doc["window"][1] <= hi)

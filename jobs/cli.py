@@ -380,8 +380,10 @@ def demo(st: _State, seed, duration, scenarios, executor) -> None:
     if unknown or not chosen:
         raise UsageError(f"--scenarios: unknown {', '.join(unknown) or '(none given)'}; "
                          f"choose from {', '.join(DEMO_CHOICES)}")
-    result = run_demo(st.cfg, st.warehouse, seed=seed, duration_s=_duration_s(duration),
-                      echo=click.echo, executor_kind=executor, scenarios=chosen)
+    duration_s = _duration_s(duration)
+    with _locked(st):
+        result = run_demo(st.cfg, st.warehouse, seed=seed, duration_s=duration_s,
+                          echo=click.echo, executor_kind=executor, scenarios=chosen)
     sys.exit(result.exit_code)
 
 
@@ -586,8 +588,10 @@ def calibrate(st: _State, from_, to, max_order, min_speed) -> None:
     from jobs.calibrate import run_calibrate
 
     start, end = _window(from_, to, required=True)
-    summary = run_calibrate(st.cfg, st.existing_warehouse, start_ns=start, end_ns=end,
-                            max_order=max_order, min_speed_mps=min_speed)
+    warehouse = st.existing_warehouse
+    with _locked(st):
+        summary = run_calibrate(st.cfg, warehouse, start_ns=start, end_ns=end,
+                                max_order=max_order, min_speed_mps=min_speed)
     click.echo(summary.render())
 
 
@@ -603,7 +607,9 @@ def calibrate_radars(st: _State, from_, to, fmt) -> None:
     from jobs.calibrate import render, run_calibration
 
     start, end = _window(from_, to, required=True)
-    est = run_calibration(st.cfg, st.existing_warehouse, start_ns=start, end_ns=end)
+    warehouse = st.existing_warehouse
+    with _locked(st):
+        est = run_calibration(st.cfg, warehouse, start_ns=start, end_ns=end)
     click.echo(est.write_json() if fmt == "json" else render(est))
 
 

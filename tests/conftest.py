@@ -9,6 +9,7 @@ from pathlib import Path
 
 import pytest
 
+import jobs  # noqa: F401  (first: caps polars to one thread before polars loads)
 from pipeline.config import Config
 from pipeline.families import load_config
 from pipeline.units import NS

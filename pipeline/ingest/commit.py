@@ -23,6 +23,7 @@ from pipeline.decode.registry import RAW_TABLES
 from pipeline.ingest.worker import FileManifest
 from pipeline.tables import empty
 from pipeline.warehouse import pending
+from pipeline.warehouse.crashpoints import crash_point
 from pipeline.warehouse.delta import replace_source_file
 from pipeline.warehouse.ledger import ledger_entry, write_entry
 from pipeline.warehouse.staged import commit_source_window, commit_staged
@@ -51,9 +52,11 @@ def _commit_tables(warehouse: Path, m: FileManifest, names: list[str],
         else:
             commit_source_window(warehouse, name, staged, source_file=m.source_file,
                                  start_ns=start_ns, end_ns=end_ns)
+        crash_point(f"ingest.{name}")
     if start_ns is None:
         index = m.index_rows if m.index_rows is not None else empty("mcap_index")
         replace_source_file(warehouse, "mcap_index", index, source_file=m.source_file)
+        crash_point("ingest.mcap_index")
         entry = ledger_entry(
             m.source_file,
             size_bytes=m.size_bytes,
@@ -68,3 +71,4 @@ def _commit_tables(warehouse: Path, m: FileManifest, names: list[str],
             not_stored=m.not_stored,
         )
         write_entry(warehouse, entry)
+        crash_point("ingest.ingest_ledger")

@@ -53,6 +53,7 @@ import duckdb
 import pyarrow as pa
 
 from pipeline.tables import column_comment, spec, table_specs
+from pipeline.warehouse.crashpoints import crash_point
 from pipeline.warehouse.delta import sql_literal, table_snapshot
 
 VIEWS_FILE = "surveil.duckdb"
@@ -322,7 +323,8 @@ def _rebuild(engine: ViewsEngine, warehouse: Path) -> Path:
             try:
                 docs_digest = _docs_digest()
                 if not copied:  # a new file: the documented views from the template
-                    engine._docs_template(con)
+                    engine._docs_template(con)  # (building it leaves `USE memory`)
+                    con.execute(f"USE {_ATTACHED}")
                     con.execute(f"COPY FROM DATABASE {_TEMPLATE} TO {_ATTACHED} (SCHEMA)")
                 written = _view_digests(con)  # (the query costs ~10 ms)
                 main = _main_comments(con)
@@ -337,6 +339,7 @@ def _rebuild(engine: ViewsEngine, warehouse: Path) -> Path:
                 main_changed = [n for n in statements
                                 if docs_changed or main.get(n) != spec(n).doc]
                 if copied and not changed and not stale and not main_changed:
+                    os.utime(target)  # up to date with the tables (views_stale)
                     return target
                 script = [f"CREATE SCHEMA IF NOT EXISTS {_ident(SNAPSHOT_SCHEMA)}"]
                 for name in stale:
@@ -361,10 +364,55 @@ def _rebuild(engine: ViewsEngine, warehouse: Path) -> Path:
             finally:
                 _detach(con)
                 con.execute("RESET file_search_path")
+        crash_point("views.written")
         os.replace(tmp, target)
+        crash_point("views.replaced")
     finally:
         _remove_db_files(tmp)
     return target
+
+
+def views_stale(warehouse: Path) -> bool:
+    """Whether ``surveil.duckdb`` may be older than the tables: some table's newest Delta
+    commit (``_delta_log/<version>.json``) is newer than the file (or the file is missing
+    while tables exist). A job killed between its commits and its views rebuild leaves
+    such a file. Costs a listing of each table's log; a rebuild that finds nothing to
+    change touches the file, so a table pinned by a crashed job's marker does not make
+    every later check rebuild."""
+    warehouse = Path(warehouse)
+    try:
+        built = (warehouse / VIEWS_FILE).stat().st_mtime_ns
+    except FileNotFoundError:
+        built = None
+    tables_dir = warehouse / "tables"
+    try:
+        names = os.listdir(tables_dir)
+    except FileNotFoundError:
+        return False
+    for name in names:
+        log = tables_dir / name / "_delta_log"
+        try:
+            versions = [n for n in os.listdir(log) if n.endswith(".json") and n[:-5].isdigit()]
+        except (FileNotFoundError, NotADirectoryError):
+            continue
+        if not versions:
+            continue
+        if built is None:
+            return True
+        newest = max(versions, key=lambda n: int(n[:-5]))
+        with contextlib.suppress(FileNotFoundError):
+            if (log / newest).stat().st_mtime_ns >= built:
+                return True
+    return False
+
+
+def refresh_views_file(warehouse: Path) -> bool:
+    """Rebuild ``surveil.duckdb`` when :func:`views_stale`; returns whether it did. Every
+    writer job calls it when it takes the warehouse lock (``jobs.lock``)."""
+    if not views_stale(warehouse):
+        return False
+    rebuild_views_file(warehouse)
+    return True
 
 
 def _digest(sql: str) -> str:

@@ -14,9 +14,12 @@ from pipeline.tables import schema, table_specs
 from pipeline.warehouse.delta import read_table, replace_window, table_path
 from pipeline.warehouse.views import (
     VIEWS_FILE,
+    ViewsEngine,
     connect_views_file,
     rebuild_views_file,
+    refresh_views_file,
     register_tables,
+    views_stale,
 )
 
 
@@ -105,7 +108,37 @@ def test_views_unchanged_tables_leave_the_file_alone(tmp_path):
     before = target.stat()
     rebuild_views_file(tmp_path)
     after = target.stat()
-    assert (after.st_ino, after.st_mtime_ns) == (before.st_ino, before.st_mtime_ns)
+    # not rewritten (same file), only touched: it is as new as the tables (views_stale)
+    assert (after.st_ino, after.st_size) == (before.st_ino, before.st_size)
+    assert after.st_mtime_ns >= before.st_mtime_ns and not views_stale(tmp_path)
+
+
+def test_a_new_views_file_built_without_warm_up_holds_the_tables_rows(tmp_path):
+    """A fresh engine builds the template inside the rebuild (no warm-up): the views
+    still go to the file, not to the engine's in-memory database."""
+    replace_window(tmp_path, "truth", truth_rows(hours(0, 3)), start_ns=T0, end_ns=T0 + DAY)
+    engine = ViewsEngine()
+    try:
+        engine.rebuild(tmp_path)
+    finally:
+        engine.close()
+    with connect_views_file(tmp_path) as con:
+        n = con.execute("SELECT count(*) FROM truth").fetchall()[0][0]
+    assert n == read_table(tmp_path, "truth").num_rows > 0
+
+
+def test_views_stale_when_a_table_commits_after_the_file(tmp_path):
+    assert not views_stale(tmp_path)  # no tables, no file
+    replace_window(tmp_path, "truth", truth_rows(hours(0, 3)), start_ns=T0, end_ns=T0 + DAY)
+    assert views_stale(tmp_path)  # tables, no file
+    rebuild_views_file(tmp_path)
+    assert not views_stale(tmp_path)
+    replace_window(tmp_path, "truth", truth_rows(hours(0, 2)), start_ns=T0, end_ns=T0 + DAY)
+    assert views_stale(tmp_path)
+    assert refresh_views_file(tmp_path) and not refresh_views_file(tmp_path)
+    with connect_views_file(tmp_path) as con:
+        n = con.execute("SELECT count(*) FROM truth").fetchall()[0][0]
+    assert n == read_table(tmp_path, "truth").num_rows
 
 
 def test_views_a_view_edited_by_hand_is_rewritten_and_a_gone_table_dropped(tmp_path):
