@@ -40,6 +40,7 @@ import itertools
 import logging
 import shutil
 import time
+from collections.abc import Iterator, Mapping, Sized
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -526,14 +527,44 @@ def family_waves(families: tuple[Family, ...], cfg: Config) -> list[list[Family]
     return waves
 
 
+class _StoredOutputs(Mapping[str, pl.DataFrame]):
+    """A family's committed outputs in ``[start_ns, end_ns)``, each table read from the
+    warehouse when first looked up (the maritime seam reads one of eight tables)."""
+
+    def __init__(self, warehouse: Path, names: tuple[str, ...], start_ns: int,
+                 end_ns: int, site: str | None = None) -> None:
+        self._warehouse, self._names, self._site = warehouse, names, site
+        self._window = (start_ns, end_ns)
+        self._read: dict[str, pl.DataFrame] = {}
+
+    def __getitem__(self, name: str) -> pl.DataFrame:
+        if name not in self._names:
+            raise KeyError(name)
+        if name not in self._read:
+            lo, hi = self._window
+            self._read[name] = pl.from_arrow(read_table(self._warehouse, name, start_ns=lo,
+                                                        end_ns=hi, site=self._site))
+        return self._read[name]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._names)
+
+    def __len__(self) -> int:
+        return len(self._names)
+
+
 def _stored_before(warehouse: Path, fam: Family, start_ns: int, site: str | None = None
-                   ) -> dict[str, pl.DataFrame]:
+                   ) -> Mapping[str, pl.DataFrame]:
     """``fam``'s committed outputs (of ``site``) in the ``stitch_lookback_s`` before
-    ``start_ns``: the unit before the window as its ``join_units`` sees a unit."""
+    ``start_ns``: the unit before the window as its ``join_units`` sees a unit (a
+    pseudo-unit); tables are read when the family's ``unit_seam`` looks them up."""
     lo = start_ns - round(fam.stitch_lookback_s * NS)
-    return {name: pl.from_arrow(read_table(warehouse, name, start_ns=lo, end_ns=start_ns,
-                                           site=site))
-            for name in fam.outputs}
+    return _StoredOutputs(warehouse, tuple(fam.outputs), lo, start_ns, site)
+
+
+def _has_rows(seam: Any) -> bool:
+    """A seam with rows (a frame or any sized value; anything else counts as rows)."""
+    return len(seam) > 0 if isinstance(seam, Sized) else seam is not None
 
 
 def _finalize_units(executor, manifests: list[UnitManifest], families: tuple[Family, ...],
@@ -549,9 +580,11 @@ def _finalize_units(executor, manifests: list[UnitManifest], families: tuple[Fam
         lead = 0
         if (fam.join_units is not None and fam.unit_seam is not None
                 and fam.stitch_lookback_s and warehouse is not None):
-            before = _stored_before(warehouse, fam, summary.start_ns, summary.site)
-            if any(f.height for f in before.values()):
-                seams, lead = [fam.unit_seam(before), *seams], 1
+            # (no rows committed before: the seam of empty outputs leads nothing)
+            seam = fam.unit_seam(_stored_before(warehouse, fam, summary.start_ns,
+                                                  summary.site))
+            if _has_rows(seam):
+                seams, lead = [seam, *seams], 1
         maps = (fam.join_units(seams)[lead:]
                 if fam.join_units is not None and len(seams) > 1 else [None] * len(ours))
         tasks += [FinalizeTask(m, mapping) for m, mapping in zip(ours, maps, strict=True)]

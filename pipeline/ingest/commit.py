@@ -7,9 +7,12 @@ table, so a changed file leaves no stale rows; a table with nothing to add or re
 not touched), then the file's ``mcap_index`` rows, and the ledger row LAST. A crash in
 between leaves a ledger without the new hash, so the next run redoes the file.
 
-A windowed run replaces the file's rows inside the window only (``replace_source_file``
-with the window predicate: the file's rows outside it stay) and writes neither
-``mcap_index`` nor the ledger: those describe whole-file ingests.
+A windowed run replaces the file's rows inside the window only
+(:func:`~pipeline.warehouse.staged.commit_source_window`, one commit per table: the
+staged files added, the file's data files inside the window removed, any data file also
+holding other rows rewritten without the window's rows of the file; no row of the staged
+files passes through the driver) and writes neither ``mcap_index`` nor the ledger: those
+describe whole-file ingests.
 """
 
 from __future__ import annotations
@@ -23,7 +26,7 @@ from pipeline.warehouse import pending
 from pipeline.warehouse.crashpoints import crash_point
 from pipeline.warehouse.delta import replace_source_file
 from pipeline.warehouse.ledger import ledger_entry, write_entry
-from pipeline.warehouse.staged import commit_staged, read_staged
+from pipeline.warehouse.staged import commit_source_window, commit_staged
 
 
 def commit_file(
@@ -47,14 +50,8 @@ def _commit_tables(warehouse: Path, m: FileManifest, names: list[str],
         if start_ns is None:
             commit_staged(warehouse, name, staged, source_file=m.source_file)
         else:
-            replace_source_file(
-                warehouse,
-                name,
-                read_staged(name, staged),
-                source_file=m.source_file,
-                start_ns=start_ns,
-                end_ns=end_ns,
-            )
+            commit_source_window(warehouse, name, staged, source_file=m.source_file,
+                                 start_ns=start_ns, end_ns=end_ns)
         crash_point(f"ingest.{name}")
     if start_ns is None:
         index = m.index_rows if m.index_rows is not None else empty("mcap_index")

@@ -95,6 +95,7 @@ from pipeline.maritime.config import ChannelIntegrityConfig, MaritimeConfig
 from pipeline.maritime.fuse import channel_information
 from pipeline.maritime.identity import ais_at_epochs
 from pipeline.maritime.sync import extrapolation_covariance
+from pipeline.spatial import MAX_CELLS, pairs_within
 from pipeline.units import NS
 
 #: wide prior on (range bias m, azimuth bias rad, time offset s): conditions A when the
@@ -186,6 +187,7 @@ class _Ais:
 
 
 NEAREST = 4  # candidate tracks kept per AIS report
+_MAX_SCALE = 8  # grids for the AIS candidates: cells of 4^0 .. 4^8 x the median reach / 4
 COVERAGE_MARGIN = 0.97  # share of a radar's max range where it is expected to see a ship
 _UNIT = np.array([1.0, 1.0, 0.0])  # a covariance (xx, yy, xy) that is never singular
 
@@ -233,9 +235,10 @@ def coasted_reports(aligned: pl.DataFrame) -> pl.DataFrame:
     return (
         aligned.select(*key, "time_ns", "course_rad", "speed_mps")
         .sort(*key, "time_ns")
-        .with_columns(
-            ((pl.col("course_rad") == pl.col("course_rad").shift(1).over(key))
-             & (pl.col("speed_mps") == pl.col("speed_mps").shift(1).over(key)))
+        .with_columns(  # sorted by track: the previous row, when of the same track
+            ((pl.col("course_rad") == pl.col("course_rad").shift(1))
+             & (pl.col("speed_mps") == pl.col("speed_mps").shift(1))
+             & _same_as_previous(key))
             .fill_null(False).alias("coasted")
         )
         .select(*key, "time_ns", "coasted")
@@ -341,7 +344,8 @@ def _ais_arrays(
     kk = rep["k"].to_numpy()
     rt = rep["time_ns"].to_numpy()
     rxy = rep.select("x_enu_m", "y_enu_m").to_numpy()
-    cand, cand_d2 = _nearest_slots(rxy, kk, rad, ic.ais_sigma_position_m**2)
+    cand, cand_d2 = nearest_slots(rxy, kk, rad, ic.ais_sigma_position_m**2,
+                                  gate_threshold(cfg.ais.gate_probability))
     rsector = sectors_of(rep)
     C = geo.site_xy.shape[0]
     rnd = (pl.int_range(pl.len()).over("k", "mmsi")).alias("_r")
@@ -377,10 +381,21 @@ def _ais_arrays(
     )
 
 
+def _same_as_previous(key: list[str]) -> pl.Expr:
+    """True where the row's ``key`` equals the previous row's (False on the first row): on
+    rows sorted by ``key``, ``pl.col(c).shift(1)`` masked by it is ``shift(1).over(key)``
+    without the window's group-by."""
+    same = pl.int_range(pl.len()) > 0  # (a null key is a group of its own, as in over)
+    for c in key:
+        same = same & pl.col(c).eq_missing(pl.col(c).shift(1))
+    return same
+
+
 def _kinematics(ic: ChannelIntegrityConfig) -> tuple[pl.Expr, pl.Expr]:
-    """The transponder against itself: each report against the previous one moved on by
-    the two reports' SOG and COG along the chord of the arc they describe (mean course,
-    length mean SOG x dt x sinc(half the course change): exact for a steady turn),
+    """On rows sorted by (mmsi, time_ns), the transponder against itself: each report
+    against the previous one moved on by the two reports' SOG and COG along the chord of
+    the arc they describe (mean course, length mean SOG x dt x sinc(half the course
+    change): exact for a steady turn),
 
     .. math:: \\xi_{self} = \\frac{|p_k - p_{k-1} - c_k|^2}{2\\sigma_p^2
               + \\tfrac12(\\sigma_V \\Delta t)^2 + \\tfrac12(\\bar V \\Delta t \\sigma_C)^2}
@@ -389,7 +404,8 @@ def _kinematics(ic: ChannelIntegrityConfig) -> tuple[pl.Expr, pl.Expr]:
     ``ais_max_gap_s`` old or a SOG/COG is missing): a stuck position (SOG says it moves,
     it does not), and ``jump``: the report farther than ``ais_jump_m`` from there (an MMSI
     now sent by another ship, a position fault) as opposed to the radar tracks changing."""
-    prev = {c: pl.col(c).shift(1).over("mmsi") for c in
+    same = _same_as_previous(["mmsi"])  # rows sorted by (mmsi, time_ns)
+    prev = {c: pl.when(same).then(pl.col(c).shift(1)) for c in
             ("time_ns", "x_enu_m", "y_enu_m", "sog_mps", "cog_rad")}
     dt = (pl.col("time_ns") - prev["time_ns"]) / NS
     half = ((pl.col("cog_rad") - prev["cog_rad"] + np.pi) % (2 * np.pi) - np.pi) / 2.0
@@ -406,10 +422,66 @@ def _kinematics(ic: ChannelIntegrityConfig) -> tuple[pl.Expr, pl.Expr]:
     return xi.alias("self_xi"), jump.alias("jump")
 
 
-def _nearest_slots(xy: np.ndarray, k: np.ndarray, rad: _Radar, var: float
+def nearest_slots(xy: np.ndarray, k: np.ndarray, rad: _Radar, var: float, gate: float
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """The NEAREST tracks (slots, every radar row's estimate) of each point at its epoch
+    k among those in the gate, by squared Mahalanobis distance d2 = r^T S^-1 r with
+    S = P + var I (eq. 21); -1 / inf when fewer than NEAREST are in the gate.
+
+    The slots are found with a grid join (:func:`pipeline.spatial.pairs_within`): a slot
+    can hold d2 < gate only within |r| < sqrt(gate * lambda_max(S)), lambda_max the larger
+    eigenvalue of the 2x2 S, so each slot reaches that far and no farther. The decisions
+    use only candidates with d2 < gate (``_ais_epoch``), so this gives the same decisions
+    as :func:`nearest_slots_dense` (every slot of the epoch, quadratic in the targets)
+    and the same (slot, d2) for every gated candidate, in the same order (d2, then slot).
+    """
+    n = xy.shape[0]
+    cand = np.full((n, NEAREST), -1, np.int64)
+    cd2 = np.full((n, NEAREST), np.inf)
+    N = rad.p_all.shape[0]
+    if n == 0 or N == 0:
+        return cand, cd2
+    S_all = rad.P_all + np.array([var, var, 0.0])
+    half_trace = 0.5 * (S_all[:, 0] + S_all[:, 1])
+    lam_max = half_trace + np.hypot(0.5 * (S_all[:, 0] - S_all[:, 1]), S_all[:, 2])
+    # a margin for rounding: pairs beyond the exact gate are dropped below
+    reach = np.sqrt(gate * lam_max) * (1.0 + 1e-6) + 1e-6
+    slot_epoch = np.repeat(np.arange(rad.slot_bounds.size - 1), np.diff(rad.slot_bounds))
+    finite = np.isfinite(reach)
+    base_m = float(np.clip(np.median(reach[finite]), 10.0, 1e5)) if finite.any() else 1e3
+    # slots by reach, each scale on its own grid (cell = reach / MAX_CELLS): a coasting
+    # track's wide gate is paired with the points of a few of its cells, not every point
+    # of the epoch (the pairs of one grid for all held ~1 GB at 3,000 ships)
+    scale = np.zeros(N, np.int64)
+    scale[finite] = np.ceil(np.log(np.maximum(reach[finite] / (MAX_CELLS * base_m), 1.0))
+                            / np.log(4.0))
+    scale = np.minimum(scale, _MAX_SCALE)
+    parts = []
+    for sc in np.unique(scale):
+        sel = np.flatnonzero(scale == sc)
+        i, j, _ = pairs_within(slot_epoch[sel], rad.p_all[sel, 0], rad.p_all[sel, 1],
+                               reach[sel], k, xy[:, 0], xy[:, 1], base_m * 4.0 ** int(sc))
+        parts.append((sel[i], j))
+    slot = np.concatenate([p[0] for p in parts])
+    row = np.concatenate([p[1] for p in parts])
+    d2 = _d2(xy[row] - rad.p_all[slot], S_all[slot])
+    keep = d2 < gate
+    row, slot, d2 = row[keep], slot[keep], d2[keep]
+    order = np.lexsort((slot, d2, row))
+    row, slot, d2 = row[order], slot[order], d2[order]
+    counts = np.bincount(row, minlength=n)
+    rank = np.arange(row.size) - np.repeat(np.cumsum(counts) - counts, counts)
+    top = rank < NEAREST
+    cand[row[top], rank[top]] = slot[top]
+    cd2[row[top], rank[top]] = d2[top]
+    return cand, cd2
+
+
+def nearest_slots_dense(xy: np.ndarray, k: np.ndarray, rad: _Radar, var: float
                    ) -> tuple[np.ndarray, np.ndarray]:
     """The NEAREST tracks (slots, every radar row's estimate) of each point at its epoch
-    k, by squared Mahalanobis distance (covariance + var I); -1 / inf when fewer."""
+    k, by squared Mahalanobis distance (covariance + var I); -1 / inf when fewer. Every
+    slot of the epoch against every point: the reference for :func:`nearest_slots`."""
     n = xy.shape[0]
     cand = np.full((n, NEAREST), -1, np.int64)
     cd2 = np.full((n, NEAREST), np.inf)

@@ -131,7 +131,8 @@ def _truth_errors(
     ):
         if pts.height == 0:
             continue
-        k = ref_row[f_rows]
+        # (radar rows without a fused row have no reference: as the join of the AIS path)
+        k = np.where(f_rows >= 0, ref_row[np.maximum(f_rows, 0)], -1)
         sel = np.flatnonzero(k >= 0)
         k = k[sel]
         P_xx, P_yy, P_xy = (p[sel] for p in position_covariance(pts))
@@ -161,15 +162,21 @@ def _truth_errors(
 
 
 def _row_of(t: np.ndarray, s: np.ndarray, qt: np.ndarray, qs: np.ndarray) -> np.ndarray:
-    """Index of each (qt, qs) among the rows (t, s) sorted by (t, s) (all present): one
-    searchsorted on a combined key (time rank, track id offset)."""
+    """Index of each (qt, qs) among the rows (t, s) sorted by (t, s), -1 where absent (a
+    radar row of a track none of whose rows was fused at that epoch: its radars were all
+    excluded): one searchsorted on a combined key (time rank, track id offset)."""
     if qt.size == 0:
         return np.empty(0, np.int64)
     times = np.unique(t)
     lo = min(int(s.min()), int(qs.min()))
     span = max(int(s.max()), int(qs.max())) - lo + 1
     key = np.searchsorted(times, t) * span + (s - lo)
-    return np.searchsorted(key, np.searchsorted(times, qt) * span + (qs - lo))
+    qkey = np.searchsorted(times, qt) * span + (qs - lo)
+    row = np.searchsorted(key, qkey)
+    found = row < key.size
+    found[found] = key[row[found]] == qkey[found]
+    found &= np.isin(qt, times)  # (a time after the last fused one ranks as the last + 1)
+    return np.where(found, row, -1)
 
 
 def nearest_truth(t: np.ndarray, x: np.ndarray, y: np.ndarray, at: pl.DataFrame,

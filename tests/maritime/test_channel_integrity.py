@@ -231,3 +231,22 @@ def test_default_schedule_in_the_channel_scenario(cfg):
     assert excluded.filter(~pl.col("channel").is_in(faulty))["len"].sum() < 0.05 * h.height
     ids = out["identifications"]
     assert ids.filter(pl.col("mmsi") == 272999001).height == 0
+
+
+def test_dense_ais_candidates_give_the_same_decisions(cfg, data, monkeypatch):
+    """The grid-gated AIS candidates (integrity.nearest_slots) against the dense
+    reference: every output frame of the check equal."""
+    radar, ais = data
+    radar = biased(radar, "R2", 80.0, FAULT_AT_S)
+    fast = check(cfg, radar, ais)
+    monkeypatch.setattr(integ, "nearest_slots",
+                        lambda xy, k, rad, var, gate: integ.nearest_slots_dense(xy, k, rad, var))
+    ref = check(cfg, radar, ais)
+    for name in fast.__dataclass_fields__:
+        a, b = getattr(fast, name), getattr(ref, name)
+        if isinstance(a, pl.DataFrame):
+            from polars.testing import assert_frame_equal
+
+            assert_frame_equal(a, b, check_exact=True)
+        else:
+            np.testing.assert_array_equal(a, b)

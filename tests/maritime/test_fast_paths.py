@@ -223,3 +223,54 @@ def test_vote_identity_rows_equal_join_asof_reference(window_s: float, min_match
                                       window_s, min_matches)
     assert ref.is_not_null().sum() > 100
     assert got.to_list() == ref.to_list()
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_nearest_slots_equal_dense_reference_in_the_gate(seed: int) -> None:
+    """Grid-gated AIS -> slot candidates: every gated candidate (d2 < gate) as the dense
+    reference's, same slot, same d2 to the bit, same order; the rest -1 / inf."""
+    from types import SimpleNamespace
+
+    from pipeline.maritime import integrity
+
+    rng = np.random.default_rng(seed)
+    n_epochs, per = 15, rng.integers(0, 150, 15)
+    bounds = np.r_[0, np.cumsum(per)]
+    N = int(bounds[-1])
+    centre = rng.uniform(0, 5000, (N, 2))
+    sig = rng.choice([5.0, 40.0, 400.0, 3000.0], N)
+    P = np.column_stack([sig**2, (0.6 * sig) ** 2, 0.3 * sig * 0.6 * sig])
+    P[rng.random(N) < 0.02] = np.nan  # a slot without a position estimate
+    rad = SimpleNamespace(slot_bounds=bounds, p_all=centre, P_all=P)
+    n = 900
+    k = np.sort(rng.integers(0, n_epochs, n))
+    xy = rng.uniform(0, 5000, (n, 2))
+    near = rng.random(n) < 0.7  # most AIS points near a slot of their epoch
+    for i in np.flatnonzero(near & (per[k] > 0)):
+        s = bounds[k[i]] + rng.integers(0, per[k[i]])
+        xy[i] = centre[s] + rng.normal(0, 30, 2)
+    gate = gate_threshold(0.999)
+    cand, d2 = integrity.nearest_slots(xy, k, rad, 100.0, gate)
+    ref_c, ref_d2 = integrity.nearest_slots_dense(xy, k, rad, 100.0)
+    gated = ref_d2 < gate
+    assert gated.sum() > 500
+    np.testing.assert_array_equal(d2 < gate, gated)
+    np.testing.assert_array_equal(cand[gated], ref_c[gated])
+    np.testing.assert_array_equal(d2[gated], ref_d2[gated])
+    assert (cand[~gated] == -1).all() and np.isinf(d2[~gated]).all()
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_shift_masked_by_same_key_equals_shift_over(seed: int) -> None:
+    """integrity._same_as_previous: on rows sorted by the key, shift(1) masked by it is
+    shift(1).over(key), null keys included."""
+    from pipeline.maritime.integrity import _same_as_previous
+
+    rng = np.random.default_rng(seed)
+    n = 500
+    a = pl.Series("a", rng.integers(0, 5, n)).set(pl.Series(rng.random(n) < 0.1), None)
+    df = pl.DataFrame({"a": a, "b": rng.integers(0, 3, n), "v": rng.normal(size=n)}).sort(
+        "a", "b")
+    got = df.with_columns(pl.when(_same_as_previous(["a", "b"])).then(pl.col("v").shift(1)))
+    want = df.with_columns(pl.col("v").shift(1).over(["a", "b"]))
+    assert_frame_equal(got, want, check_exact=True)

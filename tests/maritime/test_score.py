@@ -133,3 +133,24 @@ def test_empty_inputs_give_empty_conforming_outputs(chain, cfg):
         e = score_tracks(fused, assoc, truth=truth, ais_reports=ais, region=cfg.region,
                          sectors=cfg.sectors)
         assert e.height == 0 and tables.conform("track_errors", e).num_rows == 0
+
+
+def test_radar_rows_of_an_unfused_track_get_no_truth_reference(chain, cfg):
+    """A (time, track) with radar rows but no fused row (every radar of the track excluded
+    at that epoch, issue 22; the last epoch too) scores the other rows as before and those
+    not at all, as the AIS path's join does (it once took the next key's reference, or
+    indexed past the end)."""
+    fused = chain.fused.sort("time_ns", "system_track_id")
+    last = fused["time_ns"].max()
+    drop = (fused.filter(pl.col("time_ns") == last).head(2)
+            .vstack(fused.filter(pl.col("time_ns") < last).gather_every(37)))
+    keep = fused.join(drop.select("time_ns", "system_track_id"),
+                      on=["time_ns", "system_track_id"], how="anti")
+    e = score_tracks(keep, chain.associated, truth=chain.truth, ais_reports=chain.ais,
+                     region=cfg.region, sectors=cfg.sectors)
+    gone = drop.select("time_ns", "system_track_id")
+    want = chain.errors.join(gone, on=["time_ns", "system_track_id"], how="anti")
+    from polars.testing import assert_frame_equal
+
+    assert e.join(gone, on=["time_ns", "system_track_id"]).height == 0
+    assert_frame_equal(e, want, check_exact=True)

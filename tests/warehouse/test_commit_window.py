@@ -103,3 +103,87 @@ def test_a_site_replaces_only_its_rows(tmp_path):
     south = read_table(wh, "truth", site="south")
     assert south.num_rows == 100
     assert sorted(set(south["speed_mps"].to_pylist())) == [7.0, 9.0]
+
+
+def _sorted_rows(wh):
+    import polars as pl
+
+    return pl.from_arrow(read_table(wh, "truth")).sort("source_file", "time_ns", "speed_mps")
+
+
+def test_source_window_equals_replace_source_file(tmp_path):
+    """commit_source_window (the windowed re-ingest) leaves the rows replace_source_file
+    leaves: other sources in the window kept, the source's rows outside it kept, files
+    written by delta-rs (its own, possibly truncated string statistics) and by the stager,
+    sources whose names share a long prefix."""
+    import pyarrow as pa
+    from polars.testing import assert_frame_equal
+
+    from pipeline.warehouse.delta import replace_rows, replace_source_file
+    from pipeline.warehouse.staged import commit_source_window
+
+    long = "/archive/" + "x" * 60
+    a, b, c = f"{long}/region_a.mcap", f"{long}/region_b.mcap", "/z.mcap"
+    t = T0_NS + np.arange(0, 100) * S
+    lo, hi = T0_NS + 30 * S, T0_NS + 60 * S
+    new = t[(t >= lo) & (t < hi)]
+    whs = []
+    for k, how in enumerate(("staged", "reference")):
+        wh = tmp_path / f"wh{k}"
+        # a: staged whole-file (our statistics); b: through delta-rs; c: a file mixing a/c
+        commit_source_window(wh, "truth", _stage_src(tmp_path / f"a{k}", t, 1.0, a),
+                             source_file=a, start_ns=T0_NS, end_ns=T0_NS + 100 * S)
+        replace_rows(wh, "truth", truth_rows(t[::2], speed=2.0, source=b),
+                     predicate_sql="speed_mps = 2.0")
+        mixed = pa.concat_tables([truth_rows(t[1::7], speed=3.0, source=a),
+                                  truth_rows(t[::5], speed=4.0, source=c)])
+        replace_rows(wh, "truth", mixed, predicate_sql="speed_mps > 2.5 AND speed_mps < 4.5")
+        if how == "staged":
+            got = commit_source_window(wh, "truth", _stage_src(tmp_path / f"n{k}", new, 9.0, a),
+                                       source_file=a, start_ns=lo, end_ns=hi)
+            assert got == "swap"
+        else:
+            replace_source_file(wh, "truth", truth_rows(new, speed=9.0, source=a),
+                                source_file=a, start_ns=lo, end_ns=hi)
+        whs.append(wh)
+    ref = _sorted_rows(whs[1])
+    assert ref.height > 100
+    assert_frame_equal(_sorted_rows(whs[0]), ref, check_exact=True)
+
+
+def _stage_src(folder, t_ns, speed, source):
+    st = TableStager(folder, threaded=False)
+    st.add("truth", truth_rows(t_ns, speed=speed, source=source))
+    return st.close()
+
+
+def test_a_checkpoint_every_ten_versions_same_rows(tmp_path):
+    """commit_window and replace_rows write a Delta checkpoint at versions 10, 20, ...
+    (opening a table replays only the entries after it); the rows are unchanged and an
+    older version still reads as it was."""
+    from pipeline.warehouse.delta import CHECKPOINT_EVERY, replace_rows
+
+    wh = tmp_path / "wh"
+    t = T0_NS + np.arange(0, 100) * S
+    commit_window(wh, "truth", _stage(tmp_path / "a", t, 1.0), start_ns=T0_NS,
+                  end_ns=T0_NS + 100 * S)
+    for v in range(1, 2 * CHECKPOINT_EVERY + 3):
+        lo = T0_NS + (v % 10) * 10 * S
+        sub = lo + np.arange(10) * S
+        if v % 2:
+            commit_window(wh, "truth", _stage(tmp_path / f"s{v}", sub, float(v)), start_ns=lo,
+                          end_ns=lo + 10 * S)
+        else:
+            replace_rows(wh, "truth", truth_rows(sub, speed=float(v)),
+                         predicate_sql=f"time_ns >= {lo} AND time_ns < {lo + 10 * S}")
+        if v == 5:
+            at5 = read_table(wh, "truth")
+    log = table_path(wh, "truth") / "_delta_log"
+    assert sorted(p.name for p in log.glob("*.checkpoint.parquet")) == [
+        f"{v:020d}.checkpoint.parquet" for v in (CHECKPOINT_EVERY, 2 * CHECKPOINT_EVERY)]
+    tt, v = _rows(wh)
+    np.testing.assert_array_equal(tt, t)
+    last = {(i % 10): i for i in range(1, 2 * CHECKPOINT_EVERY + 3)}
+    np.testing.assert_array_equal(v, [float(last[k]) for k in np.repeat(np.arange(10), 10)])
+    old = DeltaTable(str(table_path(wh, "truth")), version=5).to_pyarrow_table()
+    assert sorted(old["speed_mps"].to_pylist()) == sorted(at5["speed_mps"].to_pylist())
