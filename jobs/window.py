@@ -7,8 +7,9 @@ have no raw rows, hence no derived rows to replace. It refuses (:class:`UsageErr
 exit 2, before anything is staged) when the clipped window is longer than
 ``[execution] max_window_days``, or when its estimated memory exceeds ``[execution]
 memory_budget_mb`` (0: 80% of the machine's memory). The estimate is coarse on purpose:
-the densest hour of raw rows (ledger rows over each file's span) times
-``BYTES_PER_ROW_IN_UNIT`` times the workers running at once. When the ledger knows no
+the raw rows of the largest work unit (:func:`largest_unit_rows`, from the ledger's rows
+per table over each file's span) times ``BYTES_PER_ROW_IN_UNIT`` times the workers running
+at once. When the ledger knows no
 data in the window (a warehouse filled by windowed ingests only, which write no ledger
 rows), the window is kept as asked and only its length is bounded.
 
@@ -25,6 +26,7 @@ from pathlib import Path
 
 from jobs.common import UsageError, iso
 from pipeline.config import Config
+from pipeline.families import FAMILIES
 from pipeline.warehouse.delta import read_table
 
 HOUR_NS = 3600 * 10**9
@@ -77,20 +79,43 @@ def bounded_window(cfg: Config, warehouse: Path, start_ns: int, end_ns: int,
             f"at most {ex.max_window_days:g} days per run ([execution] max_window_days): "
             "split it into shorter windows"
         )
-    peak = 0.0
-    for r in files:
-        rows = sum(json.loads(r["rows_json"] or "{}").values())
-        hours = max(1.0, (r["end_time_ns"] - r["start_time_ns"]) / HOUR_NS)
-        peak = max(peak, rows / hours)
+    name, peak = largest_unit_rows(cfg, files)
     need_mb = peak * BYTES_PER_ROW_IN_UNIT * ex.max_workers / 2**20
     budget = ex.memory_budget_mb or int(0.8 * _memory_total_mb())
     if need_mb > budget:
         raise UsageError(
-            f"the densest hour of this window holds ~{peak:,.0f} raw rows: {ex.max_workers} "
-            f"workers would need ~{need_mb:,.0f} MB, over the budget of {budget:,} MB "
-            "([execution] memory_budget_mb); use fewer workers or a larger budget"
+            f"the largest work unit of this window ({name}) reads ~{peak:,.0f} raw rows: "
+            f"{ex.max_workers} workers would need ~{need_mb:,.0f} MB, over the budget of "
+            f"{budget:,} MB ([execution] memory_budget_mb); use fewer workers or a larger "
+            "budget"
         )
     note = ""
     if (s, e) != (start_ns, end_ns):
         note = f"window clipped to the data the ledger knows: {iso(s)} .. {iso(e)}"
     return Window(s, e, note)
+
+
+def largest_unit_rows(cfg: Config, files: list[dict]) -> tuple[str, float]:
+    """The family whose largest work unit reads the most raw rows, and that count, from
+    the ledger rows of ``files`` (rows per table over each file's span): an hourly family
+    reads its input tables' densest hour, scaled down where it cuts units by volume
+    (``unit_rows`` of ``unit_table``, e.g. 300,000 radar reports); a family with one
+    unit per window reads the whole window. Derived inputs (gaps reads system_tracks)
+    are not in the ledger and not counted."""
+    per_file = [(json.loads(r["rows_json"] or "{}"),
+                 max(1.0, (r["end_time_ns"] - r["start_time_ns"]) / HOUR_NS)) for r in files]
+    best = ("", 0.0)
+    for fam in FAMILIES:
+        tables = {i.table for i in fam.inputs(cfg)}
+        if fam.unit_s is None:  # one unit per window
+            unit = sum(rows.get(t, 0) for rows, _ in per_file for t in tables)
+        else:
+            unit = 0.0
+            for rows, hours in per_file:
+                hour = sum(rows.get(t, 0) for t in tables) / hours
+                volume = rows.get(fam.unit_table, 0) / hours
+                if fam.unit_rows and volume > fam.unit_rows:
+                    hour *= fam.unit_rows / volume
+                unit = max(unit, hour)
+        best = max(best, (fam.name, float(unit)), key=lambda b: b[1])
+    return best

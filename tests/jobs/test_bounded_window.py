@@ -16,7 +16,7 @@ from mcap_fixtures import T0_NS, mixed_file
 
 from jobs.common import UsageError, parse_time_ns
 from jobs.ingest import run_ingest
-from jobs.window import HOUR_NS, bounded_window
+from jobs.window import HOUR_NS, bounded_window, largest_unit_rows
 from pipeline.config import ExecutionConfig
 from pipeline.families import load_config
 
@@ -75,6 +75,29 @@ def test_too_long_or_too_big_is_refused(warehouse):
     assert (w.start_ns, w.end_ns) == (T0_NS, T0_NS + 2 * HOUR_NS)
     with pytest.raises(UsageError, match="max_window_days"):
         bounded_window(cfg, empty, 0, parse_time_ns("2200-01-01"))
+
+
+def _ledger_row(hours: float, **rows: int) -> dict:
+    import json
+
+    return {"start_time_ns": T0_NS, "end_time_ns": T0_NS + int(hours * HOUR_NS),
+            "rows_json": json.dumps(rows)}
+
+
+def test_the_estimate_follows_the_volume_cut_units():
+    """Was: the densest hour's raw rows times the workers, so a regional hour (4.6 M
+    radar reports) was refused although the maritime units are cut at 300,000 reports."""
+    cfg = load_config()
+    dense = _ledger_row(1.0, radar_tracks=6_000_000, truth=1_000_000, ais_reports=500_000)
+    name, rows = largest_unit_rows(cfg, [dense])
+    # maritime: 7.5 M rows an hour, cut to units of 300,000 of its 6 M radar reports
+    maritime = 7_500_000 * 300_000 / 6_000_000
+    assert rows < 7_500_000 / 4
+    assert rows == max(maritime, 1_500_000)  # gaps: an hourly unit of ais + truth
+    assert name == "gaps"
+    # nav runs one unit per window: its rows over every file add up
+    nav = [_ledger_row(2.0, nav_gnss=1_000_000), _ledger_row(2.0, nav_gnss=3_000_000)]
+    assert largest_unit_rows(cfg, nav) == ("nav", 4_000_000.0)
 
 
 def test_read_table_never_aborts_at_exit(warehouse):
