@@ -32,6 +32,7 @@ import os
 import shutil
 import time
 import uuid
+from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -561,53 +562,20 @@ def commit_window(
     (by its ``site`` statistics) is untouched, a file holding several sites is rewritten
     without this site's rows of the window.
     """
-    uri = table_path(warehouse, name)
-    s = spec(name)
     if not table_exists(warehouse, name):
-        if not staged:
-            return "noop"
-        adds = _add_actions(uri, staged)
-        try:
-            create_table_with_add_actions(
-                str(uri), DeltaSchema.from_arrow(s.schema), adds, mode="error",
-                partition_by=list(s.partition_by),
-            )
-        except Exception:
-            _drop_added(uri, adds)
-            raise
-        return "create"
-    dt = DeltaTable(str(uri))
-    removes, partial = files_in_window(dt, s.time_column, start_ns, end_ns, site)
-    kept: list[StagedFile] = []
-    scratch = Path(warehouse) / "_staging" / f"rewrite-{uuid.uuid4().hex}"
-    if partial:
-        stager = TableStager(scratch, threaded=False)
-        for path, partition in partial:
-            t = pq.read_table(uri / path)
-            for k, v in partition.items():
-                t = t.append_column(k, pa.array([v] * t.num_rows, pa.string()).cast(pa.date32()))
-            col = t[s.time_column]
-            outside = pc.or_(pc.less(col, start_ns), pc.greater_equal(col, end_ns))
-            if site is not None and SITE in t.column_names:
-                outside = pc.or_(outside, pc.not_equal(t[SITE], site))
-            stager.add(name, conform(name, t.filter(outside)))
-        kept = stager.close()
-    if not staged and not removes and not kept:
-        return "noop"
-    adds = _add_actions(uri, [*staged, *kept])
-    version = dt.version() + 1
-    try:
-        dt.create_write_transaction(
-            [*removes, *adds], mode="append", schema=dt.schema(), partition_by=list(s.partition_by)
-        )
-    except Exception:
-        _drop_added(uri, adds)
-        raise
-    finally:
-        shutil.rmtree(scratch, ignore_errors=True)
-    checkpoint_if_due(dt, version)
-    return "swap"
+        return _create(warehouse, name, staged)
+    time_column = spec(name).time_column
 
+    def keep(t: pa.Table) -> pa.Array:  # rows outside the window (or of another site)
+        col = t[time_column]
+        outside = pc.or_(pc.less(col, start_ns), pc.greater_equal(col, end_ns))
+        if site is not None and SITE in t.column_names:
+            outside = pc.or_(outside, pc.not_equal(t[SITE], site))
+        return outside
+
+    dt = DeltaTable(str(table_path(warehouse, name)))
+    removes, partial = files_in_window(dt, time_column, start_ns, end_ns, site)
+    return _swap(warehouse, name, dt, staged, removes, partial, keep)
 
 def commit_source_window(
     warehouse: Path, name: str, staged: list[StagedFile], *, source_file: str, start_ns: int,
@@ -623,27 +591,48 @@ def commit_source_window(
     are removed; a file that may also hold other rows (another source, times outside the
     window, no usable statistics) is read alone, filtered, staged again and swapped in the
     same commit. Returns ``noop``, ``create`` or ``swap``."""
-    uri = table_path(warehouse, name)
-    s = spec(name)
     if not table_exists(warehouse, name):
-        if not staged:
-            return "noop"
-        adds = _add_actions(uri, staged)
-        try:
-            create_table_with_add_actions(
-                str(uri), DeltaSchema.from_arrow(s.schema), adds, mode="error",
-                partition_by=list(s.partition_by),
-            )
-        except Exception:
-            _drop_added(uri, adds)
-            raise
-        return "create"
-    dt = DeltaTable(str(uri))
-    removes, partial = files_in_window(dt, s.time_column, start_ns, end_ns,
+        return _create(warehouse, name, staged)
+    time_column = spec(name).time_column
+
+    def keep(t: pa.Table) -> pa.Array:  # every row but this source's inside the window
+        col = t[time_column]
+        inside = pc.and_(pc.greater_equal(col, start_ns), pc.less(col, end_ns))
+        ours = pc.and_(pc.equal(t["source_file"], source_file), inside)
+        return pc.invert(pc.fill_null(ours, False))
+
+    dt = DeltaTable(str(table_path(warehouse, name)))
+    removes, partial = files_in_window(dt, time_column, start_ns, end_ns,
                                        source_file=source_file)
-    kept: list[StagedFile] = []
+    return _swap(warehouse, name, dt, staged, removes, partial, keep)
+
+
+def _create(warehouse: Path, name: str, staged: list[StagedFile]) -> str:
+    """A new table of the staged files (``noop`` when there are none)."""
+    if not staged:
+        return "noop"
+    uri, s = table_path(warehouse, name), spec(name)
+    adds = _add_actions(uri, staged)
+    try:
+        create_table_with_add_actions(
+            str(uri), DeltaSchema.from_arrow(s.schema), adds, mode="error",
+            partition_by=list(s.partition_by),
+        )
+    except Exception:
+        _drop_added(uri, adds)
+        raise
+    return "create"
+
+
+def _swap(warehouse: Path, name: str, dt: DeltaTable, staged: list[StagedFile],
+          removes: list[RemoveAction], partial: list[tuple[str, dict[str, str]]],
+          keep: Callable[[pa.Table], pa.Array]) -> str:
+    """ONE commit: ``removes`` out, the staged files in, and each ``partial`` data file
+    rewritten with the rows ``keep`` selects (read one at a time, staged again)."""
+    uri, s = table_path(warehouse, name), spec(name)
     scratch = Path(warehouse) / "_staging" / f"rewrite-{uuid.uuid4().hex}"
     try:
+        kept: list[StagedFile] = []
         if partial:
             stager = TableStager(scratch, threaded=False)
             for path, partition in partial:  # one data file in memory at a time
@@ -651,10 +640,7 @@ def commit_source_window(
                 for k, v in partition.items():
                     t = t.append_column(k, pa.array([v] * t.num_rows, pa.string())
                                         .cast(pa.date32()))
-                col = t[s.time_column]
-                inside = pc.and_(pc.greater_equal(col, start_ns), pc.less(col, end_ns))
-                ours = pc.and_(pc.equal(t["source_file"], source_file), inside)
-                stager.add(name, conform(name, t.filter(pc.invert(pc.fill_null(ours, False)))))
+                stager.add(name, conform(name, t.filter(keep(t))))
             kept = stager.close()
         if not staged and not removes and not kept:
             return "noop"
@@ -670,7 +656,6 @@ def commit_source_window(
         shutil.rmtree(scratch, ignore_errors=True)
     checkpoint_if_due(dt, version)
     return "swap"
-
 
 def files_in_window(
     dt: DeltaTable, time_column: str, start_ns: int, end_ns: int, site: str | None = None,
