@@ -213,10 +213,11 @@ def run_unit(unit: BatchUnit) -> UnitManifest:
     inputs = read_inputs(fam, Path(unit.warehouse), unit.cfg, window, dict(unit.overrides),
                          unit.window, unit.site)
     out = fam.stage(inputs, window, unit.cfg)
+    seam = fam.unit_seam(out) if fam.unit_seam is not None else None
+    out = {name: frame for name, frame in out.items() if not name.startswith("_")}
     unknown = set(out) - set(fam.outputs) - {"rejects"}
     if unknown:
         raise ValueError(f"family {fam.name} returned tables it does not own: {unknown}")
-    seam = fam.unit_seam(out) if fam.unit_seam is not None else None
     folder = Path(unit.staging_dir) / f"{unit.family}-{unit.start_ns}"
     shutil.rmtree(folder, ignore_errors=True)
     folder.mkdir(parents=True)

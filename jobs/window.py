@@ -99,7 +99,8 @@ def largest_unit_rows(cfg: Config, files: list[dict]) -> tuple[str, float]:
     """The family whose largest work unit reads the most raw rows, and that count, from
     the ledger rows of ``files`` (rows per table over each file's span): an hourly family
     reads its input tables' densest hour, scaled down where it cuts units by volume
-    (``unit_rows`` of ``unit_table``, e.g. 300,000 radar reports); a family with one
+    (``unit_rows`` of ``unit_table``, e.g. 300,000 radar reports), plus the margins its
+    inputs read around a unit (the maritime lead-in and look-ahead); a family with one
     unit per window reads the whole window. Derived inputs (gaps reads system_tracks)
     are not in the ledger and not counted."""
     per_file = [(json.loads(r["rows_json"] or "{}"),
@@ -111,11 +112,12 @@ def largest_unit_rows(cfg: Config, files: list[dict]) -> tuple[str, float]:
             unit = sum(rows.get(t, 0) for rows, _ in per_file for t in tables)
         else:
             unit = 0.0
+            margin_h = {i.table: (i.before_s + i.after_s) / 3600.0 for i in fam.inputs(cfg)
+                        if not i.whole_table}
             for rows, hours in per_file:
-                hour = sum(rows.get(t, 0) for t in tables) / hours
                 volume = rows.get(fam.unit_table, 0) / hours
-                if fam.unit_rows and volume > fam.unit_rows:
-                    hour *= fam.unit_rows / volume
-                unit = max(unit, hour)
+                unit_h = min(1.0, fam.unit_rows / volume) if fam.unit_rows and volume else 1.0
+                unit = max(unit, sum(rows.get(t, 0) / hours * (unit_h + margin_h.get(t, 0.0))
+                                     for t in tables))
         best = max(best, (fam.name, float(unit)), key=lambda b: b[1])
     return best

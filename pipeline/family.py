@@ -13,7 +13,8 @@ A family (``pipeline.maritime``, ``pipeline.airfield``, ``pipeline.nav``,
 - ``inputs(cfg)``: the tables its stage reads, each with the margins it needs around the
   window (:class:`TableInput`); the batch job reads exactly those;
 - ``stage(inputs, window, cfg)``: a pure function of those tables, the window and the
-  config, returning ``{table: frame}`` for the tables in ``outputs`` (plus ``rejects``);
+  config, returning ``{table: frame}`` for the tables in ``outputs`` (plus ``rejects``;
+  a name starting with ``_`` is for the family's ``unit_seam`` only, never committed);
 - ``outputs``: the derived tables it owns (no other family writes them);
 - ``unit_rows`` and ``unit_table``: units are also cut so that none reads more than about
   ``unit_rows`` rows of ``unit_table`` (located from the Parquet footers, without

@@ -242,7 +242,7 @@ def run_chain(ships: list[Ship], cfg: Config, seed: int, duration_s: float) -> C
     aligned, _ = align_reports(radar, cfg)
     sync = maritime_config(cfg).sync
     synced = synchronise(aligned, epochs_ns=epochs_for(duration_s, cfg), sync=sync)
-    associated = associate_tracks(synced, cfg=maritime_config(cfg).association, id_base=1_000)
+    associated = associate_tracks(synced, cfg=maritime_config(cfg).association)
     fused = fuse(associated)
     fused = add_geodetic(fused, cfg.region)
     fused = assign_sectors(fused, cfg.sectors, cfg.region)

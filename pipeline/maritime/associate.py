@@ -43,7 +43,14 @@ state); a candidate made only of new local tracks joins a system track seen with
 track_timeout_s that it gates with (extrapolated to the epoch; position d^2, 2 dof, and
 the course/speed gates: the velocity of a track last seen up to track_timeout_s ago is
 a stale estimate, with no manoeuvre model to widen it), else it gets a new id
-``id_base + counter``. A mapping not refreshed for track_timeout_s is forgotten.
+a new id. A mapping not refreshed for track_timeout_s is forgotten.
+
+A new id says when the system track was born: ``birth_ms * 1_000_000 + rank`` (the
+epoch of its first row in ms since the Unix epoch, and its rank among the tracks born
+in that ms; :func:`birth_ids`). Unlike a counter from the start of the rows given, the
+id does not depend on where a window or a work unit starts: two cuts of one day that
+associate an epoch alike number its new tracks alike (the batch's units overlap and
+stitch on that, ``pipeline.maritime.stitch``).
 """
 
 from __future__ import annotations
@@ -312,7 +319,7 @@ class _Candidates:
 class _Memory:
     """State carried across epochs: per local-track key and per system track."""
 
-    key_sys: np.ndarray  # (n_keys,) system id index (id - id_base), -1 none
+    key_sys: np.ndarray  # (n_keys,) system index (allocation order), -1 none
     key_seen: np.ndarray  # (n_keys,) last epoch ns
     sys_seen: np.ndarray  # (n_sys,) last epoch ns
     sys_state: np.ndarray  # (n_sys, 9): x, y, Pxx, Pyy, Pxy, V, C, sigma_V, sigma_C
@@ -328,21 +335,41 @@ class _Memory:
         return idx
 
 
-def associate_tracks(synced: pl.DataFrame, *, cfg: AssociationConfig, id_base: int) -> pl.DataFrame:
+BIRTH_RANK_LIMIT = 1_000_000
+"""Tracks born in one millisecond at most (``birth_ids``): ids stay below 2^63 until
+the year 2262 like the int64 ns timestamps themselves."""
+
+
+def birth_ids(sys_idx: np.ndarray, time_ns: np.ndarray) -> np.ndarray:
+    """System track id of each row from its system index (allocated in epoch order,
+    from 0): ``birth_ms * BIRTH_RANK_LIMIT + rank``, birth_ms the first epoch of the
+    index in ms, rank its order among the indices born in that ms."""
+    if sys_idx.size == 0:
+        return sys_idx.astype(np.int64)
+    first = np.full(int(sys_idx.max()) + 1, np.iinfo(np.int64).max, np.int64)
+    np.minimum.at(first, sys_idx, time_ns)
+    birth_ms = first // 1_000_000  # nondecreasing: indices are allocated epoch by epoch
+    rank = np.arange(first.size) - np.searchsorted(birth_ms, birth_ms, side="left")
+    if rank.max() >= BIRTH_RANK_LIMIT:
+        raise ValueError(f"more than {BIRTH_RANK_LIMIT} system tracks born in one ms")
+    return (birth_ms * BIRTH_RANK_LIMIT + rank)[sys_idx]
+
+
+def associate_tracks(synced: pl.DataFrame, *, cfg: AssociationConfig) -> pl.DataFrame:
     """Assign every synchronised radar track to a system track, epoch by epoch.
 
     Consumes (from ``synchronise``): time_ns, site_id, local_track_id, x_enu_m, y_enu_m,
     P_xx, P_yy, P_xy (m^2), course_rad, speed_mps, sigma_course_rad, sigma_speed_mps
     (other columns pass through).
 
-    Produces the same rows plus system_track_id (int64, stable over time, new ids are
-    ``id_base + counter``) and mahalanobis_d2 (distance to the eq. 14 fused position of
+    Produces the same rows plus system_track_id (int64, stable over time, new ids from
+    the birth epoch: :func:`birth_ids`) and mahalanobis_d2 (distance to the eq. 14 fused position of
     the OTHER members of its system track at that epoch; null when alone), sorted by
     (time_ns, system_track_id, site_id).
     """
     df, site_idx, n_keys, n_sites = prepare_rows(synced)
     sys_idx = _assign_ids(df, site_idx, n_keys, n_sites, cfg)
-    ids = sys_idx + int(id_base)
+    ids = birth_ids(sys_idx, df["time_ns"].to_numpy())
     order = np.lexsort((site_idx, ids, df["time_ns"].to_numpy()))
     out = df.drop("_key")[order].with_columns(pl.Series("system_track_id", ids[order],
                                                         dtype=pl.Int64))
@@ -352,14 +379,15 @@ def associate_tracks(synced: pl.DataFrame, *, cfg: AssociationConfig, id_base: i
     )
 
 
-def associate_tracks_reference(synced: pl.DataFrame, *, cfg: AssociationConfig, id_base: int
+def associate_tracks_reference(synced: pl.DataFrame, *, cfg: AssociationConfig
                                ) -> pl.DataFrame:
     """:func:`associate_tracks` with the numpy epoch loop and the polars leave-one-out
     distance (the reference the fast path is tested against)."""
     df, site_idx, n_keys, n_sites = prepare_rows(synced)
     sys_idx = _assign_ids_reference(df, site_idx, n_keys, n_sites, cfg)
     out = df.drop("_key").with_columns(
-        pl.Series("system_track_id", sys_idx + int(id_base), dtype=pl.Int64)
+        pl.Series("system_track_id", birth_ids(sys_idx, df["time_ns"].to_numpy()),
+                  dtype=pl.Int64)
     )
     return _with_leave_one_out_d2(out).sort("time_ns", "system_track_id", "site_id")
 
@@ -571,7 +599,7 @@ def _cluster_epoch(
 def _resolve_ids(
     cand: _Candidates, mem: _Memory, t_ns: int, cfg: AssociationConfig, gate: float
 ) -> np.ndarray:
-    """System id index (id - id_base) of each candidate, one assignment problem:
+    """System index (allocation order) of each candidate, one assignment problem:
     columns are the system tracks seen within track_timeout_s. A candidate may take
     an id its members had (cost -10 per member vote; ties between ids go to the older
     id (+ rank/n_live < 1), ties between candidates for one id to the one closer to

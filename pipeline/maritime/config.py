@@ -192,7 +192,14 @@ class ChannelIntegrityConfig:
       least ``coverage_min_targets`` ships that other channels see in its range there are
       not detected by it, for more than ``coverage_miss_share`` of them;
     - ``scan_gap_factor``: a site whose last scan ended more than this many scan periods
-      ago is in outage (missing scans)."""
+      ago is in outage (missing scans);
+    - ``unit_settle_s``: how long a batch work unit tracks before its window (besides the
+      identity vote's window) so that the pairings, the exclusions and the AIS reference
+      tracks enter the window as they would in one pass: the batch's results then do not
+      depend on where its units are cut, unless a channel fault's effects outlast it
+      (``pipeline.maritime.stage``; tests/maritime/test_unit_seams.py cuts units inside
+      five faults). Each unit tracks ``unit_settle_s + 2 identity_window_s`` more than
+      its window: the price of that independence."""
 
     radar_q: float = probability(0.001)
     ais_q: float = probability(0.01)
@@ -210,6 +217,7 @@ class ChannelIntegrityConfig:
     coverage_min_targets: int = count(2)
     coverage_miss_share: float = probability(0.5)
     scan_gap_factor: float = setting(1.5, gt=1.0)
+    unit_settle_s: float = setting(300.0, ge=60.0, le=3600.0)
 
 
 @dataclass(frozen=True)

@@ -138,21 +138,23 @@ def cross_track_by_leg(
     at, as_ = associations["time_ns"].to_numpy(), associations["system_track_id"].to_numpy()
     et, es = track_errors["time_ns"].to_numpy(), track_errors["system_track_id"].to_numpy()
     times = np.unique(np.concatenate([ft, at, et]))
-    lo = int(min(fs.min(), as_.min() if as_.size else fs.min(), es.min()))
-    span = int(max(fs.max(), as_.max() if as_.size else fs.max(), es.max())) - lo + 1
+    # track ids by rank in the keys (ids are birth times: too far apart to combine)
+    track_ids = np.unique(np.concatenate([fs, as_, es]))
+    span = track_ids.size
+    fr, ar, er = (np.searchsorted(track_ids, v) for v in (fs, as_, es))
     names = sorted({"fused", *associations["site_id"].unique().to_list(),
                     *track_errors["source"].unique().to_list()})
     n_src = len(names)
 
     def key(t: np.ndarray, sid: np.ndarray, src: np.ndarray) -> np.ndarray:
-        return (np.searchsorted(times, t) * span + (sid - lo)) * n_src + src
+        return (np.searchsorted(times, t) * span + sid) * n_src + src
 
     def rank(col: pl.Series) -> np.ndarray:
         return col.replace_strict(names, list(range(n_src)), return_dtype=pl.Int64).to_numpy()
 
     # radar points of the fused points on a leg
-    f_key2 = np.searchsorted(times, ft) * span + (fs - lo)
-    a_key2 = np.searchsorted(times, at) * span + (as_ - lo)
+    f_key2 = np.searchsorted(times, ft) * span + fr
+    a_key2 = np.searchsorted(times, at) * span + ar
     pos = np.searchsorted(f_key2, a_key2)
     has = (pos < f_key2.size) & (f_key2[np.minimum(pos, f_key2.size - 1)] == a_key2)
     ai = np.flatnonzero(has)
@@ -164,9 +166,9 @@ def cross_track_by_leg(
     src = np.r_[np.full(n_f, fused_src), rank(associations["site_id"])[ai]]
     f_of = np.r_[np.arange(n_f), a_f]  # each point's fused row
     t = ft[f_of]
-    sid = fs[f_of]
-    pk = key(t, sid, src)
-    ek = key(et, es, rank(track_errors["source"]))
+    sid, sid_rank = fs[f_of], fr[f_of]
+    pk = key(t, sid_rank, src)
+    ek = key(et, er, rank(track_errors["source"]))
     e_order = np.argsort(ek, kind="stable")
     ek_sorted = ek[e_order]
     epos = np.searchsorted(ek_sorted, pk)
@@ -208,7 +210,7 @@ def cross_track_by_leg(
     cos_aspect = np.clip(np.abs((lx * ux + ly * uy) / rng), 0.0, 1.0)
     # trailing RMS per (track, source): rows sorted by (track, source, time) for polars
     srcp = src[pts]
-    grp = (sid[pts] - lo) * n_src + srcp
+    grp = sid_rank[pts] * n_src + srcp
     o = np.lexsort((t[pts], grp))
     win = f"{round(window_s * NS)}i"
     narrow = pl.DataFrame({"g": grp[o], "time_ns": t[pts][o], "e": err[o],

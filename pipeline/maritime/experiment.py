@@ -137,7 +137,7 @@ def _batch_correct(z: np.ndarray, var: np.ndarray, speed: np.ndarray, course: np
     association = maritime_config(cfg).association
     if velocity_cost is not None:
         association = replace(association, velocity_cost=velocity_cost)
-    out = associate_tracks(synced, cfg=association, id_base=0).sort("local_track_id")
+    out = associate_tracks(synced, cfg=association).sort("local_track_id")
     sid = out["system_track_id"].to_numpy().reshape(trials, 2, 2)
     return (sid[:, 0, 0] == sid[:, 1, 0]) & (sid[:, 0, 1] == sid[:, 1, 1]) & (
         sid[:, 0, 0] != sid[:, 0, 1])

@@ -164,14 +164,14 @@ def _truth_errors(
 def _row_of(t: np.ndarray, s: np.ndarray, qt: np.ndarray, qs: np.ndarray) -> np.ndarray:
     """Index of each (qt, qs) among the rows (t, s) sorted by (t, s), -1 where absent (a
     radar row of a track none of whose rows was fused at that epoch: its radars were all
-    excluded): one searchsorted on a combined key (time rank, track id offset)."""
+    excluded): one searchsorted on a combined key (time rank, track id rank: ids are
+    birth times, too far apart to combine as they are)."""
     if qt.size == 0:
         return np.empty(0, np.int64)
     times = np.unique(t)
-    lo = min(int(s.min()), int(qs.min()))
-    span = max(int(s.max()), int(qs.max())) - lo + 1
-    key = np.searchsorted(times, t) * span + (s - lo)
-    qkey = np.searchsorted(times, qt) * span + (qs - lo)
+    ids, rank = np.unique(np.concatenate([s, qs]), return_inverse=True)
+    key = np.searchsorted(times, t) * ids.size + rank[: s.size]
+    qkey = np.searchsorted(times, qt) * ids.size + rank[s.size:]
     row = np.searchsorted(key, qkey)
     found = row < key.size
     found[found] = key[row[found]] == qkey[found]

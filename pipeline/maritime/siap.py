@@ -324,8 +324,12 @@ def siap_by_sector(
     start_ns: int,
     end_ns: int,
 ) -> pl.DataFrame:
-    """Rows of the ``siap_by_sector`` table for the epochs of one window (empty without
-    truth): one row per sector (null: outside every sector), sums and measures."""
+    """Rows of the ``siap_by_sector`` table for the epochs of the window [start_ns,
+    end_ns) (empty without truth): one row per sector (null: outside every sector), sums
+    and measures. ``epochs_ns`` may reach beyond the window (a work unit's lead-in and
+    look-ahead): the track-to-truth hysteresis runs over all of them, so it enters the
+    window as it would in one pass, and the track changes and swaps seen there count
+    where they happen; every sum is of the window's epochs."""
     if truth is None or truth.height == 0 or len(epochs_ns) == 0:
         return empty_siap()
     truths = assign_sectors(
@@ -335,7 +339,12 @@ def siap_by_sector(
     ).rename({"x_enu_m": "ref_x_m", "y_enu_m": "ref_y_m"})
     tracks = _tracks(system_tracks.filter(pl.col("time_ns").is_in(list(epochs_ns))))
     assoc = associate_to_truth(candidate_pairs(tracks, truths, cfg))
-    sums = siap_sums(tracks, truths, assoc, epoch_period_s, cfg.swap_window_s)
+    primary = assoc.filter(pl.col("primary")).select("time_ns", "vessel_id", "system_track_id")
+    tracks, truths, assoc = _in_window(tracks, truths, assoc, start_ns, end_ns)
+    if truths.height == 0:
+        return empty_siap()
+    sums = siap_sums(tracks, truths, assoc, epoch_period_s, cfg.swap_window_s,
+                     primary=primary, window=(start_ns, end_ns))
     return (
         sums.with_columns(
             pl.lit(int(start_ns), pl.Int64).alias("time_ns"),
@@ -348,16 +357,43 @@ def siap_by_sector(
     )
 
 
+def _in_window(tracks: pl.DataFrame, truths: pl.DataFrame, assoc: pl.DataFrame,
+               start_ns: int, end_ns: int) -> tuple[pl.DataFrame, pl.DataFrame, pl.DataFrame]:
+    """The rows of [start_ns, end_ns), the association's row positions (``_i``, ``_j``)
+    renumbered to the rows kept."""
+    def keep(df: pl.DataFrame) -> np.ndarray:
+        t = df["time_ns"].to_numpy()
+        return (t >= start_ns) & (t < end_ns)
+
+    ki, kj, ka = keep(tracks), keep(truths), keep(assoc)
+    if ki.all() and kj.all() and ka.all():
+        return tracks, truths, assoc
+    assoc = assoc.filter(pl.Series(ka))
+    if "_i" in assoc.columns and "_j" in assoc.columns:
+        new_i, new_j = np.cumsum(ki) - 1, np.cumsum(kj) - 1
+        assoc = assoc.with_columns(
+            pl.Series("_i", new_i[assoc["_i"].to_numpy()]).cast(assoc["_i"].dtype),
+            pl.Series("_j", new_j[assoc["_j"].to_numpy()]).cast(assoc["_j"].dtype),
+        )
+    return tracks.filter(pl.Series(ki)), truths.filter(pl.Series(kj)), assoc
+
+
 def siap_sums(
     tracks: pl.DataFrame,
     truths: pl.DataFrame,
     assoc: pl.DataFrame,
     epoch_period_s: float,
     swap_window_s: float,
+    *,
+    primary: pl.DataFrame | None = None,
+    window: tuple[int, int] | None = None,
 ) -> pl.DataFrame:
     """Per-sector sums (SUM_COLUMNS) from tracks (time_ns, system_track_id, vx_mps,
     vy_mps, mmsi, sector, x/y), truths (time_ns, vessel_id, mmsi, ref_x_m, ref_y_m,
-    ref_vx_mps, ref_vy_mps, sector) and the association (associate_to_truth)."""
+    ref_vx_mps, ref_vy_mps, sector) and the association (associate_to_truth).
+    ``primary``: the truths' primary tracks (time_ns, vessel_id, system_track_id) also
+    around the window, whose track changes and swaps are those inside ``window``
+    (default: the association's, everything counted)."""
     key = ["time_ns", "vessel_id"]
     positional = "_i" in assoc.columns and "_j" in assoc.columns
     if positional:  # rows of tracks and truths known: gathers instead of joins
@@ -413,7 +449,8 @@ def siap_sums(
             pl.col("vel_err").sum().alias("sum_velocity_error_mps"),
         ),
         _track_sums(tracks, assoc),
-        _continuity_sums(tt, a.filter(pl.col("primary")), epoch_period_s, swap_window_s),
+        _continuity_sums(tt, a.filter(pl.col("primary")) if primary is None else primary,
+                         epoch_period_s, swap_window_s, window),
     ]
     out = parts[0]
     for p in parts[1:]:
@@ -494,13 +531,19 @@ def _track_sums(tracks: pl.DataFrame, assoc: pl.DataFrame) -> pl.DataFrame:
 
 
 def _continuity_sums(
-    tt: pl.DataFrame, primary: pl.DataFrame, period_s: float, swap_window_s: float
+    tt: pl.DataFrame, primary: pl.DataFrame, period_s: float, swap_window_s: float,
+    window: tuple[int, int] | None = None,
 ) -> pl.DataFrame:
-    """Track number changes, swaps and the longest segments, per truth sector."""
+    """Track number changes, swaps and the longest segments, per truth sector (changes
+    and swaps at times inside ``window``, when given)."""
     changes = track_changes(primary.select("time_ns", "vessel_id", "system_track_id"))
+    swaps = track_swaps(changes, swap_window_s)
+    if window is not None:
+        inside = pl.col("time_ns").is_between(*window, closed="left")
+        changes, swaps = changes.filter(inside), swaps.filter(inside)
     sector_of = tt.select("time_ns", "vessel_id", "sector")
     ch = changes.join(sector_of, on=["time_ns", "vessel_id"], how="left")
-    sw = track_swaps(changes, swap_window_s).join(
+    sw = swaps.join(
         sector_of.rename({"vessel_id": "vessel_a"}), on=["time_ns", "vessel_a"], how="left"
     )
     # runs of one primary track, within one sector: a run breaks when the truth's

@@ -7,6 +7,16 @@ transponder (airfield paper eq. 21-23; a channel in fault is left out of the fus
 the identification), fusion (multi-radar paper eq. 14), geodetic
 position, sectors, cross-track deviation (eq. 1-6), AIS identification, accuracy
 against truth (or AIS), SIAP per sector and cross-track error per leg.
+
+**Continuity across work units.** The batch cuts a window into units that run
+independently; the steps carry state from epoch to epoch (the association's pairings,
+the integrity's exclusions and reference tracks) and the identity of a fused point is a
+vote over +-``identity_window_s`` around it. So a unit runs the tracking steps over its
+window widened by :func:`continuity_margins_s` (a lead-in that lets that state settle
+and gathers the votes before the unit, a look-ahead for the votes after it) and keeps
+the epochs of its own window; the system track ids of the lead-in are handed to
+:mod:`pipeline.maritime.stitch`, which continues the ids of the unit before. Results
+then do not depend on where units are cut (tests/jobs/test_unit_cuts.py).
 """
 
 from __future__ import annotations
@@ -25,7 +35,7 @@ from pipeline.maritime.identity import identify
 from pipeline.maritime.integrity import check_channels
 from pipeline.maritime.score import score_tracks
 from pipeline.maritime.siap import siap_by_sector
-from pipeline.maritime.stitch import join_units, unit_seam
+from pipeline.maritime.stitch import LEAD_ASSOCIATIONS, SEAM_S, join_units, unit_seam
 from pipeline.maritime.sync import epoch_grid, synchronise
 from pipeline.units import NS
 
@@ -39,19 +49,30 @@ AUDIT_TABLES = ("siap_by_sector", "cross_track_by_leg")
 # channel integrity (issue 22): every radar per sector and every AIS transponder
 INTEGRITY_TABLES = ("maritime_channel_health",)
 OUTPUTS = DERIVED_TABLES + AUDIT_TABLES + INTEGRITY_TABLES
+def continuity_margins_s(cfg: Config) -> tuple[float, float]:
+    """(lead-in, look-ahead) a unit tracks beyond its window, s: the identity vote's
+    window on either side, plus ``[channel_integrity] unit_settle_s`` before (at least
+    the seam the stitch compares, ``SEAM_S``)."""
+    vote_s = cfg.ais.identity_window_s
+    settle_s = maritime_config(cfg).integrity.unit_settle_s
+    return vote_s + max(settle_s, SEAM_S), vote_s
 
 
 def inputs(cfg: Config) -> tuple[TableInput, ...]:
-    """Radar reports from two scan periods before the window (an epoch takes each radar's
-    latest scan ending within one period before it, and a scan's reports start one
-    period before its end; plus 1 s of slack), AIS reports from the identification's
-    report age before it, truth 2 s around it."""
+    """Over the window widened by :func:`continuity_margins_s`: radar reports from two
+    scan periods before it (an epoch takes each radar's latest scan ending within one
+    period before it, and a scan's reports start one period before its end; plus 1 s of
+    slack), AIS reports from the identification's report age before it, truth 2 s
+    around it."""
     scan_margin_s = 2 * max(s.scan_period_s for s in cfg.radar_sites) + 1.0
+    lead_s, look_s = continuity_margins_s(cfg)
     # the steps order the rows themselves: no sort of every row read
     return (
-        TableInput("radar_tracks", before_s=scan_margin_s, sorted=False),
-        TableInput("ais_reports", before_s=cfg.ais.max_report_age_s, sorted=False),
-        TableInput("truth", before_s=2.0, after_s=2.0, sorted=False),
+        TableInput("radar_tracks", before_s=lead_s + scan_margin_s, after_s=look_s,
+                   sorted=False),
+        TableInput("ais_reports", before_s=lead_s + cfg.ais.max_report_age_s,
+                   after_s=look_s, sorted=False),
+        TableInput("truth", before_s=lead_s + 2.0, after_s=look_s + 2.0, sorted=False),
     )
 
 
@@ -60,21 +81,23 @@ def stage(tables: Inputs, window: Window, cfg: Config) -> Outputs:
 
     Returns frames for ``associations``, ``system_tracks``, ``identifications``,
     ``track_errors``, ``siap_by_sector`` (empty without truth), ``cross_track_by_leg``,
-    ``maritime_channel_health`` and batch ``rejects`` (reports from unknown sites).
+    ``maritime_channel_health`` and batch ``rejects`` (reports from unknown sites), and
+    the lead-in's associations for the stitch (``LEAD_ASSOCIATIONS``, not a table).
     """
     mc = maritime_config(cfg)
     start_ns, end_ns = window.start_ns, window.end_ns
+    lead_s, look_s = continuity_margins_s(cfg)
+    track_start_ns, track_end_ns = start_ns - round(lead_s * NS), end_ns + round(look_s * NS)
     ais = tables["ais_reports"]
     truth = tables.get("truth")
     truth = truth if truth is not None and truth.height else None
     aligned, unknown = align_reports(tables["radar_tracks"], cfg)
-    epochs = epoch_grid(start_ns, end_ns, mc.sync.epoch_period_s)
+    epochs = epoch_grid(track_start_ns, track_end_ns, mc.sync.epoch_period_s)
     synced = synchronise(aligned, epochs_ns=epochs, sync=mc.sync)
-    id_base = (start_ns // NS) * 10_000
-    associated = associate_tracks(synced, cfg=mc.association, id_base=id_base)
+    associated = associate_tracks(synced, cfg=mc.association)
     associated = assign_sectors(associated, cfg.sectors, cfg.region)
     integrity = check_channels(
-        associated, aligned, ais, epochs_ns=epochs, start_ns=start_ns, cfg=cfg, mc=mc
+        associated, aligned, ais, epochs_ns=epochs, start_ns=track_start_ns, cfg=cfg, mc=mc
     )
     associated = integrity.associations
     fused = fuse(associated.filter(pl.col("used")))
@@ -83,6 +106,13 @@ def stage(tables: Inputs, window: Window, cfg: Config) -> Outputs:
     fused = cross_track(fused, cfg.fairway_legs, cfg.region, mc.max_cross_track_m)
     ais_used = ais.join(integrity.ais_excluded, on=["mmsi", "time_ns"], how="anti")
     identifications, fused = identify(fused, ais_used, cfg=cfg.ais, region=cfg.region)
+    # the unit's own epochs from here on (the margins only carried state and votes)
+    own = pl.col("time_ns").is_between(start_ns, end_ns, closed="left")
+    lead = associated.filter(pl.col("time_ns").is_between(
+        start_ns - round(SEAM_S * NS), start_ns, closed="left"))
+    tracked = fused  # SIAP's track-to-truth hysteresis also runs over the margins
+    associated, fused = associated.filter(own), fused.filter(own)
+    identifications = identifications.filter(own)
     errors = score_tracks(
         fused, associated, truth=truth, ais_reports=ais, region=cfg.region, sectors=cfg.sectors
     )
@@ -92,7 +122,7 @@ def stage(tables: Inputs, window: Window, cfg: Config) -> Outputs:
         pl.col("P_xy").alias("cov_xy_m2"),
     )
     siap = siap_by_sector(
-        fused, truth, epochs_ns=epochs, epoch_period_s=mc.sync.epoch_period_s,
+        tracked, truth, epochs_ns=epochs, epoch_period_s=mc.sync.epoch_period_s,
         region=cfg.region, sectors=cfg.sectors, cfg=mc.siap, start_ns=start_ns, end_ns=end_ns,
     )
     cross = cross_track_by_leg(
@@ -106,10 +136,10 @@ def stage(tables: Inputs, window: Window, cfg: Config) -> Outputs:
         "track_errors": errors,
         "siap_by_sector": siap,
         "cross_track_by_leg": cross,
-        "maritime_channel_health": integrity.health.filter(
-            pl.col("time_ns").is_between(start_ns, end_ns, closed="left")
-        ),
+        "maritime_channel_health": integrity.health.filter(own),
         "rejects": _unknown_site_rejects(unknown, start_ns, end_ns),
+        LEAD_ASSOCIATIONS: lead.select("time_ns", "site_id", "local_track_id",
+                                       "system_track_id"),
     }
 
 
@@ -141,5 +171,5 @@ FAMILY = Family(
     sorted_outputs=True,
     unit_seam=unit_seam,
     join_units=join_units,
-    stitch_lookback_s=600.0,  # the unit before a window: its last epoch lies in these 10 min
+    stitch_lookback_s=600.0,  # the rows before a window: their last SEAM_S lie in these 10 min
 )

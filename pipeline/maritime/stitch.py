@@ -1,10 +1,13 @@
 """Keep system track ids across the seams between batch work units.
 
-A window is cut into work units that are associated independently (in parallel), so a
-ship followed across a seam gets one system track id per unit. A radar's local track
-continues across the seam, though: a system track of unit k+1 whose radar members at
-the unit's first epoch include a (site, local track) that belonged to system track P at
-unit k's last epoch *is* P. This pass relabels it so.
+A window is cut into work units that are associated independently (in parallel). Each
+unit also tracks a lead-in before its window (``pipeline.maritime.stage``): by the end
+of the lead-in its association has settled on the pairings of the unit before, only
+under its own ids. On the last ``SEAM_S`` before the seam both units hold the same
+epochs: a system track of unit k+1 whose (epoch, site, local track) rows there are the
+rows of system track P of unit k *is* P, and this pass relabels it so. Ids born after
+the seam need nothing: an id says when its track was born
+(:func:`pipeline.maritime.associate.birth_ids`), the same in any cut.
 """
 
 from __future__ import annotations
@@ -13,33 +16,41 @@ import itertools
 
 import polars as pl
 
+SEAM_S = 60.0
+"""The overlap the stitch compares, s: two association track timeouts (a track seen in
+it is alive at the seam, even if it coasts through the seam's epoch)."""
 
-def stitch_track_ids(associations_by_unit: list[pl.DataFrame]) -> dict[int, int]:
-    """Relabelling {unit-local system_track_id: id it continues}, from the units'
-    ``associations`` frames in time order (columns time_ns, system_track_id, site_id,
-    local_track_id). Ids that continue nothing are absent from the map.
+LEAD_ASSOCIATIONS = "_lead_associations"
+"""The stage's output key for the lead-in's association rows in the ``SEAM_S`` before its
+window (time_ns, site_id, local_track_id, system_track_id): read by :func:`unit_seam`,
+never committed."""
+
+_KEY = ["time_ns", "site_id", "local_track_id"]
+
+
+def stitch_track_ids(seams: list[pl.DataFrame]) -> list[dict[int, int]]:
+    """Per unit (in time order) the relabelling {unit's system_track_id: id it
+    continues}, from the units' seams (:func:`unit_seam`: ``part`` "head" for the
+    lead-in's rows, "tail" for the unit's last ``SEAM_S``). One-to-one per seam: the
+    pairing sharing most rows first. Ids that continue nothing are absent.
 
     One loop over seams (a handful per window); the work per seam is polars joins.
     """
-    mapping: dict[int, int] = {}
-    for prev, nxt in itertools.pairwise(associations_by_unit):
-        if prev.height == 0 or nxt.height == 0:
+    maps: list[dict[int, int]] = [{} for _ in seams]
+    for k, (prev, nxt) in enumerate(itertools.pairwise(seams)):
+        tail = prev.filter(pl.col("part") == "tail")
+        head = nxt.filter(pl.col("part") == "head")
+        if tail.height == 0 or head.height == 0:
             continue
-        tail = prev.filter(pl.col("time_ns") == pl.col("time_ns").max()).select(
-            "site_id",
-            "local_track_id",
-            pl.col("system_track_id").replace(mapping).alias("continues"),
-        )
-        head = nxt.filter(pl.col("time_ns") == pl.col("time_ns").min()).select(
-            "site_id", "local_track_id", "system_track_id"
-        )
+        tail = tail.select(*_KEY, pl.col("system_track_id").replace(maps[k])
+                           .alias("continues"))
         votes = (
-            head.join(tail, on=["site_id", "local_track_id"], how="inner")
+            head.join(tail, on=_KEY, how="inner")
             .group_by("system_track_id", "continues")
             .agg(pl.len().alias("shared"))
             .sort(["shared", "system_track_id", "continues"], descending=[True, False, False])
         )
-        # one-to-one: the pairing with most shared members first
+        # one-to-one: the pairing with most shared rows first
         taken_new: set[int] = set()
         taken_old: set[int] = set()
         for new_id, old_id, _ in votes.iter_rows():
@@ -47,29 +58,30 @@ def stitch_track_ids(associations_by_unit: list[pl.DataFrame]) -> dict[int, int]
                 continue
             taken_new.add(new_id)
             taken_old.add(old_id)
-            mapping[new_id] = old_id
-    return mapping
+            if new_id != old_id:
+                maps[k + 1][new_id] = old_id
+    return maps
 
 
 def unit_seam(outputs: dict[str, pl.DataFrame]) -> pl.DataFrame:
-    """``Family.unit_seam`` of the maritime family: the association rows of the unit's
-    first and last epochs (site_id, local_track_id, system_track_id, time_ns): all that
-    :func:`stitch_track_ids` reads of a unit."""
-    a = outputs["associations"].select("time_ns", "site_id", "local_track_id",
-                                       "system_track_id")
-    if a.height == 0:
-        return a
-    t = a["time_ns"]
-    return a.filter((pl.col("time_ns") == t.min()) | (pl.col("time_ns") == t.max()))
+    """``Family.unit_seam`` of the maritime family: all :func:`stitch_track_ids` reads of
+    a unit, the lead-in's association rows (``part`` "head") and those of the unit's
+    last ``SEAM_S`` (``part`` "tail"): time_ns, site_id, local_track_id, system_track_id.
+    ``outputs`` may be a unit's (with :data:`LEAD_ASSOCIATIONS`) or the rows committed
+    before a window (tail only)."""
+    cols = ["time_ns", "site_id", "local_track_id", "system_track_id"]
+    a = outputs["associations"].select(cols)
+    parts = []
+    if a.height:
+        last = a["time_ns"].max() - round(SEAM_S * 1e9)
+        parts.append(a.filter(pl.col("time_ns") > last).with_columns(part=pl.lit("tail")))
+    lead = outputs.get(LEAD_ASSOCIATIONS)
+    if lead is not None and lead.height:
+        parts.append(lead.select(cols).with_columns(part=pl.lit("head")))
+    return pl.concat(parts) if parts else a.with_columns(part=pl.lit("tail"))
 
 
 def join_units(seams: list[pl.DataFrame]) -> list[dict[str, dict[int, int]] | None]:
     """``Family.join_units`` of the maritime family: per unit (in time order) the
     relabelling of ``system_track_id`` that continues the ids of the units before it."""
-    mapping = stitch_track_ids(seams)
-    out: list[dict[str, dict[int, int]] | None] = []
-    for seam in seams:
-        ids = set(seam["system_track_id"].to_list()) if seam.height else set()
-        own = {k: v for k, v in mapping.items() if k in ids}
-        out.append({"system_track_id": own} if own else None)
-    return out
+    return [{"system_track_id": m} if m else None for m in stitch_track_ids(seams)]

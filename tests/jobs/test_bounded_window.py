@@ -18,7 +18,7 @@ from jobs.common import UsageError, parse_time_ns
 from jobs.ingest import run_ingest
 from jobs.window import HOUR_NS, bounded_window, largest_unit_rows
 from pipeline.config import ExecutionConfig
-from pipeline.families import load_config
+from pipeline.families import family, load_config
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -90,10 +90,18 @@ def test_the_estimate_follows_the_volume_cut_units():
     cfg = load_config()
     dense = _ledger_row(1.0, radar_tracks=6_000_000, truth=1_000_000, ais_reports=500_000)
     name, rows = largest_unit_rows(cfg, [dense])
-    # maritime: 7.5 M rows an hour, cut to units of 300,000 of its 6 M radar reports
-    maritime = 7_500_000 * 300_000 / 6_000_000
-    assert rows < 7_500_000 / 4
-    assert rows == max(maritime, 1_500_000)  # gaps: an hourly unit of ais + truth
+    # maritime: 7.5 M rows an hour, cut to units of 300,000 of its 6 M radar reports,
+    # plus the lead-in and look-ahead it reads around each unit
+    per_hour = {"radar_tracks": 6_000_000, "truth": 1_000_000, "ais_reports": 500_000}
+
+    def unit_rows(fam: str, unit_h: float) -> float:
+        margin_h = {i.table: (i.before_s + i.after_s) / 3600 for i in family(fam).inputs(cfg)}
+        return sum(n * (unit_h + margin_h[t]) for t, n in per_hour.items() if t in margin_h)
+
+    maritime = unit_rows("maritime", 300_000 / 6_000_000)
+    gaps = unit_rows("gaps", 1.0)  # an hourly unit of ais + truth, ais read 2 h around
+    assert rows < 7_500_000 / 2
+    assert rows == pytest.approx(max(maritime, gaps))
     assert name == "gaps"
     # nav runs one unit per window: its rows over every file add up
     nav = [_ledger_row(2.0, nav_gnss=1_000_000), _ledger_row(2.0, nav_gnss=3_000_000)]

@@ -53,8 +53,10 @@ def scenario_tables(cfg: Config, *, duration_s: float, seed: int, start_ns: int 
 def batch_tables(cfg: Config, *, duration_s: float, seed: int, margin_s: float = 60.0
                  ) -> dict[str, pl.DataFrame]:
     """The maritime stage over the scenario, in memory, on the epochs from ``margin_s``
-    after the start to ``margin_s`` before the end."""
+    after the start to ``margin_s`` before the end (the tables the batch commits: not
+    the stage's ``_`` outputs for the stitch)."""
     radar, ais, truth = scenario_tables(cfg, duration_s=duration_s, seed=seed)
     inputs = {"radar_tracks": radar, "ais_reports": ais, "truth": truth}
     window = Window(T0_NS + round(margin_s * NS), T0_NS + round((duration_s - margin_s) * NS))
-    return stage(inputs, window, cfg)
+    out = stage(inputs, window, cfg)
+    return {name: frame for name, frame in out.items() if not name.startswith("_")}

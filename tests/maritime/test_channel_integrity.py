@@ -49,7 +49,7 @@ def check(cfg, radar: pl.DataFrame, ais: pl.DataFrame) -> integ.IntegrityResult:
     aligned, _ = align_reports(radar, cfg)
     epochs = epochs_for(DURATION_S, cfg)
     synced = synchronise(aligned, epochs_ns=epochs, sync=mc.sync)
-    assoc = assign_sectors(associate_tracks(synced, cfg=mc.association, id_base=0),
+    assoc = assign_sectors(associate_tracks(synced, cfg=mc.association),
                            cfg.sectors, cfg.region)
     return integ.check_channels(assoc, aligned, ais, epochs_ns=epochs, start_ns=int(epochs[0]),
                                 cfg=cfg, mc=mc)

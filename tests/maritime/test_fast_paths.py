@@ -174,8 +174,8 @@ def test_associate_and_fuse_equal_references(region_synced) -> None:
     cfg, aligned, epochs = region_synced
     mc = maritime_config(cfg)
     synced = synchronise(aligned, epochs_ns=epochs, sync=mc.sync)
-    fast = associate_tracks(synced, cfg=mc.association, id_base=7_000)
-    ref = associate_tracks_reference(synced, cfg=mc.association, id_base=7_000)
+    fast = associate_tracks(synced, cfg=mc.association)
+    ref = associate_tracks_reference(synced, cfg=mc.association)
     assert_frame_equal(fast, ref, check_exact=True)
     assert_frame_equal(fuse(fast), fuse_reference(ref), check_exact=True)
 

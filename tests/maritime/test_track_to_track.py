@@ -24,6 +24,7 @@ from pipeline.config import Config
 from pipeline.families import load_config
 from pipeline.maritime.align import align_reports
 from pipeline.maritime.associate import (
+    BIRTH_RANK_LIMIT,
     Kinematics,
     _cluster_epoch,
     assign,
@@ -37,8 +38,6 @@ from pipeline.maritime.config import AssociationConfig, maritime_config
 from pipeline.maritime.fuse import fuse
 from pipeline.maritime.hypothesis import state_vectors
 from pipeline.maritime.sync import synchronise
-
-ID_BASE = 5_000
 
 
 @pytest.fixture(scope="module")
@@ -60,7 +59,7 @@ def _run(ships, cfg: Config, seed: int, duration_s: float) -> pl.DataFrame:
     aligned, _ = align_reports(radar, cfg)
     sync = maritime_config(cfg).sync
     synced = synchronise(aligned, epochs_ns=epochs_for(duration_s, cfg), sync=sync)
-    return associate_tracks(synced, cfg=maritime_config(cfg).association, id_base=ID_BASE)
+    return associate_tracks(synced, cfg=maritime_config(cfg).association)
 
 
 def _assert_no_swaps(out: pl.DataFrame, min_share: float) -> None:
@@ -183,10 +182,10 @@ def test_one_epoch_pairs_and_leave_one_out_d2():
         {"site_id": "R2", "local_track_id": 9, "x_enu_m": 510.0, "y_enu_m": 12.0,
          "P_xx": 300.0, "P_xy": 40.0},
     ])
-    out = associate_tracks(syn, cfg=AssociationConfig(), id_base=ID_BASE)
+    out = associate_tracks(syn, cfg=AssociationConfig())
     ids = dict(zip(out["local_track_id"], out["system_track_id"], strict=True))
     assert ids[2] == ids[9] != ids[1]
-    assert min(ids.values()) >= ID_BASE
+    assert min(ids.values()) // BIRTH_RANK_LIMIT == syn["time_ns"][0] // 1_000_000
     d2 = dict(zip(out["local_track_id"], out["mahalanobis_d2"], strict=True))
     D = np.array([10.0, 12.0])
     S = np.array([[100.0 + 300.0, 40.0], [40.0, 200.0]])
@@ -234,7 +233,7 @@ def _overtaking_pair_mixed(cfg: Config, seed: int, velocity_cost: bool) -> int:
     aligned, _ = align_reports(radar, cfg)
     synced = synchronise(aligned, epochs_ns=epochs_for(600, cfg), sync=maritime_config(cfg).sync)
     assoc = replace(maritime_config(cfg).association, velocity_cost=velocity_cost)
-    out = associate_tracks(synced, cfg=assoc, id_base=ID_BASE)
+    out = associate_tracks(synced, cfg=assoc)
     return out.group_by("time_ns", "system_track_id").agg(
         vessel_of(pl.col("local_track_id")).n_unique().alias("n")).filter(pl.col("n") > 1).height
 
@@ -271,7 +270,7 @@ def test_restarted_local_track_joins_its_system_track(cfg):
         .alias("local_track_id"))
     aligned, _ = align_reports(radar, cfg)
     synced = synchronise(aligned, epochs_ns=epochs_for(300, cfg), sync=maritime_config(cfg).sync)
-    out = associate_tracks(synced, cfg=maritime_config(cfg).association, id_base=ID_BASE)
+    out = associate_tracks(synced, cfg=maritime_config(cfg).association)
     ids = out.filter(pl.col("local_track_id").is_in([101, 191, 201]))["system_track_id"]
     assert ids.mode().len() == 1 and (ids == ids.mode()[0]).mean() > 0.98
 
@@ -288,7 +287,7 @@ def test_single_radar_track_renumbered_after_a_gap(cfg, gap_s, same_id):
         .then(pl.lit(181, pl.Int64)).otherwise(pl.col("local_track_id")).alias("local_track_id"))
     aligned, _ = align_reports(radar, cfg)
     synced = synchronise(aligned, epochs_ns=epochs_for(300, cfg), sync=maritime_config(cfg).sync)
-    out = associate_tracks(synced, cfg=maritime_config(cfg).association, id_base=ID_BASE)
+    out = associate_tracks(synced, cfg=maritime_config(cfg).association)
     before = out.filter(pl.col("local_track_id") == 101)["system_track_id"].unique()
     after = out.filter(pl.col("local_track_id") == 181)["system_track_id"].unique()
     assert before.len() == 1 and after.len() == 1
@@ -300,7 +299,7 @@ def test_single_radar_track_renumbered_after_a_gap(cfg, gap_s, same_id):
 def test_empty_input(cfg):
     out = associate_tracks(_synced([{"site_id": "R1", "local_track_id": 1, "x_enu_m": 0.0,
                                      "y_enu_m": 0.0}]).clear(),
-                           cfg=maritime_config(cfg).association, id_base=ID_BASE)
+                           cfg=maritime_config(cfg).association)
     assert out.height == 0 and {"system_track_id", "mahalanobis_d2"} <= set(out.columns)
 
 
@@ -407,7 +406,7 @@ def test_leave_one_out_d2_is_to_the_matrix_fusion_of_the_others():
     syn = _synced([{"site_id": f"R{i + 1}", "local_track_id": i + 1, "x_enu_m": pi[0],
                     "y_enu_m": pi[1], "P_xx": Pi[0, 0], "P_yy": Pi[1, 1], "P_xy": Pi[0, 1]}
                    for i, (Pi, pi) in enumerate(zip(P, p, strict=True))])
-    out = associate_tracks(syn, cfg=AssociationConfig(), id_base=ID_BASE).sort("site_id")
+    out = associate_tracks(syn, cfg=AssociationConfig()).sort("site_id")
     assert out["system_track_id"].n_unique() == 1
     for i, d2 in enumerate(out["mahalanobis_d2"]):
         others = [j for j in range(3) if j != i]
