@@ -25,11 +25,15 @@ their rows: an aggregate row keyed by its unit (``siap_by_sector``) is replaced,
 left beside a new one, and every table equals the single-pass result. A family with a
 ``join_units`` (system track ids stitched across seams) also joins the window's first
 unit to the rows committed just before the window (``stitch_lookback_s``), so ids
-continue across the window's leading edge as they do across unit seams. A
-one-unit-per-window family plans no unit where its inputs hold no row (the ``nav``
-family in an archive without own-ship data), so it never owns, nor widens a reprocess
-to, a window it has nothing in; a unit recorded before this rule without input rows is
-ignored (:func:`unit_is_live`).
+continue across the window's leading edge as they do across unit seams. At the trailing
+edge, the units committed after the window stitched their ids to the window's old last
+rows: when the batch changed those rows (the family's ``unit_seam`` of the rows just
+before the window's end differs), the next committed units are batched again, and so on
+until a window ends as it ended before (:func:`run_batch`, ``BatchSummary.continued``).
+One-unit-per-window families plan no unit where their inputs hold no row (the ``nav``
+family in an archive without own-ship data), so they never own, nor widen a reprocess
+to, a window they have nothing in; a unit recorded before this rule without input rows
+is ignored (:func:`unit_is_live`).
 
 **One commit for readers.** Families that read another family's output run in a later
 wave (``family_waves``: gaps after maritime) and read this batch's staged rows of it
@@ -107,10 +111,16 @@ class BatchSummary:
     committed: bool = False
     family_s: dict[str, float] = field(default_factory=dict)  # summed unit wall time
     commit_s: float = 0.0
+    # the committed units after the window whose ids continued the window's old rows,
+    # when the batch changed those rows: (start, end) to batch again
+    next_window: tuple[int, int] | None = None
+    # the batches of those units (ids continued across the trailing edge)
+    continued: list[BatchSummary] = field(default_factory=list)
 
     @property
     def exit_code(self) -> int:
-        return 0 if self.committed and not self.failed_units else 1
+        own = 0 if self.committed and not self.failed_units else 1
+        return max([own, *(c.exit_code for c in self.continued)])
 
     def render(self) -> str:
         at = f"site {self.site}: " if self.site is not None else ""
@@ -130,6 +140,10 @@ class BatchSummary:
         if self.rejects:
             lines.append(f"  rejects (batch)  {self.rejects:>9} rows")
         lines += [f"  failed: {u}" for u in self.failed_units]
+        for c in self.continued:
+            lines.append("  the rows at the window's end changed: the next committed units "
+                         "batched again so their ids continue them")
+            lines += ["  " + line for line in c.render().splitlines()]
         return "\n".join(lines)
 
 
@@ -477,9 +491,17 @@ def run_batch(
     sites = [site] if site is not None else sites_in(warehouse, start_ns, end_ns)
     out = SitesSummary({}, start_ns, end_ns)
     for name in sites:
-        out.by_site[name] = _run_site(cfg, warehouse, start_ns=start_ns, end_ns=end_ns,
-                                      executor_kind=executor_kind, families=families,
-                                      progress=progress, site=name)
+        summary = _run_site(cfg, warehouse, start_ns=start_ns, end_ns=end_ns,
+                            executor_kind=executor_kind, families=families,
+                            progress=progress, site=name)
+        out.by_site[name] = summary
+        while summary.next_window is not None and summary.exit_code == 0:
+            # (a chain: each continued batch may change the rows the next units continue)
+            nxt = _run_site(cfg, warehouse, start_ns=summary.next_window[0],
+                            end_ns=summary.next_window[1], executor_kind=executor_kind,
+                            families=None, progress=progress, site=name)
+            summary.continued.append(nxt)
+            summary = nxt
     with deferred_interrupts():
         rebuild_views_file(warehouse)
     return out
@@ -505,6 +527,7 @@ def _run_site(
     staging = warehouse / "_staging" / f"batch-{_safe(site)}-{start_ns}-{end_ns}"
     shutil.rmtree(staging, ignore_errors=True)
     units = plan_units(warehouse, cfg, start_ns, end_ns, staging, fams, committed_cuts, site)
+    edge_before = _trailing_seams(warehouse, fams, end_ns, site)
     summary = BatchSummary(start_ns=start_ns, end_ns=end_ns, units_total=len(units),
                            requested=None if requested == (start_ns, end_ns) else requested,
                            site=site)
@@ -540,6 +563,9 @@ def _run_site(
     with deferred_interrupts():  # the window's commit is whole or not begun
         _commit(warehouse, manifests, summary, fams, units)
     summary.commit_s = time.perf_counter() - t0
+    changed = [name for name, seam in _trailing_seams(warehouse, fams, end_ns, site).items()
+               if not _same_seam(seam, edge_before.get(name))]
+    summary.next_window = _units_after(warehouse, changed, end_ns, site)
     shutil.rmtree(staging, ignore_errors=True)
     with contextlib.suppress(OSError):  # only when empty: another job may be staging
         (warehouse / "_staging").rmdir()
@@ -622,6 +648,37 @@ def _stored_before(warehouse: Path, fam: Family, start_ns: int, site: str | None
     pseudo-unit); tables are read when the family's ``unit_seam`` looks them up."""
     lo = start_ns - round(fam.stitch_lookback_s * NS)
     return _StoredOutputs(warehouse, tuple(fam.outputs), lo, start_ns, site)
+
+
+def _trailing_seams(warehouse: Path, fams: tuple[Family, ...], end_ns: int,
+                    site: str | None) -> dict[str, Any]:
+    """Per family with a ``join_units``, the ``unit_seam`` of its committed rows just
+    before ``end_ns``: what the units after ``end_ns`` continued."""
+    return {fam.name: fam.unit_seam(_stored_before(warehouse, fam, end_ns, site))
+            for fam in fams
+            if fam.join_units is not None and fam.unit_seam is not None
+            and fam.stitch_lookback_s}
+
+
+def _same_seam(a: Any, b: Any) -> bool:
+    """Two seams hold the same rows (frames in any order)."""
+    if isinstance(a, pl.DataFrame) and isinstance(b, pl.DataFrame):
+        if a.columns != b.columns or a.height != b.height:
+            return False
+        return a.sort(a.columns).equals(b.sort(b.columns))
+    return bool(a == b)
+
+
+def _units_after(warehouse: Path, families: list[str], end_ns: int, site: str | None
+                 ) -> tuple[int, int] | None:
+    """[end_ns, end) of ``families``' committed units that start at ``end_ns`` (None:
+    none)."""
+    if not families:
+        return None
+    units = pl.from_arrow(read_table(warehouse, "batch_units",
+                                     columns=["family", "start_ns", "end_ns"], site=site))
+    after = units.filter(pl.col("family").is_in(families) & (pl.col("start_ns") == end_ns))
+    return (end_ns, int(after["end_ns"].max())) if after.height else None
 
 
 def _has_rows(seam: Any) -> bool:

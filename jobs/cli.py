@@ -379,10 +379,12 @@ def reprocess(st: _State, from_, to, site, executor, wait) -> None:
 
 @cli.command("run")
 @click.argument("folders", nargs=-1, type=click.Path())
+@_site_option("the site of files whose MCAP metadata names none, and the only site "
+              "batched (default: such files are 'default'; every site is batched)")
 @_EXECUTOR
 @_WAIT
 @click.pass_obj
-def run_command(st: _State, folders, executor, wait) -> None:
+def run_command(st: _State, folders, site, executor, wait) -> None:
     """The nightly job: scan the archive folders (FOLDERS, default [archive] folders),
     ingest new and changed MCAP files, batch the windows they touch (and any a failed
     run left), record the run in the `runs` table. Nothing new: does nothing, says so."""
@@ -392,7 +394,7 @@ def run_command(st: _State, folders, executor, wait) -> None:
     progress = terminal_progress()
     with _locked(st, wait), progress or contextlib.nullcontext():
         summary = run_nightly(st.cfg, st.warehouse, folders=list(folders),
-                              executor_kind=executor, progress=progress,
+                              executor_kind=executor, progress=progress, site=site,
                               command=" ".join(["surveil", *sys.argv[1:]]))
     click.echo(summary.render())
     sys.exit(summary.exit_code)

@@ -6,8 +6,8 @@
    is not covered by ``batch_units`` committed after the file was ingested. This is read
    from the warehouse, not remembered by the job: a file ingested by a run that crashed
    or whose batch failed is found again by the next run, and nothing else is redone;
-3. batch those windows (spans cut out to whole UTC hours and merged; ``run_batch``
-   widens each to the committed units it overlaps);
+3. batch those windows, each site's alone (spans cut out to whole UTC hours and merged
+   per site; ``run_batch`` of that site widens each to the committed units it overlaps);
 4. record the run in ``runs`` (one row per run that had work).
 
 A run with nothing to ingest and no window pending writes nothing and says so. The
@@ -88,23 +88,35 @@ class RunSummary:
         return "\n".join(lines)
 
 
-def pending_windows(warehouse: Path) -> list[tuple[int, int]]:
-    """Windows to batch: the spans of ledger files (ok or partial) not covered by
-    ``batch_units`` of the file's site committed after the file was ingested, cut out to
-    whole UTC hours and merged; ascending. (The batch then runs every site with data in
-    a window, each alone.)"""
+def pending_windows(warehouse: Path, site: str | None = None) -> list[tuple[int, int]]:
+    """Windows to batch (of ``site``, default any): :func:`pending_by_site`'s, merged
+    over the sites; ascending."""
+    by_site = pending_by_site(warehouse)
+    return _merged([w for name, windows in by_site.items() if site in (None, name)
+                    for w in windows])
+
+
+def pending_by_site(warehouse: Path) -> dict[str, list[tuple[int, int]]]:
+    """Per site, the windows to batch: the spans of its ledger files (ok or partial) not
+    covered by its ``batch_units`` committed after the file was ingested, cut out to
+    whole UTC hours and merged; ascending. Only that site is batched over them."""
     ledger = pl.from_arrow(read_table(warehouse, "ingest_ledger")).filter(
         pl.col("status").is_in(["ok", "partial"]) & pl.col("start_time_ns").is_not_null()
         & pl.col("end_time_ns").is_not_null())
     units = pl.from_arrow(read_table(warehouse, "batch_units"))
-    spans = []
+    spans: dict[str, list[tuple[int, int]]] = {}
     for f in ledger.iter_rows(named=True):
         lo, hi = f["start_time_ns"], f["end_time_ns"] + 1
         fresh = units.filter((pl.col("site") == f["site"])
                              & (pl.col("committed_at_ns") >= f["ingested_at_ns"])
                              & (pl.col("start_ns") < hi) & (pl.col("end_ns") > lo))
         if not _covers(fresh, lo, hi):
-            spans.append((lo // HOUR_NS * HOUR_NS, -(-hi // HOUR_NS) * HOUR_NS))
+            spans.setdefault(f["site"], []).append(
+                (lo // HOUR_NS * HOUR_NS, -(-hi // HOUR_NS) * HOUR_NS))
+    return {name: _merged(windows) for name, windows in sorted(spans.items())}
+
+
+def _merged(spans: list[tuple[int, int]]) -> list[tuple[int, int]]:
     merged: list[tuple[int, int]] = []
     for a, b in sorted(spans):
         if merged and a <= merged[-1][1]:
@@ -129,8 +141,10 @@ def _covers(units: pl.DataFrame, lo: int, hi: int) -> bool:
 
 def run_nightly(cfg: Config, warehouse: Path, *, folders: list[str] | None = None,
                 executor_kind: str | None = None, command: str = "surveil run",
-                progress: Any = None) -> RunSummary:
-    """Scan, ingest what is new or changed, batch the pending windows, record the run."""
+                progress: Any = None, site: str | None = None) -> RunSummary:
+    """Scan, ingest what is new or changed, batch the pending windows (each site's
+    alone), record the run. ``site``: the site of files whose metadata names none, and
+    the only site batched (default: files without a site are ``default``; every site)."""
     chosen = list(folders or cfg.archive_folders)
     if not chosen:
         raise UsageError("no archive folders: set [archive] folders in the config or name "
@@ -149,7 +163,8 @@ def run_nightly(cfg: Config, warehouse: Path, *, folders: list[str] | None = Non
 
     if progress is not None:
         progress.ingest_total(files)
-    summary.ingest = run_ingest(files, cfg, warehouse, executor=executor_kind, on_result=seen)
+    summary.ingest = run_ingest(files, cfg, warehouse, executor=executor_kind, on_result=seen,
+                                site=site)
     for res in results:
         if res.ok and res.value.skipped:
             summary.files_skipped += 1
@@ -158,10 +173,12 @@ def run_nightly(cfg: Config, warehouse: Path, *, folders: list[str] | None = Non
     summary.failures += [f"ingest {path}: {err}" for path, err in summary.ingest.failed]
     summary.failures += [f"ingest {path}: {status}" for path, status in summary.files.items()
                          if status == "quarantined"]
-    for start, end in pending_windows(warehouse):
+    pending = [(start, end, name) for name, windows in pending_by_site(warehouse).items()
+               if site in (None, name) for start, end in windows]
+    for start, end, name in sorted(pending):
         summary.windows.append((start, end))
         batch = run_batch(cfg, warehouse, start_ns=start, end_ns=end,
-                          executor_kind=executor_kind, progress=progress)
+                          executor_kind=executor_kind, progress=progress, site=name)
         summary.batches.append(batch)
         summary.failures += [f"batch [{iso(start)}, {iso(end)}): {u}"
                              for u in batch.failed_units]

@@ -52,9 +52,12 @@ OUTPUTS = DERIVED_TABLES + AUDIT_TABLES + INTEGRITY_TABLES
 def continuity_margins_s(cfg: Config) -> tuple[float, float]:
     """(lead-in, look-ahead) a unit tracks beyond its window, s: the identity vote's
     window on either side, plus ``[channel_integrity] unit_settle_s`` before (at least
-    the seam the stitch compares, ``SEAM_S``)."""
-    vote_s = cfg.ais.identity_window_s
+    the seam the stitch compares, ``SEAM_S``); with ``unit_settle_s = 0`` that seam
+    alone (no continuity but the ids')."""
     settle_s = maritime_config(cfg).integrity.unit_settle_s
+    if settle_s == 0:
+        return SEAM_S, 0.0
+    vote_s = cfg.ais.identity_window_s
     return vote_s + max(settle_s, SEAM_S), vote_s
 
 

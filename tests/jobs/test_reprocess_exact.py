@@ -86,3 +86,41 @@ def test_windows_batched_apart_continue_ids_and_reprocess_keeps_them(e2e, tmp_pa
     assert res.exit_code == 0, res.render()
     assert (res.batch.start_ns, res.batch.end_ns) == (seam, e2e.end_ns)  # whole units
     assert_same(snapshot(wh), apart, "reprocess inside the second window")
+
+
+def test_changed_rows_at_a_windows_end_carry_on_into_the_next_units(e2e, tmp_path):
+    """Was: a reprocess that changed the rows at its window's end (new data, another
+    config) left the units after it continuing the old ids: a track break at the edge.
+    Now the next committed units are batched again until a window ends as before: here
+    the second window, so both windows equal one pass under the new config."""
+    from pipeline.families import config_from_mapping
+
+    strict = config_from_mapping(
+        {**e2e.cfg.sections,
+         "association": {**e2e.cfg.section("association"), "gate_probability": 0.9,
+                         "max_speed_difference_mps": 1.0}},
+        e2e.cfg.source)
+    seam = e2e.start_ns + 10 * MIN  # 01:00
+    maritime = family("maritime").outputs
+    wh, one = tmp_path / "wh", tmp_path / "one"
+    for path in (wh, one):
+        shutil.copytree(e2e.warehouse, path)
+        for name in (*DERIVED, "batch_units"):
+            shutil.rmtree(table_path(path, name), ignore_errors=True)
+    for start, end in ((e2e.start_ns, seam), (seam, e2e.end_ns)):
+        assert run_batch(e2e.cfg, wh, start_ns=start, end_ns=end,
+                         executor_kind="serial").exit_code == 0
+    before = snapshot(wh, maritime)
+    res = run_batch(strict, wh, start_ns=e2e.start_ns, end_ns=seam, executor_kind="serial")
+    assert res.exit_code == 0, res.render()
+    (summary,) = res.by_site.values()
+    assert [(c.start_ns, c.end_ns) for c in summary.continued] == [(seam, e2e.end_ns)]
+    assert "batched again" in res.render()
+    after = snapshot(wh, maritime)
+    assert not after["system_tracks"].equals(before["system_tracks"])  # the config mattered
+    assert run_batch(strict, one, start_ns=e2e.start_ns, end_ns=e2e.end_ns,
+                     executor_kind="serial").exit_code == 0
+    assert_same(after, snapshot(one, maritime), "reprocess with a new config vs one pass")
+    # the same batch again changes nothing at the edge: no continuation
+    res = run_batch(strict, wh, start_ns=e2e.start_ns, end_ns=seam, executor_kind="serial")
+    assert [c for s in res.by_site.values() for c in s.continued] == []

@@ -41,6 +41,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "decode"))
 from nmea_builders import sentence
 
 GAPS_S = 600.0
+HOUR = 3600 * 10**9
 DERIVED = [name for fam in FAMILIES for name in fam.outputs]
 
 
@@ -268,3 +269,34 @@ def test_a_warehouse_written_before_sites_is_refused(tmp_path):
                           str(tmp_path / "old"), "report", "accuracy_by_sector"],
                          capture_output=True, text=True, timeout=120)
     assert res.returncode == 2 and "rebuild it" in res.stderr, res.stderr
+
+
+def test_run_batches_each_sites_pending_windows_alone_and_site_limits_it(e2e, tmp_path):
+    """Was: ``surveil run`` had no --site, and a pending window of one site was batched
+    for every site with data in it. Now each site's pending windows are its own, and
+    ``run --site`` names the site of bare files and batches only that site."""
+    from jobs.run import pending_by_site, run_nightly
+
+    src = tmp_path / "in" / "bridge.nmea"
+    src.parent.mkdir()
+    src.write_bytes(b"\n".join(
+        sentence(f"GPRMC,1200{s:02d},A,4807.038,N,01131.000,E,5.0,84.4,150126,,")
+        for s in range(10)) + b"\n")
+    bare = tmp_path / "bare"
+    run_import([src], bare, cfg=e2e.cfg)
+    wh = tmp_path / "wh"  # the e2e files ingested, not batched: channel-clean pending
+    assert run_ingest(e2e.archive, e2e.cfg, wh, executor="serial").exit_code == 0
+    hour0 = e2e.start_ns // HOUR * HOUR
+    assert pending_by_site(wh) == {"channel-clean": [(hour0, hour0 + 2 * HOUR)]}
+    res = run_nightly(e2e.cfg, wh, folders=[str(bare)], executor_kind="serial",
+                      site="harbour")
+    assert res.exit_code == 0, res.render()
+    assert [list(b.by_site) for b in res.batches] == [["harbour"]]
+    assert list(pending_by_site(wh)) == ["channel-clean"]
+    assert set(read_table(wh, "batch_units")["site"].to_pylist()) == {"harbour"}
+    # without --site: the bare file is unchanged; channel-clean's windows, and only
+    # those, are batched (harbour's is not batched again)
+    res = run_nightly(e2e.cfg, wh, folders=[str(bare)], executor_kind="serial")
+    assert res.exit_code == 0 and res.files_skipped == 1, res.render()
+    assert [list(b.by_site) for b in res.batches] == [["channel-clean"]]
+    assert pending_by_site(wh) == {}

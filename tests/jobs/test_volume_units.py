@@ -32,9 +32,9 @@ def test_volume_cuts_balance_rows() -> None:
 
 def test_many_units_same_association_rows(e2e, tmp_path, monkeypatch) -> None:
     """The e2e window cut two ways, by the hour and into ~6 units by volume: the same
-    (epoch, site, track) rows; system track ids stitched across the seams (local tracks
-    that keep one system track: as many as in the hour-cut batch, within 3 points); the
-    fused track errors against truth (RMS) within 2 %. On a copy of the warehouse (the
+    association rows, system track ids included (was: the same (epoch, site, track) rows
+    but >= 85 % of local tracks keeping one id, each unit starting its association
+    afresh), and the same fused errors against truth. On a copy of the warehouse (the
     e2e one stays hour-cut for the other tests)."""
     wh = tmp_path / "warehouse"
     shutil.copytree(e2e.warehouse, wh)
@@ -44,11 +44,10 @@ def test_many_units_same_association_rows(e2e, tmp_path, monkeypatch) -> None:
     small = dataclasses.replace(FAMILIES[0], unit_rows=int(rows.sum() // 6))
     monkeypatch.setattr(batch, "family", lambda name: small)
     cut = _run(e2e, wh, min_units=6)
-    key = ["time_ns", "site_id", "local_track_id"]
-    assert cut["a"].select(key).sort(key).equals(hourly["a"].select(key).sort(key))
-    assert _kept_one_id(cut["a"]) >= _kept_one_id(hourly["a"]) - 0.03
-    assert _kept_one_id(cut["a"]) > 0.85
-    assert cut["rms"] == pytest.approx(hourly["rms"], rel=0.02)
+    a, b = cut["a"], hourly["a"]
+    assert a.sort(a.columns).equals(b.sort(b.columns))
+    assert _kept_one_id(a) == _kept_one_id(b) > 0.85
+    assert cut["rms"] == hourly["rms"]
 
 
 def _run(e2e, wh, min_units: int = 1) -> dict:
