@@ -3,7 +3,8 @@
 A *batch family* (maritime radar + AIS here; own-ship navigation and airfield surface
 surveillance plug in the same way) reads its inputs from the warehouse for a sub-window
 and returns its derived tables. The window is cut into work units (family, sub-window:
-one per UTC hour, or the whole window for families whose filters need continuity); each
+one per UTC hour, or the whole window for families whose filters need continuity, when
+their inputs hold rows in it); each
 unit writes its outputs once, as the tables' final Parquet data files (sorted row groups,
 Delta statistics) in a staging folder, and returns a small manifest (the files and the
 family's unit seam). Only when every unit of the window has succeeded does the driver
@@ -29,6 +30,10 @@ edge, the units committed after the window stitched their ids to the window's ol
 rows: when the batch changed those rows (the family's ``unit_seam`` of the rows just
 before the window's end differs), the next committed units are batched again, and so on
 until a window ends as it ended before (:func:`run_batch`, ``BatchSummary.continued``).
+One-unit-per-window families plan no unit where their inputs hold no row (the ``nav``
+family in an archive without own-ship data), so they never own, nor widen a reprocess
+to, a window they have nothing in; a unit recorded before this rule without input rows
+is ignored (:func:`unit_is_live`).
 
 **One commit for readers.** Families that read another family's output run in a later
 wave (``family_waves``: gaps after maritime) and read this batch's staged rows of it
@@ -44,7 +49,7 @@ import itertools
 import logging
 import shutil
 import time
-from collections.abc import Iterator, Mapping, Sized
+from collections.abc import Callable, Iterator, Mapping, Sized
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -280,16 +285,25 @@ def finalize_unit(task: FinalizeTask) -> UnitManifest:
                         m.site)
 
 
-def owned_window(warehouse: Path, start_ns: int, end_ns: int, site: str | None = None
+def owned_window(warehouse: Path, start_ns: int, end_ns: int, site: str | None = None,
+                 live: Callable[[str, int, int], bool] | None = None
                  ) -> tuple[int, int, dict[str, list[int]]]:
     """``[start_ns, end_ns)`` widened until no committed unit (``batch_units``, of
     ``site`` when given) of any family straddles its edges, and per family the edges of
-    its committed units inside the widened window: (start, end, {family: cuts})."""
+    its committed units inside the widened window: (start, end, {family: cuts}).
+
+    ``live(family, start, end)``: False for a committed unit that owns no rows now (a
+    one-unit-per-window family's unit without input rows, as batches recorded before
+    such units were skipped): it neither widens the window nor cuts it."""
     units = pl.from_arrow(read_table(warehouse, "batch_units",
                                      columns=["family", "start_ns", "end_ns"], site=site))
+    dead: set[tuple[str, int, int]] = set()
     lo, hi = start_ns, end_ns
     while True:
         touched = units.filter((pl.col("start_ns") < hi) & (pl.col("end_ns") > lo))
+        if live is not None:
+            dead |= {u for u in touched.iter_rows() if u not in dead and not live(*u)}
+            touched = touched.filter(~_keyed(touched, dead))
         if touched.height == 0:
             break
         new_lo = min(lo, int(touched["start_ns"].min()))
@@ -298,11 +312,52 @@ def owned_window(warehouse: Path, start_ns: int, end_ns: int, site: str | None =
             break
         lo, hi = new_lo, new_hi
     inside = units.filter((pl.col("start_ns") >= lo) & (pl.col("end_ns") <= hi))
+    inside = inside.filter(~_keyed(inside, dead))
     cuts: dict[str, list[int]] = {}
     for (name,), rows in inside.group_by(["family"]):
         edges = set(rows["start_ns"].to_list()) | set(rows["end_ns"].to_list())
         cuts[str(name)] = sorted(t for t in edges if lo < t < hi)
     return lo, hi, cuts
+
+
+def _keyed(units: pl.DataFrame, keys: set[tuple[str, int, int]]) -> pl.Series:
+    """Which rows of ``units`` (family, start_ns, end_ns) are in ``keys``."""
+    return pl.Series([u in keys for u in units.iter_rows()], dtype=pl.Boolean)
+
+
+def has_input_rows(warehouse: Path, fam: Family, cfg: Config, start_ns: int, end_ns: int,
+                   site: str | None = None, derived: frozenset[str] = frozenset()) -> bool:
+    """True when one of ``fam``'s input tables (``whole_table`` ones aside) holds a row
+    of ``site`` in ``[start_ns, end_ns)``, or when it reads one of ``derived`` (another
+    family's output, maybe written by this same batch: not known before it runs). Reads
+    the time column of the window only (partitions and row groups pruned)."""
+    for spec in fam.inputs(cfg):
+        if spec.whole_table:
+            continue
+        if spec.table in derived:
+            return True
+        at = site if site is not None and tables.has_site(spec.table) else None
+        time_col = tables.spec(spec.table).time_column
+        if read_table(warehouse, spec.table, start_ns=start_ns, end_ns=end_ns,
+                      columns=[time_col], sort=False, site=at).num_rows:
+            return True
+    return False
+
+
+def unit_is_live(warehouse: Path, cfg: Config, site: str | None = None
+                 ) -> Callable[[str, int, int], bool]:
+    """``owned_window``'s ``live``: a committed unit of a one-unit-per-window family owns
+    rows only while its inputs hold rows in its span (:func:`plan_units` plans no such
+    unit otherwise); every other unit (and one of a family no longer registered) does."""
+    owners = {f.name: f for f in FAMILIES}
+    derived = frozenset(n for f in FAMILIES for n in f.outputs)
+
+    def live(name: str, start_ns: int, end_ns: int) -> bool:
+        fam = owners.get(name)
+        return (fam is None or fam.unit_s is not None
+                or has_input_rows(warehouse, fam, cfg, start_ns, end_ns, site, derived))
+
+    return live
 
 
 def plan_units(
@@ -313,7 +368,11 @@ def plan_units(
 ) -> list[BatchUnit]:
     """Cut [start_ns, end_ns) into each family's work units: at UTC multiples of its
     ``unit_s`` (or one unit for the whole window), and, for a family with
-    ``unit_rows``, wherever the volume of its ``unit_table`` calls for more cuts."""
+    ``unit_rows``, wherever the volume of its ``unit_table`` calls for more cuts. A
+    family with one unit per window plans none where its inputs hold no row
+    (:func:`has_input_rows`): a unit it does not need would own, and a reprocess of any
+    part of it would re-run, the whole window."""
+    derived = frozenset(n for f in FAMILIES for n in f.outputs)
     units = []
     for fam in families:
         if fam.unit_s is None:  # and the edges of its committed units (owned_window)
@@ -327,11 +386,12 @@ def plan_units(
                                                site)
             extra = volume_cuts(first, last, rows, start_ns, end_ns, fam.unit_rows)
             cuts = sorted(set(cuts) | set(extra))
-        units += [
-            BatchUnit(str(warehouse), str(staging_dir), a, b, cfg, fam.name, site=site)
-            for a, b in itertools.pairwise(cuts)
-            if b > a
-        ]
+        pieces = [(a, b) for a, b in itertools.pairwise(cuts) if b > a]
+        if fam.unit_s is None:
+            pieces = [(a, b) for a, b in pieces
+                      if has_input_rows(warehouse, fam, cfg, a, b, site, derived)]
+        units += [BatchUnit(str(warehouse), str(staging_dir), a, b, cfg, fam.name, site=site)
+                  for a, b in pieces]
     return units
 
 
@@ -462,7 +522,8 @@ def _run_site(
     fams = FAMILIES if families is None else tuple(family(name) for name in families)
     warm_up(warehouse)  # the views file's DuckDB instance, built while the batch runs
     requested = (start_ns, end_ns)
-    start_ns, end_ns, committed_cuts = owned_window(warehouse, start_ns, end_ns, site)
+    start_ns, end_ns, committed_cuts = owned_window(
+        warehouse, start_ns, end_ns, site, unit_is_live(warehouse, cfg, site))
     staging = warehouse / "_staging" / f"batch-{_safe(site)}-{start_ns}-{end_ns}"
     shutil.rmtree(staging, ignore_errors=True)
     units = plan_units(warehouse, cfg, start_ns, end_ns, staging, fams, committed_cuts, site)

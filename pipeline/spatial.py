@@ -73,9 +73,14 @@ def pairs_within(
     far = ia_all[k > MAX_CELLS]
     parts_i, parts_j = [], []
     if near.size:
-        kn = np.ceil(reach[near] / cell_m).astype(np.int64)
         cx = np.floor((x_a[near] - x0) / cell_m).astype(np.int64)
         cy = np.floor((y_a[near] - y0) / cell_m).astype(np.int64)
+        # the queries in key order: each searchsorted then walks key_b forwards (numpy
+        # narrows from the previous key's place), not at random (the pairs are the same)
+        by_cell = np.argsort(_key(ga[near], np.maximum(cx, 0), np.maximum(cy, 0)),
+                             kind="stable")
+        near, cx, cy = near[by_cell], cx[by_cell], cy[by_cell]
+        kn = np.ceil(reach[near] / cell_m).astype(np.int64)
         kmax = int(kn.max())
         hi_cell = (1 << _BITS) - 1
         for dx in range(-kmax, kmax + 1):

@@ -230,11 +230,34 @@ def _sums(index: np.ndarray, values: np.ndarray, size: int) -> np.ndarray:
 def coasted_reports(aligned: pl.DataFrame) -> pl.DataFrame:
     """(site_id, local_track_id, time_ns, coasted) of the aligned reports: a report whose
     course and speed equal its track's previous report's to the bit is the tracker's
-    prediction (no plot: coasting)."""
+    prediction (no plot: coasting). One row per (site_id, local_track_id, time_ns), the
+    last of duplicates; equality as polars compares (NaN equals NaN, a null nothing).
+
+    The rows are put in (site, track, time) order by one stable ``np.lexsort`` of integer
+    keys (the site as a category code): a third of a polars sort on the string key."""
+    site = aligned["site_id"].cast(pl.Categorical).to_physical().fill_null(-1).to_numpy()
+    track = aligned["local_track_id"].fill_null(np.iinfo(np.int64).min).to_numpy()
+    t = aligned["time_ns"].to_numpy()
+    order = np.lexsort((t, track, site))
+    site, track, t = site[order], track[order], t[order]
+    same = np.zeros(order.size, bool)
+    same[1:] = (site[1:] == site[:-1]) & (track[1:] == track[:-1])
+    coasted = same & _repeats(aligned["course_rad"], order) & _repeats(
+        aligned["speed_mps"], order)
+    last = np.ones(order.size, bool)  # the last row of each (site, track, time)
+    last[:-1] = ~(same[1:] & (t[1:] == t[:-1]))
+    keep = order[last]
+    return aligned.select("site_id", "local_track_id", "time_ns")[keep].with_columns(
+        pl.Series("coasted", coasted[last]))
+
+
+def coasted_reports_polars(aligned: pl.DataFrame) -> pl.DataFrame:
+    """:func:`coasted_reports` as one polars sort, shift and unique: the reference its
+    fast path is tested against (rows in another order)."""
     key = ["site_id", "local_track_id"]
     return (
         aligned.select(*key, "time_ns", "course_rad", "speed_mps")
-        .sort(*key, "time_ns")
+        .sort(*key, "time_ns", maintain_order=True)
         .with_columns(  # sorted by track: the previous row, when of the same track
             ((pl.col("course_rad") == pl.col("course_rad").shift(1))
              & (pl.col("speed_mps") == pl.col("speed_mps").shift(1))
@@ -242,8 +265,19 @@ def coasted_reports(aligned: pl.DataFrame) -> pl.DataFrame:
             .fill_null(False).alias("coasted")
         )
         .select(*key, "time_ns", "coasted")
-        .unique([*key, "time_ns"], keep="last")
+        .unique([*key, "time_ns"], keep="last", maintain_order=True)
     )
+
+
+def _repeats(column: pl.Series, order: np.ndarray) -> np.ndarray:
+    """Row i (in ``order``) equals row i - 1 as polars' ``==`` says: NaN equals NaN, -0.0
+    equals 0.0, a null equals nothing (False on the first row)."""
+    x = column.to_numpy()[order].astype(np.float64, copy=False)
+    valid = ~column.is_null().to_numpy()[order]
+    out = np.zeros(order.size, bool)
+    out[1:] = (((x[1:] == x[:-1]) | (np.isnan(x[1:]) & np.isnan(x[:-1])))
+               & valid[1:] & valid[:-1])
+    return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -275,7 +309,7 @@ def _radar_arrays(
         .alias("_slot"),
     )
     site = df["_site"].to_numpy()
-    sector = np.array([sector_index[s] for s in df["sector"].to_list()], np.int64)
+    sector = _sector_codes(df["sector"], sector_index)
     xy = df.select("x_enu_m", "y_enu_m").to_numpy()
     P = df.select("P_xx", "P_yy", "P_xy").to_numpy()
     vx, vy = frames.velocity_enu(df["speed_mps"].to_numpy(), df["course_rad"].to_numpy())
@@ -324,8 +358,8 @@ def _ais_arrays(
     mmsi = np.unique(reports["mmsi"].to_numpy())
 
     def sectors_of(df: pl.DataFrame) -> np.ndarray:
-        named = assign_sectors(df, cfg.sectors, cfg.region)["sector"].to_list()
-        return np.array([sector_index[s] for s in named], np.int64)
+        return _sector_codes(assign_sectors(df, cfg.sectors, cfg.region)["sector"],
+                             sector_index)
 
     x, y = frames.geodetic_to_enu(reports["lat_deg"].to_numpy(), reports["lon_deg"].to_numpy(),
                                   cfg.region.origin_lat_deg, cfg.region.origin_lon_deg)
@@ -348,7 +382,6 @@ def _ais_arrays(
                                   gate_threshold(cfg.ais.gate_probability))
     rsector = sectors_of(rep)
     C = geo.site_xy.shape[0]
-    rnd = (pl.int_range(pl.len()).over("k", "mmsi")).alias("_r")
     var = ic.ais_sigma_position_m**2
     ref_xy = ref.select("x_enu_m", "y_enu_m").to_numpy()
     ref_cov = ref.select("P_xx", "P_yy", "P_xy").to_numpy()
@@ -368,7 +401,7 @@ def _ais_arrays(
         rep_sector=rsector,
         rep_near=geo.near(rxy),
         rep_groups=np.arange(C)[None, :] * (geo.G + 1) + rsector[:, None],
-        rep_round=rep.select(rnd)["_r"].to_numpy(),
+        rep_round=_rank_within(kk, rep["mmsi"].to_numpy()),
         rep_jump=rep["jump"].to_numpy(),
         rep_self=rep["self_xi"].fill_null(np.nan).to_numpy(),
         mmsi_near=_sums(np.searchsorted(mmsi, rep["mmsi"].to_numpy()), geo.near(rxy),
@@ -379,6 +412,28 @@ def _ais_arrays(
         rep_cand_d2=cand_d2,
         mmsi=mmsi,
     )
+
+
+def _rank_within(k: np.ndarray, m: np.ndarray) -> np.ndarray:
+    """Rank of each row among the earlier rows with its (k, m): ``int_range(len).over(k,
+    m)`` with one stable lexsort."""
+    order = np.lexsort((m, k))  # stable: rows of a (k, m) keep their order
+    ks, ms = k[order], m[order]
+    start = np.ones(order.size, bool)
+    start[1:] = (ks[1:] != ks[:-1]) | (ms[1:] != ms[:-1])
+    first = np.maximum.accumulate(np.where(start, np.arange(order.size), 0))
+    rank = np.empty(order.size, np.int64)
+    rank[order] = np.arange(order.size) - first
+    return rank
+
+
+def _sector_codes(sector: pl.Series, sector_index: dict[str | None, int]) -> np.ndarray:
+    """``sector_index`` of each sector name (None: outside every sector); an unknown name
+    raises."""
+    names = [n for n in sector_index if n is not None]
+    return (sector.replace_strict(names, [sector_index[n] for n in names],
+                                  return_dtype=pl.Int64)
+            .fill_null(sector_index[None]).to_numpy())
 
 
 def _same_as_previous(key: list[str]) -> pl.Expr:
@@ -776,10 +831,12 @@ def _radar_groups(
     HtSi = np.stack([Hk[:, 0, :] * Sk[:, 1, None] - Hk[:, 1, :] * Sk[:, 2, None],
                      Hk[:, 1, :] * Sk[:, 0, None] - Hk[:, 0, :] * Sk[:, 2, None]],
                     axis=2) / det[:, None, None]
-    terms = np.concatenate([
-        np.ones((gk.size, 1)), xi[kept, None],
-        np.einsum("nij,njk->nik", HtSi, Hk).reshape(-1, 9), np.einsum("nij,nj->ni", HtSi, rk),
-    ], axis=1)
+    # H^T S^-1 H and H^T S^-1 r, the two-term sums written out (einsum's generic loop
+    # is ~4x slower on these 2-long contractions; the same products, the same sums)
+    HtSiH = HtSi[:, :, 0, None] * Hk[:, None, 0, :] + HtSi[:, :, 1, None] * Hk[:, None, 1, :]
+    HtSir = HtSi[:, :, 0] * rk[:, 0, None] + HtSi[:, :, 1] * rk[:, 1, None]
+    terms = np.concatenate([np.ones((gk.size, 1)), xi[kept, None], HtSiH.reshape(-1, 9),
+                            HtSir], axis=1)
     tot = _sums(gk, terms, n_groups)
     nk = tot[:, 0].astype(np.int64)
     A = tot[:, 2:11].reshape(-1, 3, 3) + np.diag(_THETA_PRIOR**-2.0)

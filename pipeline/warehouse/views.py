@@ -18,10 +18,12 @@ schemas' docs do. The copy is attached to an in-memory DuckDB instance
 (:class:`ViewsEngine`: the ingest's context owns one; other callers share a module
 default). :meth:`ViewsEngine.warm_up` creates it in the background: building DuckDB's
 function catalog costs ~40 ms per instance, and a job would otherwise pay it at its very
-end, after the last write. Each view carries
-the digest of its statement as its comment (``duckdb_views().comment``), so an update
-rewrites only the views whose table changed since the file was written (an ingest changes
-three or four of ~30 tables); a missing or unreadable file is built from scratch.
+end, after the last write. Each snapshot view carries the digest of its statement and
+the snapshot it reads (Delta version, when its log entry was written, the schema's view
+code) as its comment (``duckdb_views().comment``), so an update reads the Delta log of,
+and rewrites, only the tables whose snapshot changed since the file was written (an
+ingest changes three or four of ~35 tables; opening a table's log costs ~3 ms); a
+missing or unreadable file is built from scratch.
 
 **Portable.** The snapshot views name their files relative to the warehouse folder
 (``tables/<name>/date=.../part-....parquet``), so a copied or moved warehouse reads its
@@ -54,7 +56,8 @@ import pyarrow as pa
 
 from pipeline.tables import column_comment, spec, table_specs
 from pipeline.warehouse.crashpoints import crash_point
-from pipeline.warehouse.delta import sql_literal, table_snapshot
+from pipeline.warehouse.delta import sql_literal, table_path, table_snapshot
+from pipeline.warehouse.pending import pinned_versions
 
 VIEWS_FILE = "surveil.duckdb"
 STORAGE_VERSION = "v1.0.0"  # the oldest storage format of DuckDB 1.x: every 1.x reads it
@@ -311,8 +314,9 @@ def _rebuild(engine: ViewsEngine, warehouse: Path) -> Path:
     warehouse = Path(warehouse)
     warehouse.mkdir(parents=True, exist_ok=True)
     target = warehouse / VIEWS_FILE
-    statements = {name: _current_view_sql(warehouse, name, SNAPSHOT_SCHEMA, root=warehouse)
-                  for name in table_specs()}
+    names = list(table_specs())
+    pins = pinned_versions(warehouse)
+    keys = {name: _snapshot_key(warehouse, name, pins) for name in names}
     tmp = warehouse / f".{VIEWS_FILE}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}"
     try:
         with engine._lock:
@@ -329,14 +333,21 @@ def _rebuild(engine: ViewsEngine, warehouse: Path) -> Path:
                 written = _view_digests(con)  # (the query costs ~10 ms)
                 main = _main_comments(con)
                 docs_changed = _macro_comment(con) != docs_digest
-                digests = {name: _digest(sql) for name, sql in statements.items()}
+                # a view whose comment names the snapshot readers see now is up to date:
+                # only the others' statements are made (~3 ms each: the Delta log read)
+                statements = {
+                    n: _current_view_sql(warehouse, n, SNAPSHOT_SCHEMA, root=warehouse)
+                    for n in names
+                    if keys[n] is None or written.get(n, "").partition(" ")[2] != keys[n]}
+                digests = {n: _digest(sql) + (f" {keys[n]}" if keys[n] else "")
+                           for n, sql in statements.items()}
                 changed = [n for n in statements if written.get(n) != digests[n]]
                 # a table no longer defined: its views (and those of older releases, which
                 # kept the digest as the comment of the view in main)
-                stale = [n for n in written if n not in statements]
+                stale = [n for n in written if n not in keys]
                 stale += [n for n, c in main.items()
-                          if c is not None and n not in statements and n not in stale]
-                main_changed = [n for n in statements
+                          if c is not None and n not in keys and n not in stale]
+                main_changed = [n for n in names
                                 if docs_changed or main.get(n) != spec(n).doc]
                 if copied and not changed and not stale and not main_changed:
                     os.utime(target)  # up to date with the tables (views_stale)
@@ -413,6 +424,34 @@ def refresh_views_file(warehouse: Path) -> bool:
         return False
     rebuild_views_file(warehouse)
     return True
+
+
+def _snapshot_key(warehouse: Path, name: str, pins: dict[str, int]) -> str | None:
+    """What a snapshot view's statement depends on besides the files: the schema's view
+    code (the digest of its empty view), the Delta version readers see (pinned or the
+    latest) and when that version's log entry was written (a table removed and made
+    anew reuses version numbers). None when the log entry is gone: always rebuilt."""
+    log = table_path(warehouse, name) / "_delta_log"
+    version = pins.get(name)
+    if version is None:
+        try:
+            found = [int(f[:-5]) for f in os.listdir(log)
+                     if f.endswith(".json") and f[:-5].isdigit()]
+        except (FileNotFoundError, NotADirectoryError):
+            found = []
+        version = max(found, default=-1)
+    if version < 0:
+        return f"{_empty_view_digest(name)}:none"
+    try:
+        written_ns = (log / f"{version:020d}.json").stat().st_mtime_ns
+    except FileNotFoundError:
+        return None
+    return f"{_empty_view_digest(name)}:{version}@{written_ns}"
+
+
+@functools.cache
+def _empty_view_digest(name: str) -> str:
+    return _digest(view_sql(name, [], SNAPSHOT_SCHEMA))[:12]
 
 
 def _digest(sql: str) -> str:

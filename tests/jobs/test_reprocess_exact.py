@@ -24,7 +24,7 @@ def snapshot(warehouse, names=(*DERIVED, "batch_units")) -> dict[str, pl.DataFra
     for name in names:
         t = pl.from_arrow(read_table(warehouse, name))
         if name == "batch_units":
-            t = t.drop("committed_at_ns")
+            t = t.drop("committed_at_ns", "window_start_ns", "window_end_ns")  # bookkeeping
         out[name] = t.sort(t.columns) if t.height else t
     return out
 
@@ -45,13 +45,14 @@ def test_sub_window_reprocess_gives_the_single_pass_rows(e2e, tmp_path):
     single = snapshot(wh)
     assert single["siap_by_sector"].height > 0 and single["system_tracks"].height > 0
     t0 = e2e.start_ns  # 00:50; the maritime units are [00:50, 01:00) and [01:00, 01:10)
-    windows = [(t0 + 12 * MIN, t0 + 15 * MIN),          # inside the second unit, unaligned
-               (t0, t0 + 10 * MIN),                      # the first unit, aligned
-               (t0 + 5 * MIN + 7 * NS, t0 + 15 * MIN)]  # across the seam, unaligned
-    for start, end in windows:
+    t1, t2 = t0 + 10 * MIN, e2e.end_ns  # (no nav data: no nav unit over the whole window)
+    windows = [(t0 + 12 * MIN, t0 + 15 * MIN, t1, t2),          # inside the second unit
+               (t0, t0 + 10 * MIN, t0, t1),                      # the first unit, aligned
+               (t0 + 5 * MIN + 7 * NS, t0 + 15 * MIN, t0, t2)]  # across the seam
+    for start, end, lo, hi in windows:
         res = run_reprocess(e2e.cfg, wh, start_ns=start, end_ns=end, executor_kind="serial")
         assert res.exit_code == 0, res.render()
-        assert (res.batch.start_ns, res.batch.end_ns) == (e2e.start_ns, e2e.end_ns)
+        assert (res.batch.start_ns, res.batch.end_ns) == (lo, hi)  # the units it overlaps
         assert_same(snapshot(wh), single, f"after reprocess [{start}, {end})")
     truth_epochs = pl.from_arrow(read_table(wh, "siap_by_sector"))["truth_epochs"].sum()
     assert truth_epochs == single["siap_by_sector"]["truth_epochs"].sum()

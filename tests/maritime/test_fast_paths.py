@@ -274,3 +274,40 @@ def test_shift_masked_by_same_key_equals_shift_over(seed: int) -> None:
     got = df.with_columns(pl.when(_same_as_previous(["a", "b"])).then(pl.col("v").shift(1)))
     want = df.with_columns(pl.col("v").shift(1).over(["a", "b"]))
     assert_frame_equal(got, want, check_exact=True)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_coasted_reports_equals_the_polars_reference(seed: int) -> None:
+    """integrity.coasted_reports (one numpy lexsort) against coasted_reports_polars:
+    repeats, NaN (equal to NaN in polars), -0.0, nulls, null sites, duplicate times."""
+    from pipeline.maritime.integrity import coasted_reports, coasted_reports_polars
+
+    rng = np.random.default_rng(seed)
+    n = 2000
+    values = np.array([0.5, 0.5, 1.0, np.nan, -0.0, 0.0])
+
+    def column(name: str) -> pl.Series:
+        v = pl.Series(name, values[rng.integers(0, values.size, n)])
+        return v.set(pl.Series(rng.random(n) < 0.05), None)
+
+    site = pl.Series("site_id", rng.choice(["R1", "R2", "R10"], n)).set(
+        pl.Series(rng.random(n) < 0.03), None)
+    df = pl.DataFrame({"site_id": site, "local_track_id": rng.integers(0, 6, n),
+                       "time_ns": rng.integers(0, 300, n),
+                       "course_rad": column("course_rad"), "speed_mps": column("speed_mps")})
+    key = ["site_id", "local_track_id", "time_ns"]
+    got = coasted_reports(df).sort(key, nulls_last=True)
+    want = coasted_reports_polars(df).sort(key, nulls_last=True)
+    assert got["coasted"].sum() > 50
+    assert_frame_equal(got, want, check_exact=True)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_rank_within_equals_int_range_over(seed: int) -> None:
+    from pipeline.maritime.integrity import _rank_within
+
+    rng = np.random.default_rng(seed)
+    df = pl.DataFrame({"k": np.sort(rng.integers(0, 20, 3000)),
+                       "m": rng.integers(0, 40, 3000)})
+    want = df.select(pl.int_range(pl.len()).over("k", "m"))["literal"].to_numpy()
+    np.testing.assert_array_equal(_rank_within(df["k"].to_numpy(), df["m"].to_numpy()), want)
