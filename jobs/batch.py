@@ -30,6 +30,9 @@ edge, the units committed after the window stitched their ids to the window's ol
 rows: when the batch changed those rows (the family's ``unit_seam`` of the rows just
 before the window's end differs), the next committed units are batched again, and so on
 until a window ends as it ended before (:func:`run_batch`, ``BatchSummary.continued``).
+That promise is written down before the window's commit (``_continue/``, with a digest
+of the rows at its end as they were): a job killed between the commit and the end of
+the chain leaves it there, and the next batch of the site runs the chain first.
 One-unit-per-window families plan no unit where their inputs hold no row (the ``nav``
 family in an archive without own-ship data), so they never own, nor widen a reprocess
 to, a window they have nothing in; a unit recorded before this rule without input rows
@@ -46,7 +49,9 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import itertools
+import json
 import logging
+import os
 import shutil
 import time
 from collections.abc import Callable, Iterator, Mapping, Sized
@@ -116,6 +121,7 @@ class BatchSummary:
     next_window: tuple[int, int] | None = None
     # the batches of those units (ids continued across the trailing edge)
     continued: list[BatchSummary] = field(default_factory=list)
+    continuation: Path | None = None  # its record (``_continue/``) until they are
 
     @property
     def exit_code(self) -> int:
@@ -403,6 +409,8 @@ class SitesSummary:
     by_site: dict[str, BatchSummary]
     asked_start_ns: int
     asked_end_ns: int
+    # chains a killed job left undone (``_continue/``), run before the window
+    resumed: list[BatchSummary] = field(default_factory=list)
 
     @property
     def start_ns(self) -> int:
@@ -437,23 +445,32 @@ class SitesSummary:
 
     @property
     def rows(self) -> dict[str, int]:
-        """Rows written per table, all sites (for run records; reports stay per site)."""
+        """Rows written per table, all sites (for run records; reports stay per site),
+        continued and resumed batches included."""
         out: dict[str, int] = {}
-        for b in self.by_site.values():
+        todo = [*self.by_site.values(), *self.resumed]
+        while todo:
+            b = todo.pop()
+            todo += b.continued
             for name, n in b.rows.items():
                 out[name] = out.get(name, 0) + n
         return out
 
     @property
     def exit_code(self) -> int:
-        return max((b.exit_code for b in self.by_site.values()), default=0)
+        return max((b.exit_code for b in [*self.by_site.values(), *self.resumed]),
+                   default=0)
 
     def render(self) -> str:
-        if not self.by_site:
-            return (f"batch window [{_iso(self.asked_start_ns)}, {_iso(self.asked_end_ns)}): "
-                    "no site has "
-                    "data in it; nothing written")
-        return "\n".join(b.render() for b in self.by_site.values())
+        lines = []
+        for r in self.resumed:
+            lines.append(f"site {r.site}: a killed job left the units after "
+                         f"{_iso(r.end_ns)} to batch again (the rows they continue changed)")
+            lines += ["  " + line for c in r.continued for line in c.render().splitlines()]
+        if not self.by_site and not self.resumed:
+            lines.append(f"batch window [{_iso(self.asked_start_ns)}, "
+                         f"{_iso(self.asked_end_ns)}): no site has data in it; nothing written")
+        return "\n".join([*lines, *(b.render() for b in self.by_site.values())])
 
 
 def sites_in(warehouse: Path, start_ns: int, end_ns: int) -> list[str]:
@@ -491,20 +508,49 @@ def run_batch(
     sites = [site] if site is not None else sites_in(warehouse, start_ns, end_ns)
     out = SitesSummary({}, start_ns, end_ns)
     for name in sites:
+        out.resumed += resume_continuations(cfg, warehouse, site=name,  # a killed job's first
+                                            executor_kind=executor_kind, progress=progress)
         summary = _run_site(cfg, warehouse, start_ns=start_ns, end_ns=end_ns,
                             executor_kind=executor_kind, families=families,
                             progress=progress, site=name)
         out.by_site[name] = summary
-        while summary.next_window is not None and summary.exit_code == 0:
-            # (a chain: each continued batch may change the rows the next units continue)
-            nxt = _run_site(cfg, warehouse, start_ns=summary.next_window[0],
-                            end_ns=summary.next_window[1], executor_kind=executor_kind,
-                            families=None, progress=progress, site=name)
-            summary.continued.append(nxt)
-            summary = nxt
+        _continue(cfg, warehouse, summary, executor_kind, progress)
     with deferred_interrupts():
         rebuild_views_file(warehouse)
     return out
+
+
+def resume_continuations(cfg: Config, warehouse: Path, *, site: str | None = None,
+                         executor_kind: str | None = None, progress: Any = None
+                         ) -> list[BatchSummary]:
+    """Run the chains killed jobs left undone (``_continue/``: the rows at a window's
+    end changed, the units after it not batched again yet), of ``site`` or of every
+    site; one summary per record (its ``continued`` batches)."""
+    out = []
+    for left in _left_continuations(warehouse, site):
+        first = BatchSummary(left.end_ns, left.end_ns, site=left.site, committed=True,
+                             next_window=_units_after(warehouse, left.families,
+                                                      left.end_ns, left.site))
+        _continue(cfg, warehouse, first, executor_kind, progress)
+        if first.exit_code == 0:
+            _drop(left.path)
+        out.append(first)
+    return out
+
+
+def _continue(cfg: Config, warehouse: Path, summary: BatchSummary,
+              executor_kind: str | None, progress: Any) -> None:
+    """Batch again the units after ``summary``'s window while the rows they continue
+    changed (a chain: each batch may change the rows the next units continue); each
+    link's continuation record is removed once the link after it committed."""
+    while summary.next_window is not None and summary.exit_code == 0:
+        nxt = _run_site(cfg, warehouse, start_ns=summary.next_window[0],
+                        end_ns=summary.next_window[1], executor_kind=executor_kind,
+                        families=None, progress=progress, site=summary.site)
+        summary.continued.append(nxt)
+        if nxt.committed and summary.continuation is not None:
+            _drop(summary.continuation)
+        summary = nxt
 
 
 def _run_site(
@@ -560,12 +606,18 @@ def _run_site(
         shutil.rmtree(staging, ignore_errors=True)
         return summary
     t0 = time.perf_counter()
+    record = _promise_continuation(warehouse, site, end_ns, edge_before)
     with deferred_interrupts():  # the window's commit is whole or not begun
         _commit(warehouse, manifests, summary, fams, units)
     summary.commit_s = time.perf_counter() - t0
+    crash_point("batch.continuation")
     changed = [name for name, seam in _trailing_seams(warehouse, fams, end_ns, site).items()
-               if not _same_seam(seam, edge_before.get(name))]
+               if _seam_digest(seam) != _seam_digest(edge_before.get(name))]
     summary.next_window = _units_after(warehouse, changed, end_ns, site)
+    if summary.next_window is None:
+        _drop(record)
+    else:
+        summary.continuation = record
     shutil.rmtree(staging, ignore_errors=True)
     with contextlib.suppress(OSError):  # only when empty: another job may be staging
         (warehouse / "_staging").rmdir()
@@ -660,13 +712,71 @@ def _trailing_seams(warehouse: Path, fams: tuple[Family, ...], end_ns: int,
             and fam.stitch_lookback_s}
 
 
-def _same_seam(a: Any, b: Any) -> bool:
-    """Two seams hold the same rows (frames in any order)."""
-    if isinstance(a, pl.DataFrame) and isinstance(b, pl.DataFrame):
-        if a.columns != b.columns or a.height != b.height:
-            return False
-        return a.sort(a.columns).equals(b.sort(b.columns))
-    return bool(a == b)
+def _seam_digest(seam: Any) -> str:
+    """sha256 of a seam's rows (a frame in any row order, or any value's repr)."""
+    if isinstance(seam, pl.DataFrame):
+        text = seam.sort(seam.columns).write_csv() if seam.height else ",".join(seam.columns)
+    else:
+        text = repr(seam)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+CONTINUE_DIR = "_continue"
+
+
+@dataclass(frozen=True)
+class _Continuation:
+    """A continuation record left by a killed job (``_continue/``)."""
+
+    path: Path
+    site: str
+    end_ns: int
+    families: list[str]
+
+
+def _promise_continuation(warehouse: Path, site: str | None, end_ns: int,
+                          seams: dict[str, Any]) -> Path:
+    """Record, before a window's commit, the digests of the rows at its end (atomic
+    write): if the job dies before the units after it are batched again, the next batch
+    finds the rows changed and does it (:func:`_left_continuations`)."""
+    folder = warehouse / CONTINUE_DIR
+    folder.mkdir(exist_ok=True)
+    doc = {"site": site, "end_ns": end_ns,
+           "digests": {name: _seam_digest(seam) for name, seam in seams.items()}}
+    path = folder / f"{_safe(site or '')}-{end_ns}-{time.time_ns()}.json"
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(json.dumps(doc))
+    os.replace(tmp, path)
+    return path
+
+
+def _left_continuations(warehouse: Path, site: str | None) -> list[_Continuation]:
+    """The continuation records (of ``site``, or all) left by killed jobs whose window's
+    end changed (those whose rows did not change, a job killed before its commit, are
+    removed)."""
+    out = []
+    for path in sorted((warehouse / CONTINUE_DIR).glob("*.json")):
+        try:
+            doc = json.loads(path.read_text())
+        except (OSError, ValueError):
+            continue
+        if site is not None and doc.get("site") != site:
+            continue
+        fams = tuple(family(n) for n in doc["digests"])
+        now = _trailing_seams(warehouse, fams, doc["end_ns"], doc["site"])
+        changed = [n for n, d in doc["digests"].items() if _seam_digest(now.get(n)) != d]
+        if changed:
+            out.append(_Continuation(path, doc["site"], doc["end_ns"], changed))
+        else:
+            _drop(path)
+    return out
+
+
+def _drop(record: Path) -> None:
+    """Remove a continuation record (and its folder once empty)."""
+    record.unlink(missing_ok=True)
+    with contextlib.suppress(OSError):
+        record.parent.rmdir()
 
 
 def _units_after(warehouse: Path, families: list[str], end_ns: int, site: str | None

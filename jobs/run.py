@@ -27,7 +27,7 @@ from typing import Any
 
 import polars as pl
 
-from jobs.batch import SitesSummary, run_batch
+from jobs.batch import SitesSummary, resume_continuations, run_batch
 from jobs.common import UsageError, iso
 from jobs.ingest import expand_paths, run_ingest
 from pipeline import tables
@@ -173,6 +173,15 @@ def run_nightly(cfg: Config, warehouse: Path, *, folders: list[str] | None = Non
     summary.failures += [f"ingest {path}: {err}" for path, err in summary.ingest.failed]
     summary.failures += [f"ingest {path}: {status}" for path, status in summary.files.items()
                          if status == "quarantined"]
+    # chains a killed job left (the rows at a window's end changed, the units after it
+    # not batched again): done first, even when no window is pending
+    resumed = resume_continuations(cfg, warehouse, site=site, executor_kind=executor_kind,
+                                   progress=progress)
+    if resumed:
+        summary.batches.append(SitesSummary({}, 0, 0, resumed=resumed))
+        summary.windows += [(c.start_ns, c.end_ns) for r in resumed for c in r.continued]
+        summary.failures += [f"batch [{iso(c.start_ns)}, {iso(c.end_ns)}): {u}"
+                             for r in resumed for c in r.continued for u in c.failed_units]
     pending = [(start, end, name) for name, windows in pending_by_site(warehouse).items()
                if site in (None, name) for start, end in windows]
     for start, end, name in sorted(pending):

@@ -49,6 +49,8 @@ AUDIT_TABLES = ("siap_by_sector", "cross_track_by_leg")
 # channel integrity (issue 22): every radar per sector and every AIS transponder
 INTEGRITY_TABLES = ("maritime_channel_health",)
 OUTPUTS = DERIVED_TABLES + AUDIT_TABLES + INTEGRITY_TABLES
+
+
 def continuity_margins_s(cfg: Config) -> tuple[float, float]:
     """(lead-in, look-ahead) a unit tracks beyond its window, s: the identity vote's
     window on either side, plus ``[channel_integrity] unit_settle_s`` before (at least

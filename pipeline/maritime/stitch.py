@@ -16,6 +16,8 @@ import itertools
 
 import polars as pl
 
+from pipeline.units import NS
+
 SEAM_S = 60.0
 """The overlap the stitch compares, s: two association track timeouts (a track seen in
 it is alive at the seam, even if it coasts through the seam's epoch)."""
@@ -73,7 +75,7 @@ def unit_seam(outputs: dict[str, pl.DataFrame]) -> pl.DataFrame:
     a = outputs["associations"].select(cols)
     parts = []
     if a.height:
-        last = a["time_ns"].max() - round(SEAM_S * 1e9)
+        last = a["time_ns"].max() - round(SEAM_S * NS)
         parts.append(a.filter(pl.col("time_ns") > last).with_columns(part=pl.lit("tail")))
     lead = outputs.get(LEAD_ASSOCIATIONS)
     if lead is not None and lead.height:

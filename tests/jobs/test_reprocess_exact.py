@@ -5,8 +5,10 @@ continue across a window's leading edge."""
 from __future__ import annotations
 
 import shutil
+from pathlib import Path
 
 import polars as pl
+import pytest
 from polars.testing import assert_frame_equal
 
 from jobs.batch import run_batch
@@ -124,3 +126,62 @@ def test_changed_rows_at_a_windows_end_carry_on_into_the_next_units(e2e, tmp_pat
     # the same batch again changes nothing at the edge: no continuation
     res = run_batch(strict, wh, start_ns=e2e.start_ns, end_ns=seam, executor_kind="serial")
     assert [c for s in res.by_site.values() for c in s.continued] == []
+
+
+class _Killed(BaseException):
+    pass
+
+
+@pytest.mark.parametrize("resumed_by", ["batch", "run"])
+def test_a_job_killed_before_its_chain_leaves_it_to_the_next_batch(e2e, tmp_path,
+                                                                   monkeypatch, resumed_by):
+    """The chain above is promised in ``_continue/`` before the window's commit: killed
+    right after the commit (before the units after it were batched again), the next
+    batch of the site finds the rows at the window's end changed and runs the chain
+    first; a job killed before its commit leaves a record the next batch drops."""
+    import jobs.batch
+    from pipeline.families import config_from_mapping
+
+    strict = config_from_mapping(
+        {**e2e.cfg.sections,
+         "association": {**e2e.cfg.section("association"), "gate_probability": 0.9,
+                         "max_speed_difference_mps": 1.0}},
+        e2e.cfg.source)
+    seam = e2e.start_ns + 10 * MIN
+    maritime = family("maritime").outputs
+    wh, one = tmp_path / "wh", tmp_path / "one"
+    for path in (wh, one):
+        shutil.copytree(e2e.warehouse, path)
+        for name in (*DERIVED, "batch_units"):
+            shutil.rmtree(table_path(path, name), ignore_errors=True)
+    for start, end in ((e2e.start_ns, seam), (seam, e2e.end_ns)):
+        assert run_batch(e2e.cfg, wh, start_ns=start, end_ns=end,
+                         executor_kind="serial").exit_code == 0
+
+    def kill_at(name: str):
+        def crash(point: str) -> None:
+            if point == name:
+                raise _Killed(point)
+        return crash
+
+    monkeypatch.setattr(jobs.batch, "crash_point", kill_at("batch.continuation"))
+    with pytest.raises(_Killed):
+        run_batch(strict, wh, start_ns=e2e.start_ns, end_ns=seam, executor_kind="serial")
+    monkeypatch.setattr(jobs.batch, "crash_point", lambda point: None)
+    assert len(list((wh / "_continue").glob("*.json"))) == 1
+    if resumed_by == "batch":  # the next batch of the site (the first window again)
+        res = run_batch(strict, wh, start_ns=e2e.start_ns, end_ns=seam,
+                        executor_kind="serial")
+        assert [(c.start_ns, c.end_ns) for r in res.resumed for c in r.continued] == [
+            (seam, e2e.end_ns)]
+        assert "a killed job left the units after" in res.render()
+    else:  # the nightly run: no file changed, no window pending, the chain is run
+        from jobs.run import run_nightly
+        res = run_nightly(strict, wh, folders=[str(Path(e2e.archive[0]).parent)],
+                          executor_kind="serial")
+        assert res.windows == [(seam, e2e.end_ns)] and not res.files
+    assert res.exit_code == 0, res.render()
+    assert list((wh / "_continue").glob("*.json")) == []
+    assert run_batch(strict, one, start_ns=e2e.start_ns, end_ns=e2e.end_ns,
+                     executor_kind="serial").exit_code == 0
+    assert_same(snapshot(wh, maritime), snapshot(one, maritime), "after the resumed chain")
