@@ -95,23 +95,8 @@ def test_changed_rows_at_a_windows_end_carry_on_into_the_next_units(e2e, tmp_pat
     config) left the units after it continuing the old ids: a track break at the edge.
     Now the next committed units are batched again until a window ends as before: here
     the second window, so both windows equal one pass under the new config."""
-    from pipeline.families import config_from_mapping
-
-    strict = config_from_mapping(
-        {**e2e.cfg.sections,
-         "association": {**e2e.cfg.section("association"), "gate_probability": 0.9,
-                         "max_speed_difference_mps": 1.0}},
-        e2e.cfg.source)
-    seam = e2e.start_ns + 10 * MIN  # 01:00
+    strict, seam, wh, one = _two_windows_and_a_new_config(e2e, tmp_path)
     maritime = family("maritime").outputs
-    wh, one = tmp_path / "wh", tmp_path / "one"
-    for path in (wh, one):
-        shutil.copytree(e2e.warehouse, path)
-        for name in (*DERIVED, "batch_units"):
-            shutil.rmtree(table_path(path, name), ignore_errors=True)
-    for start, end in ((e2e.start_ns, seam), (seam, e2e.end_ns)):
-        assert run_batch(e2e.cfg, wh, start_ns=start, end_ns=end,
-                         executor_kind="serial").exit_code == 0
     before = snapshot(wh, maritime)
     res = run_batch(strict, wh, start_ns=e2e.start_ns, end_ns=seam, executor_kind="serial")
     assert res.exit_code == 0, res.render()
@@ -140,23 +125,8 @@ def test_a_job_killed_before_its_chain_leaves_it_to_the_next_batch(e2e, tmp_path
     batch of the site finds the rows at the window's end changed and runs the chain
     first; a job killed before its commit leaves a record the next batch drops."""
     import jobs.batch
-    from pipeline.families import config_from_mapping
-
-    strict = config_from_mapping(
-        {**e2e.cfg.sections,
-         "association": {**e2e.cfg.section("association"), "gate_probability": 0.9,
-                         "max_speed_difference_mps": 1.0}},
-        e2e.cfg.source)
-    seam = e2e.start_ns + 10 * MIN
+    strict, seam, wh, one = _two_windows_and_a_new_config(e2e, tmp_path)
     maritime = family("maritime").outputs
-    wh, one = tmp_path / "wh", tmp_path / "one"
-    for path in (wh, one):
-        shutil.copytree(e2e.warehouse, path)
-        for name in (*DERIVED, "batch_units"):
-            shutil.rmtree(table_path(path, name), ignore_errors=True)
-    for start, end in ((e2e.start_ns, seam), (seam, e2e.end_ns)):
-        assert run_batch(e2e.cfg, wh, start_ns=start, end_ns=end,
-                         executor_kind="serial").exit_code == 0
 
     def kill_at(name: str):
         def crash(point: str) -> None:
@@ -185,3 +155,26 @@ def test_a_job_killed_before_its_chain_leaves_it_to_the_next_batch(e2e, tmp_path
     assert run_batch(strict, one, start_ns=e2e.start_ns, end_ns=e2e.end_ns,
                      executor_kind="serial").exit_code == 0
     assert_same(snapshot(wh, maritime), snapshot(one, maritime), "after the resumed chain")
+
+
+def _two_windows_and_a_new_config(e2e, tmp_path):
+    """(a stricter association config, the seam at 01:00, a warehouse with the e2e
+    window batched as two windows [00:50, 01:00) and [01:00, 01:10), a warehouse with
+    the raw tables only)."""
+    from pipeline.families import config_from_mapping
+
+    strict = config_from_mapping(
+        {**e2e.cfg.sections,
+         "association": {**e2e.cfg.section("association"), "gate_probability": 0.9,
+                         "max_speed_difference_mps": 1.0}},
+        e2e.cfg.source)
+    seam = e2e.start_ns + 10 * MIN
+    wh, one = tmp_path / "wh", tmp_path / "one"
+    for path in (wh, one):
+        shutil.copytree(e2e.warehouse, path)
+        for name in (*DERIVED, "batch_units"):
+            shutil.rmtree(table_path(path, name), ignore_errors=True)
+    for start, end in ((e2e.start_ns, seam), (seam, e2e.end_ns)):
+        assert run_batch(e2e.cfg, wh, start_ns=start, end_ns=end,
+                         executor_kind="serial").exit_code == 0
+    return strict, seam, wh, one
