@@ -573,7 +573,7 @@ def _run_site(
     staging = warehouse / "_staging" / f"batch-{_safe(site)}-{start_ns}-{end_ns}"
     shutil.rmtree(staging, ignore_errors=True)
     units = plan_units(warehouse, cfg, start_ns, end_ns, staging, fams, committed_cuts, site)
-    edge_before = _trailing_seams(warehouse, fams, end_ns, site)
+    edge_before = _trailing_digests(warehouse, fams, end_ns, site)
     summary = BatchSummary(start_ns=start_ns, end_ns=end_ns, units_total=len(units),
                            requested=None if requested == (start_ns, end_ns) else requested,
                            site=site)
@@ -611,8 +611,8 @@ def _run_site(
         _commit(warehouse, manifests, summary, fams, units)
     summary.commit_s = time.perf_counter() - t0
     crash_point("batch.continuation")
-    changed = [name for name, seam in _trailing_seams(warehouse, fams, end_ns, site).items()
-               if _seam_digest(seam) != _seam_digest(edge_before.get(name))]
+    edge_after = _trailing_digests(warehouse, fams, end_ns, site)
+    changed = [name for name, digest in edge_after.items() if digest != edge_before.get(name)]
     summary.next_window = _units_after(warehouse, changed, end_ns, site)
     if summary.next_window is None:
         _drop(record)
@@ -712,6 +712,13 @@ def _trailing_seams(warehouse: Path, fams: tuple[Family, ...], end_ns: int,
             and fam.stitch_lookback_s}
 
 
+def _trailing_digests(warehouse: Path, fams: tuple[Family, ...], end_ns: int,
+                      site: str | None) -> dict[str, str]:
+    """:func:`_seam_digest` of each :func:`_trailing_seams`."""
+    return {name: _seam_digest(seam)
+            for name, seam in _trailing_seams(warehouse, fams, end_ns, site).items()}
+
+
 def _seam_digest(seam: Any) -> str:
     """sha256 of a seam's rows (a frame in any row order, or any value's repr)."""
     if isinstance(seam, pl.DataFrame):
@@ -735,14 +742,14 @@ class _Continuation:
 
 
 def _promise_continuation(warehouse: Path, site: str | None, end_ns: int,
-                          seams: dict[str, Any]) -> Path:
+                          digests: dict[str, str]) -> Path:
     """Record, before a window's commit, the digests of the rows at its end (atomic
     write): if the job dies before the units after it are batched again, the next batch
     finds the rows changed and does it (:func:`_left_continuations`)."""
     folder = warehouse / CONTINUE_DIR
     folder.mkdir(exist_ok=True)
     doc = {"site": site, "end_ns": end_ns,
-           "digests": {name: _seam_digest(seam) for name, seam in seams.items()}}
+           "digests": digests}
     path = folder / f"{_safe(site or '')}-{end_ns}-{time.time_ns()}.json"
     tmp = path.with_suffix(".tmp")
     tmp.write_text(json.dumps(doc))
@@ -763,8 +770,8 @@ def _left_continuations(warehouse: Path, site: str | None) -> list[_Continuation
         if site is not None and doc.get("site") != site:
             continue
         fams = tuple(family(n) for n in doc["digests"])
-        now = _trailing_seams(warehouse, fams, doc["end_ns"], doc["site"])
-        changed = [n for n, d in doc["digests"].items() if _seam_digest(now.get(n)) != d]
+        now = _trailing_digests(warehouse, fams, doc["end_ns"], doc["site"])
+        changed = [n for n, d in doc["digests"].items() if now.get(n) != d]
         if changed:
             out.append(_Continuation(path, doc["site"], doc["end_ns"], changed))
         else:
