@@ -18,8 +18,9 @@ commit leaves the previous data of the window untouched.
 **Units own rows.** Every committed unit is recorded in ``batch_units`` (family, start,
 end). A batch whose window overlaps committed units is widened to cover them whole
 (:func:`owned_window`, repeated until no unit straddles an edge), and each family's units
-inside are cut as a single pass cuts them: at its unit grid, and, for a family without a
-grid (one unit per window), at the edges of its committed units. So a reprocess of any
+inside are cut as a single pass cuts them: at its unit grid and inside each grid cell
+by that whole cell's volume (:func:`unit_cuts`), and, for a family without a grid (one
+unit per window), at the edges of its committed units. So a reprocess of any
 sub-window re-runs exactly the units that own it, with the same inputs, and replaces
 their rows: an aggregate row keyed by its unit (``siap_by_sector``) is replaced, never
 left beside a new one, and every table equals the single-pass result. A family with a
@@ -76,9 +77,9 @@ from pipeline.warehouse.delta import (
     read_table,
     replace_rows,
     replace_window,
+    rows_per_second,
     sql_literal,
     volume_cuts,
-    volume_profile,
 )
 from pipeline.warehouse.staged import StagedFile, TableStager, commit_window, read_staged
 from pipeline.warehouse.views import rebuild_views_file, warm_up
@@ -372,26 +373,15 @@ def plan_units(
     committed_cuts: dict[str, list[int]] | None = None,
     site: str | None = None,
 ) -> list[BatchUnit]:
-    """Cut [start_ns, end_ns) into each family's work units: at UTC multiples of its
-    ``unit_s`` (or one unit for the whole window), and, for a family with
-    ``unit_rows``, wherever the volume of its ``unit_table`` calls for more cuts. A
+    """Cut [start_ns, end_ns) into each family's work units (:func:`unit_cuts`). A
     family with one unit per window plans none where its inputs hold no row
     (:func:`has_input_rows`): a unit it does not need would own, and a reprocess of any
     part of it would re-run, the whole window."""
     derived = frozenset(n for f in FAMILIES for n in f.outputs)
     units = []
     for fam in families:
-        if fam.unit_s is None:  # and the edges of its committed units (owned_window)
-            kept = (committed_cuts or {}).get(fam.name, [])
-            cuts = sorted({start_ns, end_ns, *kept})
-        else:
-            step = fam.unit_s * NS
-            cuts = [start_ns, *range((start_ns // step + 1) * step, end_ns, step), end_ns]
-        if fam.unit_rows is not None and fam.unit_table:
-            first, last, rows = volume_profile(warehouse, fam.unit_table, start_ns, end_ns,
-                                               site)
-            extra = volume_cuts(first, last, rows, start_ns, end_ns, fam.unit_rows)
-            cuts = sorted(set(cuts) | set(extra))
+        kept = (committed_cuts or {}).get(fam.name, [])
+        cuts = unit_cuts(warehouse, fam, start_ns, end_ns, kept, site)
         pieces = [(a, b) for a, b in itertools.pairwise(cuts) if b > a]
         if fam.unit_s is None:
             pieces = [(a, b) for a, b in pieces
@@ -399,6 +389,33 @@ def plan_units(
         units += [BatchUnit(str(warehouse), str(staging_dir), a, b, cfg, fam.name, site=site)
                   for a, b in pieces]
     return units
+
+
+def unit_cuts(warehouse: Path, fam: Family, start_ns: int, end_ns: int,
+              kept: list[int], site: str | None = None) -> list[int]:
+    """``fam``'s unit edges in [start_ns, end_ns), both ends included.
+
+    A family with a ``unit_s`` grid is cut at its UTC multiples, and, with ``unit_rows``,
+    inside each grid cell wherever the rows of its ``unit_table`` in the *whole cell*
+    call for it (:func:`volume_cuts`, on whole seconds). So the cuts are a function of
+    the cell's rows and the config, not of the window asked for nor of the files that
+    hold the rows: a day batched at once, hour by hour or reprocessed over any
+    sub-window (widened to the committed units it touches) is cut at the same times and
+    its units see the same inputs. A family without a grid (one unit per window) is
+    cut at ``kept``, the edges of its committed units (:func:`owned_window`), and by
+    volume over the window."""
+    if fam.unit_s is None:
+        cuts = {start_ns, end_ns, *kept}
+        cells = [(start_ns, end_ns)]
+    else:
+        step = fam.unit_s * NS
+        cells = [(t, t + step) for t in range(start_ns // step * step, end_ns, step)]
+        cuts = {start_ns, end_ns, *(a for a, _ in cells if a > start_ns)}
+    if fam.unit_rows is not None and fam.unit_table:
+        for a, b in cells:  # one cell's time column at a time
+            per_s = rows_per_second(warehouse, fam.unit_table, a, b, site)
+            cuts |= {c for c in volume_cuts(per_s, a, fam.unit_rows) if start_ns < c < end_ns}
+    return sorted(cuts)
 
 
 @dataclass

@@ -27,10 +27,10 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.dataset as pds
-import pyarrow.parquet as pq
 from deltalake import DeltaTable, WriterProperties, write_deltalake
 
 from pipeline.tables import conform, empty, spec
+from pipeline.units import NS
 from pipeline.warehouse.pending import pinned_versions
 
 NS_PER_DAY = 86_400 * 10**9
@@ -341,77 +341,30 @@ def empty_table(name: str) -> pa.Table:
     return empty(name)
 
 
-def volume_profile(warehouse: Path, name: str, start_ns: int, end_ns: int,
-                   site: str | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Where ``name``'s rows lie in time, from metadata only: per Parquet row group of the
-    current snapshot overlapping ``[start_ns, end_ns)``, its (first time, last time, rows)
-    on the table's time column (the footers' statistics; no row is read). Row groups of
-    ingested tables hold ~64 Ki rows sorted by time, so this locates the rows to a few
-    seconds in a busy hour. Empty arrays when the table does not exist. ``site``: files
-    of other sites (by their ``site`` statistics) are left out, so a site's units are cut
-    by its own volume."""
-    s = spec(name)
-    empty = (np.empty(0, np.int64), np.empty(0, np.int64), np.empty(0, np.int64))
-    if not table_exists(warehouse, name) or not s.time_column:
-        return empty
-    dt = DeltaTable(str(table_path(warehouse, name)))
-    adds = pa.table(dt.get_add_actions(flatten=True))
-    lo_col, hi_col = f"min.{s.time_column}", f"max.{s.time_column}"
-    if adds.num_rows == 0:
-        return empty
-    lo = adds[lo_col].to_numpy(zero_copy_only=False) if lo_col in adds.column_names else None
-    hi = adds[hi_col].to_numpy(zero_copy_only=False) if hi_col in adds.column_names else None
-    root = table_path(warehouse, name)
-    names = adds.column_names
-    s_lo = adds["min.site"].to_pylist() if site is not None and "min.site" in names else None
-    s_hi = adds["max.site"].to_pylist() if site is not None and "max.site" in names else None
-    first, last, rows = [], [], []
-    for k, path in enumerate(adds["path"].to_pylist()):
-        if lo is not None and hi is not None and (hi[k] < start_ns or lo[k] >= end_ns):
-            continue
-        if s_lo is not None and s_hi is not None and (s_hi[k] < site or s_lo[k] > site):
-            continue  # another site's file
-        md = pq.ParquetFile(root / path).metadata
-        idx = md.schema.names.index(s.time_column)
-        for g in range(md.num_row_groups):
-            rg = md.row_group(g)
-            st = rg.column(idx).statistics
-            if st is None or not st.has_min_max:  # no statistics: spread over the file
-                a, b = (int(lo[k]), int(hi[k])) if lo is not None else (start_ns, end_ns - 1)
-            else:
-                a, b = int(st.min), int(st.max)
-            if b < start_ns or a >= end_ns:
-                continue
-            first.append(a)
-            last.append(b)
-            rows.append(rg.num_rows)
-    return (np.asarray(first, np.int64), np.asarray(last, np.int64),
-            np.asarray(rows, np.int64))
+def rows_per_second(warehouse: Path, name: str, start_ns: int, end_ns: int,
+                    site: str | None = None) -> np.ndarray:
+    """How many of ``name``'s rows (of ``site``, when given) fall in each second of
+    ``[start_ns, end_ns)`` (counted from ``start_ns``), from its time column alone. A
+    function of the rows, not of how the files hold them: a window re-ingested into
+    other files has the same profile."""
+    time_col = spec(name).time_column
+    n_s = -(-(end_ns - start_ns) // NS)
+    t = read_table(warehouse, name, start_ns=start_ns, end_ns=end_ns, columns=[time_col],
+                   sort=False, site=site)
+    seconds = (t[time_col].to_numpy() - start_ns) // NS
+    return np.bincount(seconds, minlength=n_s)
 
 
-def volume_cuts(first: np.ndarray, last: np.ndarray, rows: np.ndarray, start_ns: int,
-                end_ns: int, max_rows: int) -> list[int]:
-    """Cut times inside ``(start_ns, end_ns)`` so that no piece holds more than about
-    ``max_rows`` rows, the rows of each row group (``volume_profile``) taken as spread
-    evenly over its time span. Returns the interior cuts, ascending."""
-    if rows.size == 0 or rows.sum() <= max_rows:
+def volume_cuts(rows_per_s: np.ndarray, start_ns: int, max_rows: int) -> list[int]:
+    """Cut times (whole seconds after ``start_ns``) that split the rows counted by
+    ``rows_per_s`` (:func:`rows_per_second`) into the fewest pieces of at most about
+    ``max_rows`` rows each (one second's rows over), as even as whole seconds allow.
+    Returns the interior cuts, ascending."""
+    total = int(rows_per_s.sum())
+    if total <= max_rows:
         return []
-    a = np.maximum(first, start_ns).astype(float)
-    b = np.minimum(last, end_ns - 1).astype(float) + 1.0
-    frac = (b - a) / np.maximum(last - first + 1, 1)
-    n = rows * np.clip(frac, 0.0, 1.0)
-    # piecewise-linear cumulative count over the union of breakpoints
-    edges = np.unique(np.concatenate([[start_ns, end_ns], a, b]))
-    edges = edges[(edges >= start_ns) & (edges <= end_ns)]
-    density = np.zeros(edges.size - 1)
-    for lo, hi, cnt in zip(a, b, n, strict=True):
-        i0, i1 = np.searchsorted(edges, lo), np.searchsorted(edges, hi)
-        width = edges[i1] - edges[i0]
-        if width > 0:
-            density[i0:i1] += cnt / width
-    cum = np.r_[0.0, np.cumsum(density * np.diff(edges))]
-    total = cum[-1]
-    k = int(np.ceil(total / max_rows))
+    k = -(-total // max_rows)
     targets = total * np.arange(1, k) / k
-    cuts = np.interp(targets, cum, edges)
-    return sorted({int(c) for c in cuts if start_ns < c < end_ns})
+    after = np.searchsorted(np.cumsum(rows_per_s), targets) + 1  # seconds before the cut
+    end_s = rows_per_s.size
+    return sorted({start_ns + int(s) * NS for s in after if 0 < s < end_s})

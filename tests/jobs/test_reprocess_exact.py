@@ -5,6 +5,7 @@ continue across a window's leading edge."""
 from __future__ import annotations
 
 import shutil
+from dataclasses import replace
 from pathlib import Path
 
 import polars as pl
@@ -19,6 +20,7 @@ from pipeline.warehouse.delta import read_table, table_path
 
 DERIVED = [name for fam in FAMILIES for name in fam.outputs]
 MIN = 60 * NS
+UNIT_SETTLE_S = 0.0
 
 
 def snapshot(warehouse, names=(*DERIVED, "batch_units")) -> dict[str, pl.DataFrame]:
@@ -178,3 +180,47 @@ def _two_windows_and_a_new_config(e2e, tmp_path):
         assert run_batch(e2e.cfg, wh, start_ns=start, end_ns=end,
                          executor_kind="serial").exit_code == 0
     return strict, seam, wh, one
+
+
+def test_a_reprocess_cuts_volume_units_where_the_single_pass_cut_them(e2e, tmp_path,
+                                                                      monkeypatch):
+    """Was: a reprocess cut a volume-cut family (maritime, ``unit_rows``) over its own
+    widened window, not where the units it replaces were cut: other units, other rows
+    where the unit overlap is not exact (``unit_settle_s = 0``), and the trailing-edge
+    chain re-batching every later window (the 24 h region day's 1-hour reprocess ran
+    half the day again). Now the cuts are a function of each hour's rows: the e2e window
+    in ~8 volume units, reprocessed over unaligned sub-windows across several of them,
+    keeps every table and ``batch_units`` row for row and continues nothing."""
+    import jobs.batch
+    import pipeline.families
+    from pipeline.families import config_from_mapping
+
+    cfg = config_from_mapping(
+        {**e2e.cfg.sections, "channel_integrity": {
+            **e2e.cfg.section("channel_integrity"), "unit_settle_s": UNIT_SETTLE_S}},
+        e2e.cfg.source)
+    wh = tmp_path / "wh"
+    shutil.copytree(e2e.warehouse, wh)
+    for name in (*DERIVED, "batch_units"):
+        shutil.rmtree(table_path(wh, name), ignore_errors=True)
+    rows = read_table(wh, "radar_tracks", start_ns=e2e.start_ns, end_ns=e2e.end_ns,
+                      columns=["time_ns"], sort=False).num_rows
+    small = tuple(replace(f, unit_rows=rows // 8) if f.name == "maritime" else f
+                  for f in FAMILIES)
+    monkeypatch.setattr(pipeline.families, "FAMILIES", small, raising=False)
+    monkeypatch.setattr(jobs.batch, "FAMILIES", small)
+    res = run_batch(cfg, wh, start_ns=e2e.start_ns, end_ns=e2e.end_ns, executor_kind="serial")
+    assert res.exit_code == 0, res.render()
+    single = snapshot(wh)
+    edges = single["batch_units"].filter(pl.col("family") == "maritime")["start_ns"].sort()
+    assert edges.len() >= 6
+    t0 = e2e.start_ns
+    for start, end in ((t0 + 3 * MIN + 11 * NS, t0 + 14 * MIN + 5 * NS),   # across 01:00
+                       (t0 + 1 * MIN, t0 + 7 * MIN),
+                       (t0 + 12 * MIN + 30 * NS, e2e.end_ns - 17 * NS)):
+        res = run_reprocess(cfg, wh, start_ns=start, end_ns=end, executor_kind="serial")
+        assert res.exit_code == 0, res.render()
+        spanned = edges.filter((edges > res.batch.start_ns) & (edges < res.batch.end_ns))
+        assert spanned.len() >= 1  # the reprocess re-ran several volume units
+        assert [c for s in res.batch.by_site.values() for c in s.continued] == []
+        assert_same(snapshot(wh), single, f"after reprocess [{start}, {end})")

@@ -9,25 +9,24 @@ import shutil
 
 import numpy as np
 import polars as pl
-import pytest
 
 from jobs import batch
 from pipeline.families import FAMILIES
-from pipeline.warehouse.delta import read_table, volume_cuts, volume_profile
+from pipeline.units import NS
+from pipeline.warehouse.delta import read_table, volume_cuts
 
 
 def test_volume_cuts_balance_rows() -> None:
-    first = np.array([0, 100, 200, 300])
-    last = np.array([99, 199, 299, 399])
-    rows = np.array([1000, 4000, 1000, 1000])
-    cuts = volume_cuts(first, last, rows, 0, 400, 2000)
-    edges = [0, *cuts, 400]
-    per = []
-    for a, b in itertools.pairwise(edges):
-        per.append(sum(r * max(0, min(b, e + 1) - max(a, f)) / (e + 1 - f)
-                       for f, e, r in zip(first, last, rows, strict=True)))
-    assert len(cuts) == 3 and max(per) <= 2000 * 1.01 and sum(per) == pytest.approx(7000)
-    assert volume_cuts(first, last, rows, 0, 400, 10_000) == []
+    """Whole-second cuts, the fewest pieces of at most max_rows (one second's rows
+    over), none when the rows fit in one."""
+    per_s = np.array([10] * 100 + [40] * 100 + [10] * 200)  # 7000 rows over 400 s
+    start = 1_000 * NS
+    cuts = volume_cuts(per_s, start, 2000)
+    assert len(cuts) == 3 and all((c - start) % NS == 0 for c in cuts)
+    edges = [0, *((c - start) // NS for c in cuts), per_s.size]
+    per = [int(per_s[a:b].sum()) for a, b in itertools.pairwise(edges)]
+    assert sum(per) == 7000 and max(per) <= 2000 + 40
+    assert volume_cuts(per_s, start, 10_000) == []
 
 
 def test_many_units_same_association_rows(e2e, tmp_path, monkeypatch) -> None:
@@ -38,10 +37,11 @@ def test_many_units_same_association_rows(e2e, tmp_path, monkeypatch) -> None:
     e2e one stays hour-cut for the other tests)."""
     wh = tmp_path / "warehouse"
     shutil.copytree(e2e.warehouse, wh)
-    _, _, rows = volume_profile(wh, "radar_tracks", e2e.start_ns, e2e.end_ns)
-    assert rows.sum() > 0
+    rows = read_table(wh, "radar_tracks", start_ns=e2e.start_ns, end_ns=e2e.end_ns,
+                      columns=["time_ns"], sort=False).num_rows
+    assert rows > 0
     hourly = _run(e2e, wh)
-    small = dataclasses.replace(FAMILIES[0], unit_rows=int(rows.sum() // 6))
+    small = dataclasses.replace(FAMILIES[0], unit_rows=rows // 6)
     monkeypatch.setattr(batch, "family", lambda name: small)
     cut = _run(e2e, wh, min_units=6)
     a, b = cut["a"], hourly["a"]
