@@ -20,6 +20,9 @@ from pipeline.gaps.config import GapsConfig
 from pipeline.gaps.geometry import GapsGeometry
 from pipeline.units import NS
 
+KNN_QUERIES = 256
+"""Particles whose k-th-neighbour distance gives the HPD bandwidth's median."""
+
 
 @dataclass(frozen=True)
 class LeadIn:
@@ -416,13 +419,20 @@ def hpd_region(
     return area, ok & (dens[rij[:, 0], rij[:, 1]] >= level)
 
 
-def _knn_bandwidth(xy: np.ndarray, n_eff: float, k: int = 10) -> float:
+def _knn_bandwidth(xy: np.ndarray, n_eff: float, k: int = 10,
+                   max_queries: int = KNN_QUERIES) -> float:
     """Kernel bandwidth (m) from the median k-th-nearest-neighbour distance (see
-    :func:`hpd_region`); at least 1 m."""
-    pts = np.unique(xy, axis=0)
-    if pts.shape[0] <= k:
+    :func:`hpd_region`); at least 1 m. The distinct particles (a resampled cloud repeats
+    them) are the neighbours; the median is taken over at most ``max_queries`` of them,
+    evenly spaced in (x, y) order (a median's standard error over 256 points is ~8 % of
+    the spread of r_k, well inside what the kernel estimate tolerates; querying all 2,000
+    was most of the forecast's time)."""
+    pts = np.unique(xy[:, 0] + 1j * xy[:, 1])  # distinct (x, y), sorted: complex sorts x, y
+    if pts.size <= k:
         return max(float(np.sqrt(np.mean(np.var(xy, axis=0)))), 1.0)
-    r_k = np.median(cKDTree(pts).query(pts, k=k + 1)[0][:, k])
+    pts = np.column_stack([pts.real, pts.imag])
+    queries = pts[:: -(-pts.shape[0] // max_queries)]
+    r_k = np.median(cKDTree(pts).query(queries, k=k + 1)[0][:, k])
     return max(float(r_k * n_eff ** (1.0 / 3.0) / (2.0 * np.sqrt(k))), 1.0)
 
 
