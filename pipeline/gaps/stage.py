@@ -10,10 +10,9 @@ day never sits in one worker's memory. The stage reads
   and whether (and when) the vessel reappeared is looked up that far ahead;
 - ``truth`` over the window, when the log is simulated.
 
-``system_tracks`` are read as committed before this batch: the maritime family writes
-them in the same run and commits at the end, so a first batch of a window forecasts from
-AIS alone and a re-run (``surveil reprocess`` or the next nightly run) also uses the
-identified radar tracks. The random generator is seeded by the unit's window, so
+``system_tracks`` are this batch's: the gaps family runs in a later wave than the
+maritime family and reads its staged rows inside the window (``jobs.batch.family_waves``),
+the committed ones outside it. The random generator is seeded by the unit's window, so
 re-running a window reproduces its rows exactly.
 """
 
