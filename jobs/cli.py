@@ -441,7 +441,15 @@ def demo(st: _State, seed, duration, scenarios, executor) -> None:
 @click.pass_obj
 def report(st: _State, name, from_, to, sector, fmt, params, list_, site) -> None:
     """Run a report (sql/ or a [reports] dirs folder) over the warehouse."""
-    from jobs.report import explain_empty, format_report, run_named_report
+    import duckdb
+
+    from jobs.report import (
+        REPORT_MEMORY,
+        explain_empty,
+        format_report,
+        named_report_batches,
+        write_csv,
+    )
     from pipeline.reports import (
         ReportError,
         UnknownReportError,
@@ -456,20 +464,33 @@ def report(st: _State, name, from_, to, sector, fmt, params, list_, site) -> Non
         return
     start, end = _window(from_, to, required=False)
     sector = st.sector(sector)
-    try:
-        table = run_named_report(st.existing_warehouse, name, start_ns=start, end_ns=end,
-                                 sector=sector, cfg=st.cfg, params=_params(params),
-                                 site=site)
+    try:  # CSV is written as DuckDB streams it; a table or JSON is formatted whole
+        with named_report_batches(st.existing_warehouse, name, start_ns=start, end_ns=end,
+                                  sector=sector, cfg=st.cfg, params=_params(params),
+                                  site=site) as reader:
+            if fmt == "csv":
+                sys.stdout.flush()
+                rows = write_csv(reader, sys.stdout.buffer)
+            else:
+                table = reader.read_all()
+                rows = table.num_rows
     except UnknownReportError as exc:
         raise UsageError(f"no report {name!r}; available: {', '.join(list_reports(dirs))}"
                          ) from exc
     except ReportError as exc:
         raise UsageError(str(exc)) from exc
-    if table.num_rows == 0:
+    except duckdb.OutOfMemoryException as exc:
+        click.echo(f"error: report {name} needs more memory than DuckDB may use "
+                   f"({REPORT_MEMORY}; spilling to disk did not suffice): narrow "
+                   "--from/--to or raise SURVEIL_REPORT_MEMORY (e.g. 8GB). "
+                   f"{str(exc).splitlines()[0]}", err=True)
+        sys.exit(1)
+    if rows == 0:
         why = explain_empty(st.existing_warehouse, load_report(name, dirs), start_ns=start,
                             end_ns=end, sector=sector, cfg=st.cfg)
         click.echo(f"{name}: no rows. {why}", err=True)
-    click.echo(format_report(table, fmt, title=name), nl=fmt != "table")
+    if fmt != "csv":
+        click.echo(format_report(table, fmt, title=name), nl=fmt != "table")
 
 
 def _list_reports(dirs: tuple[Path, ...]) -> None:

@@ -2,14 +2,17 @@
 
 from __future__ import annotations
 
+import contextlib
 import io
+import itertools
 import json
 import os
 import shutil
 import sys
-from collections.abc import Mapping
+import tempfile
+from collections.abc import Iterator, Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 import duckdb
 import pyarrow as pa
@@ -23,11 +26,18 @@ from pipeline.tables import column_doc, column_unit, table_specs
 from pipeline.warehouse.views import register_tables
 
 ALL_TIME = (0, 2**63 - 1)
+ROWS_PER_BATCH = 65_536  # rows a streamed report holds at a time
+REPORT_MEMORY = os.environ.get("SURVEIL_REPORT_MEMORY", "2GB")
+"""DuckDB's memory limit for a report: a larger aggregate (``map_tracks`` over a regional
+day: tens of millions of groups) spills to the system's temporary folder."""
+_SPILLS = itertools.count()  # one spill folder per connection (DuckDB names its files alike)
 
 
 def open_warehouse(warehouse: Path, threads: int = 2) -> duckdb.DuckDBPyConnection:
     """An in-memory DuckDB whose views are the warehouse tables' current snapshots."""
-    con = duckdb.connect(config={"threads": threads})
+    spill = Path(tempfile.gettempdir()) / f"surveil-duckdb-{os.getpid()}-{next(_SPILLS)}"
+    con = duckdb.connect(config={"threads": threads, "memory_limit": REPORT_MEMORY,
+                                 "temp_directory": str(spill)})  # made and removed by DuckDB
     register_tables(con, warehouse)
     return con
 
@@ -46,9 +56,30 @@ def run_named_report(
     """Report ``name`` over the warehouse (all time when no window). ``cfg``: its
     ``[requirements]`` are bound and its ``[reports] dirs`` searched (None: the shipped
     figures, shipped reports only); ``site``: that site's rows (None: every site, apart)."""
+    with named_report_batches(warehouse, name, start_ns=start_ns, end_ns=end_ns,
+                              sector=sector, cfg=cfg, params=params, site=site) as reader:
+        return reader.read_all()
+
+
+@contextlib.contextmanager
+def named_report_batches(
+    warehouse: Path,
+    name: str,
+    *,
+    start_ns: int | None = None,
+    end_ns: int | None = None,
+    sector: str | None = None,
+    cfg: Config | None = None,
+    params: Mapping[str, Any] | None = None,
+    site: str | None = None,
+) -> Iterator[pa.RecordBatchReader]:
+    """:func:`run_named_report`'s rows as a stream of record batches, read while the
+    ``with`` block holds the warehouse open: ``surveil report --format csv`` writes a
+    report of tens of millions of rows (``map_tracks`` over a regional day) without
+    holding it."""
     con = open_warehouse(warehouse)
     try:
-        return run_report(
+        yield run_report(
             con,
             name,
             start_ns=ALL_TIME[0] if start_ns is None else start_ns,
@@ -58,9 +89,21 @@ def run_named_report(
             params=params,
             dirs=reports_config(cfg).dirs if cfg is not None else (),
             site=site,
+            rows_per_batch=ROWS_PER_BATCH,
         )
     finally:
         con.close()
+
+
+def write_csv(reader: pa.RecordBatchReader, sink: BinaryIO) -> int:
+    """Write ``reader``'s rows to ``sink`` as CSV (one header), batch by batch, as
+    :func:`format_report` formats them; returns the rows written."""
+    rows = 0
+    with pacsv.CSVWriter(sink, reader.schema) as writer:
+        for batch in reader:
+            writer.write_batch(batch)
+            rows += batch.num_rows
+    return rows
 
 
 def explain_empty(warehouse: Path, report: ReportSql, *, start_ns: int | None,

@@ -287,12 +287,16 @@ def run_report(
     params: Mapping[str, Any] | None = None,
     dirs: Sequence[Path] = (),
     site: str | None = None,
-) -> pa.Table:
+    rows_per_batch: int | None = None,
+) -> pa.Table | pa.RecordBatchReader:
     """Run a report on a connection whose views expose the warehouse tables.
     ``requirements``: the config's ``[requirements]`` (None: the shipped figures);
     ``site``: that site's rows (None: every site, each its own rows: reports group by
-    ``site``)."""
+    ``site``). ``rows_per_batch``: the rows as a stream of record batches of that size,
+    read while ``con`` is open (a report of tens of millions of rows is then written
+    without being held); None: one table."""
     report = name if isinstance(name, ReportSql) else load_report(name, dirs)
     bound = bind_params(report, start_ns=start_ns, end_ns=end_ns, sector=sector,
                         requirements=requirements, params=params, site=site)
-    return con.sql(report.text, params=bound).to_arrow_table()
+    rel = con.sql(report.text, params=bound)
+    return rel.to_arrow_table() if rows_per_batch is None else rel.to_arrow_reader(rows_per_batch)
