@@ -42,22 +42,10 @@ def open_warehouse(warehouse: Path, threads: int = 2) -> duckdb.DuckDBPyConnecti
     return con
 
 
-def run_named_report(
-    warehouse: Path,
-    name: str,
-    *,
-    start_ns: int | None = None,
-    end_ns: int | None = None,
-    sector: str | None = None,
-    cfg: Config | None = None,
-    params: Mapping[str, Any] | None = None,
-    site: str | None = None,
-) -> pa.Table:
-    """Report ``name`` over the warehouse (all time when no window). ``cfg``: its
-    ``[requirements]`` are bound and its ``[reports] dirs`` searched (None: the shipped
-    figures, shipped reports only); ``site``: that site's rows (None: every site, apart)."""
-    with named_report_batches(warehouse, name, start_ns=start_ns, end_ns=end_ns,
-                              sector=sector, cfg=cfg, params=params, site=site) as reader:
+def run_named_report(warehouse: Path, name: str, **options: Any) -> pa.Table:
+    """Report ``name`` over the warehouse as one table; ``options``: those of
+    :func:`named_report_batches` (window, sector, config, parameters, site)."""
+    with named_report_batches(warehouse, name, **options) as reader:
         return reader.read_all()
 
 
@@ -73,10 +61,12 @@ def named_report_batches(
     params: Mapping[str, Any] | None = None,
     site: str | None = None,
 ) -> Iterator[pa.RecordBatchReader]:
-    """:func:`run_named_report`'s rows as a stream of record batches, read while the
-    ``with`` block holds the warehouse open: ``surveil report --format csv`` writes a
-    report of tens of millions of rows (``map_tracks`` over a regional day) without
-    holding it."""
+    """Report ``name``'s rows as a stream of record batches, read while the ``with``
+    block holds the warehouse open: ``surveil report --format csv`` writes a report of
+    tens of millions of rows (``map_tracks`` over a regional day) without holding it.
+    All time when no window; ``cfg``: its ``[requirements]`` are bound and its
+    ``[reports] dirs`` searched (None: the shipped figures, shipped reports only);
+    ``site``: that site's rows (None: every site, apart)."""
     con = open_warehouse(warehouse)
     try:
         yield run_report(
