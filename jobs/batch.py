@@ -767,8 +767,7 @@ def _promise_continuation(warehouse: Path, site: str | None, end_ns: int,
     finds the rows changed and does it (:func:`_left_continuations`)."""
     folder = warehouse / CONTINUE_DIR
     folder.mkdir(exist_ok=True)
-    doc = {"site": site, "end_ns": end_ns,
-           "digests": digests}
+    doc = {"site": site, "end_ns": end_ns, "digests": digests}
     path = folder / f"{_safe(site or '')}-{end_ns}-{time.time_ns()}.json"
     tmp = path.with_suffix(".tmp")
     tmp.write_text(json.dumps(doc))
