@@ -43,7 +43,7 @@ from pipeline import frames, tables
 from pipeline.config import Config, RegionConfig
 from pipeline.gaps.config import GapsConfig
 from pipeline.gaps.geometry import GapsGeometry, build_geometry
-from pipeline.gaps.messages import detect_gaps, lead_in, observations, plan_forecasts
+from pipeline.gaps.messages import detect_gaps, gap_messages, lead_in, plan_forecasts
 from pipeline.gaps.propagate import Reference, lead_in_arrays, propagate_gaps, run_lead_in
 from pipeline.geometry import assign_sectors
 from pipeline.units import NS
@@ -171,10 +171,12 @@ def forecast_gaps(
     (or None). Pure: the same inputs and rng state give the same rows.
     """
     g = gaps_cfg
-    obs = observations(ais_reports, system_tracks, ais=cfg.ais, gaps=g, region=cfg.region)
-    if obs.height == 0:
+    last_seen = _last_message_ns(ais_reports, system_tracks)
+    if last_seen is None:
         return empty_forecasts()
-    data_end = min(int(data_end_ns), int(obs["time_ns"].max()))
+    data_end = min(int(data_end_ns), last_seen)
+    obs = gap_messages(ais_reports, system_tracks, ais=cfg.ais, gaps=g, region=cfg.region,
+                       data_end_ns=data_end)
     gaps = detect_gaps(obs, threshold_s=g.gap_threshold_s, data_end_ns=data_end)
     plan = plan_forecasts(gaps, g, start_ns=start_ns, end_ns=end_ns).with_row_index("plan_row")
     if plan.height == 0:
@@ -196,6 +198,16 @@ def forecast_gaps(
     ]
     stats = {k: np.concatenate([r[k] for r in records]) for k in records[0]}
     return _assemble(plan, gaps, leads, refs, ref, stats, g, geometry, cfg)
+
+
+def _last_message_ns(ais_reports: pl.DataFrame, system_tracks: pl.DataFrame | None) -> int | None:
+    """Time of the last AIS report or identified system track; None when there is none."""
+    times = [ais_reports["time_ns"].max()]
+    if system_tracks is not None:
+        identified = pl.col("time_ns").filter(pl.col("mmsi").is_not_null())
+        times.append(system_tracks.select(identified.max()).item())
+    times = [t for t in times if t is not None]
+    return int(max(times)) if times else None
 
 
 def _run_batch(

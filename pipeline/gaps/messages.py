@@ -57,6 +57,72 @@ def observations(
     return _flags(obs, gaps)
 
 
+def gap_messages(
+    ais_reports: pl.DataFrame,
+    system_tracks: pl.DataFrame | None,
+    *,
+    ais: AisConfig,
+    gaps: GapsConfig,
+    region: RegionConfig,
+    data_end_ns: int,
+) -> pl.DataFrame:
+    """The rows of :func:`observations` that the gaps ending by ``data_end_ns`` need:
+    each gap's start message, the messages within ``lead_in_s`` before it and the message
+    that ends it, with ``next_time_ns`` and the flags computed over every message.
+
+    :func:`detect_gaps`, :func:`lead_in` and the gap-end references give the same rows on
+    these as on all of them. The flags and gaps are found on four key columns first, and
+    only the rows kept become message vectors: a dense region hour reads ~4 M messages
+    over its lookback and horizon, of which a few per cent are near a gap.
+    """
+    tracks = _identified(system_tracks)
+    keys = pl.concat([
+        _keys(ais_reports, 0, "cog_rad"),
+        *([_keys(tracks, 1, "course_rad")] if tracks.height else []),
+    ]).sort(["mmsi", "time_ns", "src", "row"])
+    keys = _flags(keys, gaps)
+    thr, lead_ns = int(gaps.gap_threshold_s * NS), int(gaps.lead_in_s * NS)
+    silence_end = pl.coalesce(pl.col("next_time_ns"), pl.lit(int(data_end_ns)))
+    starts = (silence_end - pl.col("time_ns")) > thr
+    # a gap's start is the last message at its time: the rows before it in (mmsi, time)
+    # order are those lead_in's as-of join maps to it
+    next_start = pl.when(starts).then(pl.col("time_ns")).backward_fill()
+    next_start_mmsi = pl.when(starts).then(pl.col("mmsi")).backward_fill()
+    keep = keys.filter(
+        (next_start_mmsi == pl.col("mmsi"))
+        & (next_start - pl.col("time_ns") <= lead_ns)  # a lead-in, the start itself
+        | starts.shift(1) & (pl.col("mmsi") == pl.col("mmsi").shift(1))  # a gap's end
+    ).select("src", "row", "next_time_ns", "flag_new", "flag_manoeuvre")
+    rows = [keep.filter(pl.col("src") == s)["row"] for s in (0, 1)]
+    full = [_ais_messages(ais_reports[rows[0]], ais, gaps, region).with_columns(
+        pl.lit(0, pl.UInt8).alias("src"), rows[0])]
+    if tracks.height:
+        full.append(_track_messages(tracks[rows[1]]).with_columns(
+            pl.lit(1, pl.UInt8).alias("src"), rows[1]))
+    return (
+        pl.concat(full).join(keep, on=["src", "row"])
+        .sort(["mmsi", "time_ns", "src", "row"])
+        .drop("src", "row")
+    )
+
+
+def _identified(system_tracks: pl.DataFrame | None) -> pl.DataFrame:
+    if system_tracks is None:
+        return pl.DataFrame(schema={"time_ns": pl.Int64, "mmsi": pl.Int64})
+    return system_tracks.filter(pl.col("mmsi").is_not_null())
+
+
+def _keys(frame: pl.DataFrame, src: int, cog: str) -> pl.DataFrame:
+    """(time_ns, mmsi, src, row, cog_rad): what the flags and the gaps are found on."""
+    return frame.select(
+        pl.col("time_ns").cast(pl.Int64),
+        pl.col("mmsi").cast(pl.Int64),
+        pl.lit(src, pl.UInt8).alias("src"),
+        pl.int_range(pl.len(), dtype=pl.UInt32).alias("row"),
+        pl.col(cog).cast(pl.Float64).alias("cog_rad"),
+    )
+
+
 def _ais_messages(
     ais_reports: pl.DataFrame, ais: AisConfig, gaps: GapsConfig, region: RegionConfig
 ) -> pl.DataFrame:
@@ -113,15 +179,18 @@ def _track_messages(tracks: pl.DataFrame) -> pl.DataFrame:
 
 
 def _flags(obs: pl.DataFrame, gaps: GapsConfig) -> pl.DataFrame:
+    """``obs`` sorted by (mmsi, time): a row's neighbours are the vessel's previous and
+    next messages when their MMSI is the same (shifts, not per-vessel windows: ~4 M rows
+    in a dense unit)."""
     thr = int(gaps.gap_threshold_s * NS)
-    by = "mmsi"
-    prev_t = pl.col("time_ns").shift(1).over(by)
+    same_prev = pl.col("mmsi") == pl.col("mmsi").shift(1)
+    prev_t = pl.when(same_prev).then(pl.col("time_ns").shift(1))
     dt_prev_s = (pl.col("time_ns") - prev_t) / NS
-    dcog = (pl.col("cog_rad") - pl.col("cog_rad").shift(1).over(by) + math.pi) % (
-        2 * math.pi
-    ) - math.pi
+    dcog = (pl.col("cog_rad") - pl.col("cog_rad").shift(1) + math.pi) % (2 * math.pi) - math.pi
     return obs.with_columns(
-        pl.col("time_ns").shift(-1).over(by).alias("next_time_ns"),
+        pl.when(pl.col("mmsi") == pl.col("mmsi").shift(-1))
+        .then(pl.col("time_ns").shift(-1))
+        .alias("next_time_ns"),
         (prev_t.is_null() | ((pl.col("time_ns") - prev_t) > thr)).alias("flag_new"),
         pl.when(dt_prev_s > 0)
         .then(dcog.abs() / dt_prev_s > gaps.manoeuvre_rate_rad_per_s)

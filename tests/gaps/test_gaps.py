@@ -20,7 +20,14 @@ from pipeline.frames import enu_to_geodetic, geodetic_to_enu
 from pipeline.gaps.config import gaps_config
 from pipeline.gaps.forecast import OUTSIDE_ZONES, forecast_gaps
 from pipeline.gaps.geometry import build_geometry
-from pipeline.gaps.messages import detect_gaps, lead_in, mark_lost, observations, plan_forecasts
+from pipeline.gaps.messages import (
+    detect_gaps,
+    gap_messages,
+    lead_in,
+    mark_lost,
+    observations,
+    plan_forecasts,
+)
 from pipeline.gaps.propagate import hpd_region
 from pipeline.units import NS
 from tests.conftest import real_data_dir
@@ -240,6 +247,56 @@ def test_lead_in_is_thinned_and_ends_with_the_gap_start_message(cfg):
         assert last["slot"] == g.max_lead_in_obs - 1
         assert last["time_ns"] == gaps["gap_start_ns"][int(gid[0])]
         assert (last["time_ns"] - part["time_ns"][0]) <= g.lead_in_s * NS
+
+
+def _many_vessels(cfg, seed: int) -> tuple[pl.DataFrame, pl.DataFrame]:
+    """40 vessels over 3 h: AIS at random intervals with long silences, and system tracks
+    every 3 s over random stretches (some unidentified), on whole seconds so that AIS
+    reports and track updates often share a time; courses that sometimes turn sharply."""
+    rng = np.random.default_rng(seed)
+    ais, tracks = [], []
+    for mmsi in range(1, 41):
+        t = np.cumsum(rng.choice([2.0, 10.0, 30.0, 700.0, 1500.0], 300, p=[.3, .4, .2, .07, .03]))
+        t = t[t < 3 * 3600]
+        cog = np.cumsum(rng.choice([0.0, 0.01, 1.0], t.size, p=[.6, .35, .05]))
+        x, y = straight_vessel(cfg, mmsi, (mmsi * 500.0, -9000.0), 0.3, 5.0, t)
+        ais.append(ais_frame(cfg, mmsi, t, x, y, 5.0, cog % (2 * math.pi)))
+        a = rng.uniform(0, 3 * 3600)
+        tt = np.arange(a, min(a + rng.uniform(0, 3000), 3 * 3600), 3.0).round()
+        xt, yt = straight_vessel(cfg, mmsi, (mmsi * 500.0, -9000.0), 0.3, 5.0, tt)
+        lat, lon = enu_to_geodetic(xt, yt, cfg.region.origin_lat_deg, cfg.region.origin_lon_deg)
+        tracks.append(pl.DataFrame({
+            "time_ns": T0 + (tt * NS).astype(np.int64),
+            "mmsi": pl.Series([None if mmsi % 7 == 0 else mmsi] * tt.size, dtype=pl.Int64),
+            "x_enu_m": xt, "y_enu_m": yt, "lat_deg": np.atleast_1d(lat),
+            "lon_deg": np.atleast_1d(lon), "sigma_x_m": 20.0, "sigma_y_m": 25.0,
+            "cov_xy_m2": 3.0, "course_rad": 0.3 + rng.normal(0, 0.5, tt.size),
+            "speed_mps": 5.0, "sigma_course_rad": 0.03, "sigma_speed_mps": 0.25,
+        }))
+    return pl.concat(ais).sort("time_ns"), pl.concat(tracks).sort("time_ns")
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_the_messages_near_gaps_give_the_gaps_lead_ins_and_ends_of_all_messages(cfg, seed):
+    """gap_messages keeps a few of the messages (the forecasts' memory at density) and
+    the gaps, the lead-ins and the reappearing messages found on them are those found on
+    every message (flags and next message computed over all)."""
+    g = gaps_config(cfg)
+    ais, tracks = _many_vessels(cfg, seed)
+    end = T0 + 3 * 3600 * NS
+    every = observations(ais, tracks, ais=cfg.ais, gaps=g, region=cfg.region)
+    some = gap_messages(ais, tracks, ais=cfg.ais, gaps=g, region=cfg.region, data_end_ns=end)
+    assert 0 < some.height < every.height / 2
+    assert some.columns == every.columns
+    gaps = detect_gaps(every, threshold_s=g.gap_threshold_s, data_end_ns=end)
+    assert gaps.height > 40
+    assert detect_gaps(some, threshold_s=g.gap_threshold_s, data_end_ns=end).equals(gaps)
+    key = ["gap_id", "slot"]
+    assert lead_in(some, gaps, g).sort(key).equals(lead_in(every, gaps, g).sort(key))
+    ends = gaps.filter(~pl.col("gap_open")).select("mmsi", pl.col("gap_end_ns").alias("time_ns"))
+    first = ["mmsi", "time_ns"]
+    assert (some.unique(first, keep="first", maintain_order=True).join(ends, on=first)
+            .equals(every.unique(first, keep="first", maintain_order=True).join(ends, on=first)))
 
 
 # --- the 90% region ---------------------------------------------------------------------
