@@ -55,7 +55,7 @@ import logging
 import os
 import shutil
 import time
-from collections.abc import Callable, Iterator, Mapping, Sized
+from collections.abc import Callable, Iterator, Mapping, Sequence, Sized
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -215,7 +215,8 @@ def _overridden(warehouse: Path, name: str, paths: tuple[str, ...], batch_window
 @dataclass(frozen=True)
 class UnitManifest:
     """What a worker staged: {table: data files ready to commit} for one family's
-    sub-window, and the family's ``unit_seam`` of it (small)."""
+    sub-window, and the family's ``unit_seam`` of it (a frame stays in the unit's
+    folder: :class:`SeamFile`)."""
 
     family: str
     start_ns: int
@@ -244,6 +245,8 @@ def run_unit(unit: BatchUnit) -> UnitManifest:
     folder = Path(unit.staging_dir) / f"{unit.family}-{unit.start_ns}"
     shutil.rmtree(folder, ignore_errors=True)
     folder.mkdir(parents=True)
+    if isinstance(seam, pl.DataFrame):
+        seam = SeamFile.write(seam, folder / "_seam.arrow")
     files: dict[str, list[str]] = {}
     for name, frame in out.items():
         if frame.height:
@@ -258,6 +261,41 @@ def run_unit(unit: BatchUnit) -> UnitManifest:
             files[name] = [str(path)]
     return UnitManifest(unit.family, unit.start_ns, files, seam, str(folder),
                         time.perf_counter() - t0, unit.site)
+
+
+@dataclass(frozen=True)
+class SeamFile:
+    """A unit's seam frame, kept in its staging folder until the window's units are
+    joined. The driver holds a window's seams one pair at a time (:class:`_Seams`), not
+    all of them: a region day has 260 maritime units of ~8 MB of seam rows each (was
+    2 GB of the driver's memory)."""
+
+    path: str
+
+    @classmethod
+    def write(cls, seam: pl.DataFrame, path: Path) -> SeamFile:
+        seam.write_ipc(path, compression="lz4")
+        return cls(str(path))
+
+    def read(self) -> pl.DataFrame:
+        return pl.read_ipc(self.path)
+
+
+class _Seams(Sequence):
+    """The seams given to a family's ``join_units``: a :class:`SeamFile` is read when
+    its item is looked up (``join_units`` walks them in order)."""
+
+    def __init__(self, items: list[Any]) -> None:
+        self.items = items
+
+    def __len__(self) -> int:
+        return len(self.items)
+
+    def __getitem__(self, i):  # type: ignore[override]
+        if isinstance(i, slice):
+            return _Seams(self.items[i])
+        item = self.items[i]
+        return item.read() if isinstance(item, SeamFile) else item
 
 
 @dataclass(frozen=True)
@@ -839,7 +877,7 @@ def _finalize_units(executor, manifests: list[UnitManifest], families: tuple[Fam
                                                   summary.site))
             if _has_rows(seam):
                 seams, lead = [seam, *seams], 1
-        maps = (fam.join_units(seams)[lead:]
+        maps = (fam.join_units(_Seams(seams))[lead:]
                 if fam.join_units is not None and len(seams) > 1 else [None] * len(ours))
         tasks += [FinalizeTask(m, mapping) for m, mapping in zip(ours, maps, strict=True)]
     out: list[UnitManifest] = []

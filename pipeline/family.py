@@ -17,18 +17,19 @@ A family (``pipeline.maritime``, ``pipeline.airfield``, ``pipeline.nav``,
   a name starting with ``_`` is for the family's ``unit_seam`` only, never committed);
 - ``outputs``: the derived tables it owns (no other family writes them);
 - ``unit_rows`` and ``unit_table``: units are also cut so that none reads more than about
-  ``unit_rows`` rows of ``unit_table`` (located from the Parquet footers, without
-  reading rows): memory per worker bounded by data volume, not by a fixed hour;
+  ``unit_rows`` rows of ``unit_table`` (counted per second from its time column): memory
+  per worker bounded by data volume, not by a fixed hour;
 - ``sorted_outputs``: the stage returns every frame sorted by its table's sort key (the
   batch then writes it as it is instead of sorting it);
 - ``unit_s``: the work unit length (the window is cut at UTC multiples of it), or
   ``None`` for one unit per window (filters that need continuity);
 - ``unit_seam`` and ``join_units``: how consecutive units join into the window's tables
   (e.g. system track ids stitched across unit seams), or ``None`` to concatenate. The
-  worker keeps ``unit_seam(outputs)``, something small (e.g. the rows of a unit's first
-  and last epochs); the driver gives the seams of a window's units, in time order, to
-  ``join_units``, which returns per unit ``None`` or a :data:`Relabel` to apply to every
-  output of that unit (the units' outputs themselves never travel to the driver).
+  worker keeps ``unit_seam(outputs)`` (e.g. the rows of a unit's first and last epochs;
+  a frame is kept in the unit's staging folder); the driver gives the seams of a
+  window's units, in time order, to ``join_units`` as a sequence that reads each seam
+  when it is looked up; it returns per unit ``None`` or a :data:`Relabel` to apply to
+  every output of that unit (the units' outputs themselves never travel to the driver).
 - ``stitch_lookback_s``: how far before a window the batch reads the family's committed
   outputs; their ``unit_seam`` leads the window's seams given to ``join_units`` (ids
   continue across the window's leading edge); 0: the window's units are joined alone.
@@ -39,7 +40,7 @@ commits what it returns.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -112,5 +113,5 @@ class Family:
     unit_table: str = ""
     sorted_outputs: bool = False
     unit_seam: Callable[[Outputs], Any] | None = None
-    join_units: Callable[[list[Any]], list[Relabel | None]] | None = None
+    join_units: Callable[[Sequence[Any]], list[Relabel | None]] | None = None
     stitch_lookback_s: float = 0.0

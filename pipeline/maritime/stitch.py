@@ -13,6 +13,7 @@ the seam need nothing: an id says when its track was born
 from __future__ import annotations
 
 import itertools
+from collections.abc import Sequence
 
 import polars as pl
 
@@ -30,7 +31,7 @@ never committed."""
 _KEY = ["time_ns", "site_id", "local_track_id"]
 
 
-def stitch_track_ids(seams: list[pl.DataFrame]) -> list[dict[int, int]]:
+def stitch_track_ids(seams: Sequence[pl.DataFrame]) -> list[dict[int, int]]:
     """Per unit (in time order) the relabelling {unit's system_track_id: id it
     continues}, from the units' seams (:func:`unit_seam`: ``part`` "head" for the
     lead-in's rows, "tail" for the unit's last ``SEAM_S``). One-to-one per seam: the
@@ -38,7 +39,7 @@ def stitch_track_ids(seams: list[pl.DataFrame]) -> list[dict[int, int]]:
 
     One loop over seams (a handful per window); the work per seam is polars joins.
     """
-    maps: list[dict[int, int]] = [{} for _ in seams]
+    maps: list[dict[int, int]] = [{} for _ in range(len(seams))]  # (seams may be read lazily)
     for k, (prev, nxt) in enumerate(itertools.pairwise(seams)):
         tail = prev.filter(pl.col("part") == "tail")
         head = nxt.filter(pl.col("part") == "head")
@@ -83,7 +84,7 @@ def unit_seam(outputs: dict[str, pl.DataFrame]) -> pl.DataFrame:
     return pl.concat(parts) if parts else a.with_columns(part=pl.lit("tail"))
 
 
-def join_units(seams: list[pl.DataFrame]) -> list[dict[str, dict[int, int]] | None]:
+def join_units(seams: Sequence[pl.DataFrame]) -> list[dict[str, dict[int, int]] | None]:
     """``Family.join_units`` of the maritime family: per unit (in time order) the
     relabelling of ``system_track_id`` that continues the ids of the units before it."""
     return [{"system_track_id": m} if m else None for m in stitch_track_ids(seams)]

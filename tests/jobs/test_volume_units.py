@@ -1,10 +1,11 @@
-"""Work units sized by data volume: cuts from the Parquet footers, a batch over many
-units commits the same association rows as over one."""
+"""Work units sized by data volume: cuts from the time column, a batch over many units
+commits the same association rows as over one, and a unit's seam stays on disk."""
 
 from __future__ import annotations
 
 import dataclasses
 import itertools
+import pickle
 import shutil
 
 import numpy as np
@@ -12,6 +13,8 @@ import polars as pl
 
 from jobs import batch
 from pipeline.families import FAMILIES
+from pipeline.family import Window
+from pipeline.maritime.stitch import unit_seam
 from pipeline.units import NS
 from pipeline.warehouse.delta import read_table, volume_cuts
 
@@ -64,3 +67,22 @@ def _kept_one_id(a: pl.DataFrame) -> float:
     """Share of (site, local track) pairs that kept a single system track id."""
     ids = a.group_by("site_id", "local_track_id").agg(pl.col("system_track_id").n_unique())
     return float((ids["system_track_id"] == 1).mean())
+
+
+def test_a_units_seam_stays_in_its_folder_until_the_join(e2e, tmp_path) -> None:
+    """The manifest a worker returns names its seam's file (the driver reads a window's
+    seams one pair at a time; a region day's held 2 GB in the driver): the file holds
+    the stage's seam rows, and the manifest pickles small."""
+    t0 = e2e.start_ns + 600 * NS
+    unit = batch.BatchUnit(str(e2e.warehouse), str(tmp_path / "staging"), t0, t0 + 600 * NS,
+                           e2e.cfg)
+    m = batch.run_unit(unit)
+    assert isinstance(m.seam, batch.SeamFile)
+    fam = batch.family("maritime")
+    inputs = batch.read_inputs(fam, e2e.warehouse, e2e.cfg, Window(t0, t0 + 600 * NS))
+    expected = unit_seam(fam.stage(inputs, Window(t0, t0 + 600 * NS), e2e.cfg))
+    assert expected.height > 100
+    assert m.seam.read().equals(expected)
+    assert len(pickle.dumps(m)) < 4096
+    seams = batch._Seams([m.seam, expected])
+    assert len(seams) == 2 and seams[0].equals(seams[1])
