@@ -34,6 +34,8 @@ pool of its own (its workers enter that context in their initializer).
 from __future__ import annotations
 
 import contextlib
+import ctypes
+import ctypes.util
 import multiprocessing
 import multiprocessing.util
 import os
@@ -50,11 +52,25 @@ from contextlib import AbstractContextManager
 from dataclasses import dataclass
 from typing import Any, Generic, Protocol, TypeVar
 
+import pyarrow as pa
+
 from pipeline.config import ConfigError
 from pipeline.signals import ignore_in_worker
 
 U = TypeVar("U")
 V = TypeVar("V")
+
+def _glibc() -> Any:
+    """glibc, for ``malloc_trim`` (None elsewhere: musl, macOS)."""
+    name = ctypes.util.find_library("c")
+    try:
+        libc = ctypes.CDLL(name) if name else None
+    except OSError:
+        return None
+    return libc if libc is not None and hasattr(libc, "malloc_trim") else None
+
+
+_LIBC = _glibc()
 
 THREAD_ENV_VARS = (
     "POLARS_MAX_THREADS",
@@ -130,7 +146,26 @@ def _start_worker(threads_per_worker: int, context: bytes | None) -> None:
 
 
 def _call_in_worker(fn: Callable[..., V], unit: Any) -> V:
-    return fn(unit, _worker_context)
+    try:
+        return fn(unit, _worker_context)
+    finally:
+        release_memory()
+
+
+def _call_released(fn: Callable[..., V], unit: Any) -> V:
+    try:
+        return fn(unit)
+    finally:
+        release_memory()
+
+
+def release_memory() -> None:
+    """Hand the pages a unit's frames freed back to the OS: glibc's heap and Arrow's
+    pool keep them, so a pool worker carried its largest unit's memory into every later
+    one (a region day's worker: ~1.0 GB between maritime units, 0.66 GB with this)."""
+    pa.default_memory_pool().release_unused()
+    if _LIBC is not None:
+        _LIBC.malloc_trim(0)
 
 
 def _call_with_own_context(fn: Callable[..., V], context: ContextFactory, unit: Any) -> V:
@@ -227,7 +262,8 @@ class ProcessExecutor:
     def _map(pool: ProcessPoolExecutor, fn: Callable[..., V], units: list[U],
              blob: bytes | None) -> Iterator[UnitResult]:
         futures: dict[Future, Any] = {
-            (pool.submit(fn, u) if blob is None else pool.submit(_call_in_worker, fn, u)): u
+            (pool.submit(_call_released, fn, u) if blob is None
+             else pool.submit(_call_in_worker, fn, u)): u
             for u in units
         }
         pending = set(futures)
@@ -288,9 +324,9 @@ class RayExecutor:
             num_cpus=1,
             max_retries=self.max_retries,
             runtime_env={"env_vars": thread_env(self.threads_per_worker)},
-        )(fn if context is None else _call_with_own_context)
+        )(_call_released if context is None else _call_with_own_context)
         if context is None:
-            refs = {remote.remote(u): u for u in units}
+            refs = {remote.remote(fn, u): u for u in units}
         else:
             refs = {remote.remote(fn, context, u): u for u in units}
         pending = list(refs)
