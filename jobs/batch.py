@@ -291,7 +291,7 @@ class _Seams(Sequence):
     def __len__(self) -> int:
         return len(self.items)
 
-    def __getitem__(self, i):  # type: ignore[override]
+    def __getitem__(self, i: int | slice) -> Any:  # type: ignore[override]
         if isinstance(i, slice):
             return _Seams(self.items[i])
         item = self.items[i]

@@ -60,6 +60,7 @@ from pipeline.signals import ignore_in_worker
 U = TypeVar("U")
 V = TypeVar("V")
 
+
 def _glibc() -> Any:
     """glibc, for ``malloc_trim`` (None elsewhere: musl, macOS)."""
     name = ctypes.util.find_library("c")
