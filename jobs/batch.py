@@ -291,9 +291,7 @@ class _Seams(Sequence):
     def __len__(self) -> int:
         return len(self.items)
 
-    def __getitem__(self, i: int | slice) -> Any:  # type: ignore[override]
-        if isinstance(i, slice):
-            return _Seams(self.items[i])
+    def __getitem__(self, i: int) -> Any:  # type: ignore[override]
         item = self.items[i]
         return item.read() if isinstance(item, SeamFile) else item
 

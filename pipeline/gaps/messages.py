@@ -75,11 +75,11 @@ def gap_messages(
     only the rows kept become message vectors: a dense region hour reads ~4 M messages
     over its lookback and horizon, of which a few per cent are near a gap.
     """
-    tracks = _identified(system_tracks)
-    keys = pl.concat([
-        _keys(ais_reports, 0, "cog_rad"),
-        *([_keys(tracks, 1, "course_rad")] if tracks.height else []),
-    ]).sort(["mmsi", "time_ns", "src", "row"])
+    parts = [_keys(ais_reports, 0, "cog_rad")]
+    tracks = system_tracks is not None and system_tracks.height > 0
+    if tracks:  # rows of the identified tracks, numbered in the whole frame
+        parts.append(_keys(system_tracks, 1, "course_rad").filter(pl.col("mmsi").is_not_null()))
+    keys = pl.concat(parts).sort(["mmsi", "time_ns", "src", "row"])
     keys = _flags(keys, gaps)
     thr, lead_ns = int(gaps.gap_threshold_s * NS), int(gaps.lead_in_s * NS)
     silence_end = pl.coalesce(pl.col("next_time_ns"), pl.lit(int(data_end_ns)))
@@ -96,20 +96,14 @@ def gap_messages(
     rows = [keep.filter(pl.col("src") == s)["row"] for s in (0, 1)]
     full = [_ais_messages(ais_reports[rows[0]], ais, gaps, region).with_columns(
         pl.lit(0, pl.UInt8).alias("src"), rows[0])]
-    if tracks.height:
-        full.append(_track_messages(tracks[rows[1]]).with_columns(
+    if tracks:
+        full.append(_track_messages(system_tracks[rows[1]]).with_columns(
             pl.lit(1, pl.UInt8).alias("src"), rows[1]))
     return (
         pl.concat(full).join(keep, on=["src", "row"])
         .sort(["mmsi", "time_ns", "src", "row"])
         .drop("src", "row")
     )
-
-
-def _identified(system_tracks: pl.DataFrame | None) -> pl.DataFrame:
-    if system_tracks is None:
-        return pl.DataFrame(schema={"time_ns": pl.Int64, "mmsi": pl.Int64})
-    return system_tracks.filter(pl.col("mmsi").is_not_null())
 
 
 def _keys(frame: pl.DataFrame, src: int, cog: str) -> pl.DataFrame:
