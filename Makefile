@@ -6,9 +6,9 @@ BIN    := $(VENV)/bin
 .PHONY: demo test setup lint bench clean fuzz fuzz-asan bench-hostile
 
 NATIVE := pipeline/decode/_json_columns.c pipeline/decode/_pow5_128.h pipeline/io/_mcap_records.c \
-          pipeline/maritime/_associate.c
+          pipeline/maritime/_associate.c pipeline/filters/_particle.c
 
-# pip builds the two C extensions (optional: skipped without a C compiler)
+# pip builds the four C extensions (optional: skipped without a C compiler)
 $(BIN)/surveil: pyproject.toml $(NATIVE)
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip

@@ -75,7 +75,7 @@ def test_extension_sources_exist(setuptools_cfg):
     exts = setuptools_cfg["ext-modules"]
     names = {e["name"] for e in exts}
     assert names == {"pipeline.decode._json_columns", "pipeline.io._mcap_records",
-                     "pipeline.maritime._associate"}
+                     "pipeline.maritime._associate", "pipeline.filters._particle"}
     for ext in exts:
         assert ext["sources"], ext["name"]
         for src in [*ext["sources"], *ext.get("depends", [])]:

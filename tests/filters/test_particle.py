@@ -54,6 +54,10 @@ def test_gaussian_log_likelihood_matches_scipy():
     for g in range(2):
         want = stats.multivariate_normal(mean=[0, 0], cov=R[g]).logpdf(r[g])
         np.testing.assert_allclose(got[g], want, rtol=1e-10)
+    R3 = np.array([[[9.0, 2.0, -1.0], [2.0, 4.0, 0.5], [-1.0, 0.5, 1.0]]])
+    r3 = rng.normal(size=(1, 40, 3)) * 3
+    want3 = stats.multivariate_normal(mean=[0, 0, 0], cov=R3[0]).logpdf(r3[0])
+    np.testing.assert_allclose(pf.gaussian_log_likelihood(r3, R3)[0], want3, rtol=1e-10)
 
 
 # --- resampling ----------------------------------------------------------------------
