@@ -14,7 +14,7 @@ from collections.abc import Iterable
 import duckdb
 
 from pipeline.config import Config
-from pipeline.families import FAMILIES
+from pipeline import families
 from pipeline.reports import ReportSql
 from pipeline.tables import spec, table_specs
 
@@ -36,7 +36,7 @@ def producer(table: str) -> str:
     """The command that writes ``table``, as a user would type it."""
     if table in _CALIBRATIONS:
         return f"`{_CALIBRATIONS[table]}`"
-    for fam in FAMILIES:
+    for fam in families.FAMILIES:  # (the stages import only when asked: PEP 562)
         if table in fam.outputs:
             return f"`surveil batch --from T --to T` ({fam.name} family)"
     kind = spec(table).kind if table in table_specs() else "raw"
@@ -66,7 +66,7 @@ def _empty_inputs(con: duckdb.DuckDBPyConnection, table: str, cfg: Config | None
     """The inputs of the family that writes ``table`` that have no rows in the window."""
     if cfg is None:
         return []
-    for fam in FAMILIES:
+    for fam in families.FAMILIES:
         if table in fam.outputs:
             try:
                 inputs = [ti.table for ti in fam.inputs(cfg) if not ti.whole_table]
