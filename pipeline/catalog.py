@@ -13,8 +13,8 @@ from collections.abc import Iterable
 
 import duckdb
 
-from pipeline.config import Config
 from pipeline import families
+from pipeline.config import Config
 from pipeline.reports import ReportSql
 from pipeline.tables import spec, table_specs
 
