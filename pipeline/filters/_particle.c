@@ -14,9 +14,8 @@
  * -ffp-contract=off, so no fused multiply-add). glibc's sincos gives sin's and cos's
  * results. tests/filters/test_particle_kernel.py compares the two paths.
  */
-#define _GNU_SOURCE
 #define PY_SSIZE_T_CLEAN
-#include <Python.h>
+#include <Python.h> /* first; it defines _GNU_SOURCE, which declares sincos() in math.h */
 
 #include <math.h>
 

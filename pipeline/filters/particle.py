@@ -34,7 +34,7 @@ import numpy as np
 
 try:  # the transition's arithmetic in one pass (optional: built when a C compiler is present)
     from pipeline.filters import _particle
-except ImportError:  # pragma: no cover - the same numbers, ~2x slower
+except ImportError:  # pragma: no cover - the same numbers, ~1.6x slower
     _particle = None
 
 Propagate = Callable[[np.ndarray, np.ndarray, np.random.Generator], np.ndarray]
