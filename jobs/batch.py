@@ -221,12 +221,11 @@ def is_sorted_by(frame: pl.DataFrame, keys: list[str]) -> bool:
         return True
     if frame.select(pl.any_horizontal(pl.col(keys).is_null().any())).item():
         return False
-    prev = [pl.col(k).shift(1) for k in keys]
     later = pl.lit(False)  # the row is after the previous one on the keys seen so far
     tie = pl.lit(True)
-    for k, p in zip(keys, prev, strict=True):
-        later = later | (tie & (pl.col(k) > p))
-        tie = tie & (pl.col(k) == p)
+    for k in keys:
+        later = later | (tie & (pl.col(k) > pl.col(k).shift(1)))
+        tie = tie & (pl.col(k) == pl.col(k).shift(1))
     return bool(frame.select((later | tie).slice(1).all()).item())
 
 
