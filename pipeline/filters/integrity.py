@@ -20,14 +20,15 @@ targets; the state of the rule is plain arrays, returned, never mutated.
 from __future__ import annotations
 
 import numpy as np
-from scipy import stats
+
+from pipeline.filters.quantiles import chi2_ppf
 
 
 def chi2_thresholds(q: float, dof: int) -> tuple[float, float]:
     """(d1, d2) with P{d1 < ξ < d2} = 1 − q for ξ ~ χ²(dof), equal tails (eq. 22)."""
     if not 0.0 < q < 1.0:
         raise ValueError("q must be in (0, 1)")
-    return float(stats.chi2.ppf(q / 2.0, dof)), float(stats.chi2.ppf(1.0 - q / 2.0, dof))
+    return float(chi2_ppf(q / 2.0, dof)), float(chi2_ppf(1.0 - q / 2.0, dof))
 
 
 def nis(r: np.ndarray, S: np.ndarray) -> np.ndarray:

@@ -61,8 +61,8 @@ from itertools import pairwise
 import numpy as np
 import polars as pl
 from scipy.optimize import linear_sum_assignment
-from scipy.stats import chi2
 
+from pipeline.filters.quantiles import chi2_ppf
 from pipeline.frames import wrap_angle
 from pipeline.maritime.config import AssociationConfig
 from pipeline.maritime.fuse import (
@@ -111,7 +111,7 @@ class Kinematics:
 def gate_threshold(gate_probability: float, dof: int = 2) -> float:
     """chi2.ppf(gate_probability, dof): the gate on d^2 (2 dof: position; 4: position
     and velocity)."""
-    return float(chi2.ppf(gate_probability, dof))
+    return float(chi2_ppf(gate_probability, dof))
 
 
 def association_gate(cfg: AssociationConfig) -> float:

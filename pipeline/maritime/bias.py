@@ -49,9 +49,9 @@ from dataclasses import dataclass
 
 import numpy as np
 import polars as pl
-from scipy.stats import chi2, norm
 
 from pipeline.config import Config, RadarSite
+from pipeline.filters.quantiles import chi2_ppf, normal_ppf
 from pipeline.frames import TWO_PI, enu_to_polar, geodetic_to_enu, wrap_angle
 from pipeline.maritime.config import RadarBiasConfig, SiteBias, radar_bias_config
 from pipeline.units import NS
@@ -221,7 +221,7 @@ def match_tracks(
         + (sigma_ais_m / pl.col("r_ref")) ** 2
         + cfg.prior_azimuth_bias_rad**2
     )
-    gate = float(chi2.ppf(cfg.gate_probability, 2))
+    gate = float(chi2_ppf(cfg.gate_probability, 2))
     nearest = (
         cand.with_columns(_d2_polar(cand, var_r, var_az).alias("d2"))
         .filter(pl.col("d2") < gate)
@@ -403,7 +403,7 @@ def estimate_biases(
     """``radar_bias_by_site`` rows: one per configured site with AIS-matched tracks in the
     window (raw radar reports, not corrected by ``[radar_bias.correction]``)."""
     bcfg = radar_bias_config(cfg)
-    z = float(norm.ppf(0.5 + bcfg.confidence / 2))
+    z = float(normal_ppf(0.5 + bcfg.confidence / 2))
     rows = []
     for site in cfg.radar_sites:  # a handful of sites: one least-squares problem each
         out = estimate_site_bias(

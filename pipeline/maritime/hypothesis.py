@@ -46,8 +46,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.stats import chi2
 
+from pipeline.filters.quantiles import chi2_ppf
 from pipeline.maritime.associate import assign
 
 
@@ -216,7 +216,7 @@ def associate_pictures(
     gate chi2.ppf(gate_probability, d) (its cost of non-assignment).
     """
     d = X[0].shape[-1]
-    gate = float(chi2.ppf(gate_probability, d))
+    gate = float(chi2_ppf(gate_probability, d))
     info = np.zeros((0, d, d))
     vec = np.zeros((0, d))
     labels = []

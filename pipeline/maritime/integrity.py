@@ -84,11 +84,11 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 import polars as pl
-from scipy import stats
 
 from pipeline import frames
 from pipeline.config import Config
 from pipeline.filters.integrity import chi2_thresholds, eta, step_exclusion
+from pipeline.filters.quantiles import chi2_ppf
 from pipeline.geometry import assign_sectors
 from pipeline.maritime.associate import gate_threshold
 from pipeline.maritime.config import ChannelIntegrityConfig, MaritimeConfig
@@ -581,12 +581,12 @@ class _Tables:
     def __init__(self, ic: ChannelIntegrityConfig, n_max: int) -> None:
         n = np.arange(1, n_max + 1)
         q = ic.radar_q
-        self.nis_d1 = np.r_[np.nan, stats.chi2.ppf(q / 4.0, 2 * n)]  # sum test, q/2 in all
-        self.nis_d2 = np.r_[np.nan, stats.chi2.ppf(1.0 - q / 4.0, 2 * n)]
-        self.bias_d2 = float(stats.chi2.ppf(1.0 - q / 2.0, 3))
+        self.nis_d1 = np.r_[np.nan, chi2_ppf(q / 4.0, 2 * n)]  # sum test, q/2 in all
+        self.nis_d2 = np.r_[np.nan, chi2_ppf(1.0 - q / 4.0, 2 * n)]
+        self.bias_d2 = float(chi2_ppf(1.0 - q / 2.0, 3))
         self.ais_d1, self.ais_d2 = chi2_thresholds(ic.ais_q / 2.0, 2)  # q/2 each: radar
-        self.self_d2 = float(stats.chi2.ppf(1.0 - ic.ais_q / 2.0, 2))  # and kinematics
-        self.outlier = float(stats.chi2.ppf(1.0 - ic.outlier_q, 2))
+        self.self_d2 = float(chi2_ppf(1.0 - ic.ais_q / 2.0, 2))  # and kinematics
+        self.outlier = float(chi2_ppf(1.0 - ic.outlier_q, 2))
 
 
 # --- the epoch loop ----------------------------------------------------------------------
