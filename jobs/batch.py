@@ -650,9 +650,8 @@ def _run_site(
                            requested=None if requested == (start_ns, end_ns) else requested,
                            site=site)
     ex = cfg.execution
-    executor = make_executor(
-        executor_kind or ex.executor, min(ex.max_workers, len(units)), ex.threads_per_worker
-    )
+    kind, workers = executor_kind or ex.executor, min(ex.max_workers, len(units))
+    executor = make_executor(kind, workers, ex.threads_per_worker)
     manifests: list[UnitManifest] = []
     if progress is not None:
         progress.batch_units(len(units))
@@ -667,8 +666,8 @@ def _run_site(
                     for fam in fams if fam.name in {m.family for m in manifests}
                     for name in fam.outputs)
                 names = {f.name for f in wave}
-                ours = [replace(u, overrides=overrides, window=(start_ns, end_ns))
-                        for u in units if u.family in names]
+                ours = granted([replace(u, overrides=overrides, window=(start_ns, end_ns))
+                                for u in units if u.family in names], kind, workers)
                 manifests += _run_units(executor, ours, tuple(wave), summary, progress,
                                         warehouse)
                 if summary.failed_units:
@@ -696,6 +695,19 @@ def _run_site(
     with contextlib.suppress(OSError):  # only when empty: another job may be staging
         (warehouse / "_staging").rmdir()
     return summary
+
+
+def granted(units: list[BatchUnit], kind: str, workers: int) -> list[BatchUnit]:
+    """The units of a wave with the cores it leaves idle: a wave of fewer units than the
+    process pool's workers (a reprocessed hour's one gaps unit after its maritime wave)
+    gives each unit ``workers // len(units)`` times its ``threads_per_worker``, for a
+    stage that runs its own threads (gaps). Not for Ray, whose tasks ask for one CPU."""
+    if kind != "process" or not units or len(units) >= workers:
+        return units
+    share = workers // len(units)
+    return [replace(u, cfg=replace(u.cfg, execution=replace(
+        u.cfg.execution, threads_per_worker=u.cfg.execution.threads_per_worker * share)))
+        for u in units]
 
 
 def _safe(site: str) -> str:

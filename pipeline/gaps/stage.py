@@ -13,7 +13,9 @@ day never sits in one worker's memory. The stage reads
 ``system_tracks`` are this batch's: the gaps family runs in a later wave than the
 maritime family and reads its staged rows inside the window (``jobs.batch.family_waves``),
 the committed ones outside it. The random generator is seeded by the unit's window, so
-re-running a window reproduces its rows exactly.
+re-running a window reproduces its rows exactly. The unit runs its batches of gaps on
+``execution.threads_per_worker`` threads: a worker granted spare cores (the batch's
+lone unit of a wave, ``jobs.batch``) uses them; the rows are the same either way.
 """
 
 from __future__ import annotations
@@ -66,6 +68,7 @@ def stage(tables: Inputs, window: Window, cfg: Config) -> Outputs:
         end_ns=window.end_ns,
         data_end_ns=window.end_ns + int(g.max_horizon_s * NS),
         rng=window_rng(window.start_ns, window.end_ns),
+        threads=cfg.execution.threads_per_worker,
     )
     return {"gap_forecasts": out}
 

@@ -393,6 +393,23 @@ def test_the_same_inputs_and_seed_give_the_same_rows(cfg):
     assert run[0].equals(run[1])
 
 
+def test_the_rows_do_not_depend_on_how_many_threads_run_the_batches(cfg):
+    """Batches of gaps draw from their own streams (spawned in batch order), so running
+    them on threads, which finish in any order, gives the rows of one thread."""
+    g = dataclasses.replace(gaps_config(cfg), particles=200, batch_gaps=4)
+    ais, tracks = _many_vessels(cfg, 2)
+    end = T0 + 3 * 3600 * NS
+
+    def forecast(threads: int) -> pl.DataFrame:
+        return forecast_gaps(ais, tracks, None, cfg=cfg, gaps_cfg=g, start_ns=T0 + 3600 * NS,
+                             end_ns=end, data_end_ns=end, rng=np.random.default_rng(8),
+                             threads=threads)
+
+    one = forecast(1)
+    assert one["gap_id"].n_unique() > 3 * g.batch_gaps  # several batches, so several streams
+    assert forecast(3).equals(one)
+
+
 def test_the_constraint_keeps_a_ship_heading_for_the_coast_in_the_water(cfg):
     """A ship in the inner channel heading east goes silent 4 km before the channel
     mouth, where the fairway turns up the winding north-east channel: without the constraint the

@@ -86,3 +86,23 @@ def test_a_units_seam_stays_in_its_folder_until_the_join(e2e, tmp_path) -> None:
     assert len(pickle.dumps(m)) < 4096
     seams = batch._Seams([m.seam, expected])
     assert len(seams) == 2 and seams[0].equals(seams[1])
+
+
+def test_a_wave_of_fewer_units_than_workers_is_granted_their_idle_cores(e2e, tmp_path) -> None:
+    """A reprocessed hour's one gaps unit runs after its maritime wave with the pool's
+    other worker idle: it gets that worker's threads (the process pool only)."""
+    def units(n: int) -> list[batch.BatchUnit]:
+        return [batch.BatchUnit(str(e2e.warehouse), str(tmp_path), i, i + 1, e2e.cfg, "gaps")
+                for i in range(n)]
+
+    def threads(us: list[batch.BatchUnit]) -> list[int]:
+        return [u.cfg.execution.threads_per_worker for u in us]
+
+    assert e2e.cfg.execution.threads_per_worker == 1
+    assert threads(batch.granted(units(1), "process", 2)) == [2]
+    assert threads(batch.granted(units(2), "process", 5)) == [2, 2]
+    assert threads(batch.granted(units(2), "process", 2)) == [1, 1]
+    assert threads(batch.granted(units(1), "ray", 2)) == [1]
+    assert threads(batch.granted(units(1), "serial", 1)) == [1]
+    granted = batch.granted(units(1), "process", 2)[0]
+    assert granted.cfg.region == e2e.cfg.region and granted.start_ns == 0
