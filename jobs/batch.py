@@ -566,6 +566,7 @@ def run_batch(
     families: tuple[str, ...] | None = None,
     progress: Any = None,
     site: str | None = None,
+    resume: bool = True,
 ) -> SitesSummary:
     """Run the batch for [start_ns, end_ns), site by site, and commit each site's window
     atomically per table.
@@ -574,14 +575,17 @@ def run_batch(
     are untouched); default: every site the ledger knows data of in the window, each
     batched alone (its own units, ids, commit). ``families``: names of the families to
     run (default: every registered family); ``progress``: the CLI's
-    :class:`~jobs.progress.TerminalProgress` (or None)."""
+    :class:`~jobs.progress.TerminalProgress` (or None). ``resume``: first run the chains
+    killed jobs left (:func:`resume_continuations`); False for a caller that just did
+    (``surveil run``: a chain that failed there is not tried again in the same job)."""
     if end_ns <= start_ns:
         raise ValueError("--to must be after --from")
     sites = [site] if site is not None else sites_in(warehouse, start_ns, end_ns)
     out = SitesSummary({}, start_ns, end_ns)
     for name in sites:
-        out.resumed += resume_continuations(cfg, warehouse, site=name,  # a killed job's first
-                                            executor_kind=executor_kind, progress=progress)
+        if resume:  # a killed job's chain first
+            out.resumed += resume_continuations(cfg, warehouse, site=name,
+                                                executor_kind=executor_kind, progress=progress)
         summary = _run_site(cfg, warehouse, start_ns=start_ns, end_ns=end_ns,
                             executor_kind=executor_kind, families=families,
                             progress=progress, site=name)

@@ -186,8 +186,9 @@ def run_nightly(cfg: Config, warehouse: Path, *, folders: list[str] | None = Non
                if site in (None, name) for start, end in windows]
     for start, end, name in sorted(pending):
         summary.windows.append((start, end))
-        batch = run_batch(cfg, warehouse, start_ns=start, end_ns=end,
-                          executor_kind=executor_kind, progress=progress, site=name)
+        batch = run_batch(cfg, warehouse, start_ns=start, end_ns=end,  # chains: done above
+                          executor_kind=executor_kind, progress=progress, site=name,
+                          resume=False)
         summary.batches.append(batch)
         summary.failures += [f"batch [{iso(start)}, {iso(end)}): {u}"
                              for u in batch.failed_units]

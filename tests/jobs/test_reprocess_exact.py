@@ -159,6 +159,41 @@ def test_a_job_killed_before_its_chain_leaves_it_to_the_next_batch(e2e, tmp_path
     assert_same(snapshot(wh, maritime), snapshot(one, maritime), "after the resumed chain")
 
 
+def test_a_chain_that_fails_in_a_nightly_run_is_tried_once_in_it(e2e, tmp_path, monkeypatch):
+    """Was: ``surveil run`` ran a killed job's chain, and when it failed, ran it again
+    inside its batch of each pending window. Now the run tries it once; the record stays
+    for the next run, and the pending window is still batched."""
+    import jobs.batch
+    import jobs.run
+    strict, seam, wh, _ = _two_windows_and_a_new_config(e2e, tmp_path)
+
+    def crash(point: str) -> None:
+        if point == "batch.continuation":
+            raise _Killed(point)
+
+    monkeypatch.setattr(jobs.batch, "crash_point", crash)
+    with pytest.raises(_Killed):
+        run_batch(strict, wh, start_ns=e2e.start_ns, end_ns=seam, executor_kind="serial")
+    monkeypatch.setattr(jobs.batch, "crash_point", lambda point: None)
+    run_unit, tried = jobs.batch.run_unit, []
+
+    def failing_after_the_seam(unit):  # the chain's units fail, the window's run
+        if unit.start_ns >= seam:
+            tried.append((unit.family, unit.start_ns))
+            raise RuntimeError("chain unit fails")
+        return run_unit(unit)
+
+    monkeypatch.setattr(jobs.batch, "run_unit", failing_after_the_seam)
+    site = jobs.batch.sites_in(wh, e2e.start_ns, seam)[0]
+    monkeypatch.setattr(jobs.run, "pending_by_site", lambda w: {site: [(e2e.start_ns, seam)]})
+    res = jobs.run.run_nightly(strict, wh, folders=[str(Path(e2e.archive[0]).parent)],
+                               executor_kind="serial")
+    assert res.exit_code != 0 and any("chain unit fails" in f for f in res.failures)
+    assert res.windows == [(seam, e2e.end_ns), (e2e.start_ns, seam)]
+    assert len(tried) == len(set(tried)) > 0  # each unit of the chain tried once
+    assert len(list((wh / "_continue").glob("*.json"))) == 1
+
+
 def _two_windows_and_a_new_config(e2e, tmp_path):
     """(a stricter association config, the seam at 01:00, a warehouse with the e2e
     window batched as two windows [00:50, 01:00) and [01:00, 01:10), a warehouse with
