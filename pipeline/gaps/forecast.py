@@ -205,7 +205,8 @@ def forecast_gaps(
 
     if threads > 1 and len(batches) > 1:
         # the particle arithmetic (numpy's loops, the C transition) runs without the GIL:
-        # 2 threads take a dense hour's unit from ~24 to ~16 s on 2 cores (bench note)
+        # 2 threads take a dense hour's unit from ~22-30 to ~15-18 s on 2 cores
+        # (docs/scale.md, perf24)
         with ThreadPoolExecutor(min(threads, len(batches)), "gaps-batch") as pool:
             records = list(pool.map(run, batches, streams))
     else:

@@ -177,7 +177,7 @@ def test_a_chain_that_fails_in_a_nightly_run_is_tried_once_in_it(e2e, tmp_path, 
     monkeypatch.setattr(jobs.batch, "crash_point", lambda point: None)
     run_unit, tried = jobs.batch.run_unit, []
 
-    def failing_after_the_seam(unit):  # the chain's units fail, the window's run
+    def failing_after_the_seam(unit):  # the chain's units fail, the pending window's run
         if unit.start_ns >= seam:
             tried.append((unit.family, unit.start_ns))
             raise RuntimeError("chain unit fails")
