@@ -51,8 +51,9 @@ import numpy as np
 import polars as pl
 
 from pipeline.config import Config, RadarSite
-from pipeline.filters.quantiles import chi2_ppf, normal_ppf
+from pipeline.filters.quantiles import normal_ppf
 from pipeline.frames import TWO_PI, enu_to_polar, geodetic_to_enu, wrap_angle
+from pipeline.maritime.associate import gate_threshold
 from pipeline.maritime.config import RadarBiasConfig, SiteBias, radar_bias_config
 from pipeline.units import NS
 
@@ -221,7 +222,7 @@ def match_tracks(
         + (sigma_ais_m / pl.col("r_ref")) ** 2
         + cfg.prior_azimuth_bias_rad**2
     )
-    gate = float(chi2_ppf(cfg.gate_probability, 2))
+    gate = gate_threshold(cfg.gate_probability)
     nearest = (
         cand.with_columns(_d2_polar(cand, var_r, var_az).alias("d2"))
         .filter(pl.col("d2") < gate)

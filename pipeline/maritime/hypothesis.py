@@ -47,8 +47,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.filters.quantiles import chi2_ppf
-from pipeline.maritime.associate import assign
+from pipeline.maritime.associate import assign, gate_threshold
 
 
 @dataclass(frozen=True)
@@ -216,7 +215,7 @@ def associate_pictures(
     gate chi2.ppf(gate_probability, d) (its cost of non-assignment).
     """
     d = X[0].shape[-1]
-    gate = float(chi2_ppf(gate_probability, d))
+    gate = gate_threshold(gate_probability, d)
     info = np.zeros((0, d, d))
     vec = np.zeros((0, d))
     labels = []

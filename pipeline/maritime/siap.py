@@ -65,8 +65,8 @@ import numpy as np
 import polars as pl
 
 from pipeline.config import RegionConfig, Sector
-from pipeline.filters.quantiles import chi2_ppf
 from pipeline.geometry import assign_sectors, position_covariance
+from pipeline.maritime.associate import gate_threshold
 from pipeline.maritime.config import SiapConfig
 from pipeline.maritime.score import truth_at_epochs
 from pipeline.spatial import pairs_within
@@ -160,7 +160,7 @@ def candidate_pairs(tracks: pl.DataFrame, truths: pl.DataFrame, cfg: SiapConfig)
     use instead of joins). A grid join (``pipeline.spatial``) of the points within
     max_distance_m; the same pairs, values and order as :func:`candidate_pairs_reference`."""
     cell = cfg.max_distance_m
-    gate = float(chi2_ppf(cfg.gate_probability, 2))
+    gate = gate_threshold(cfg.gate_probability)
     tt, rt = tracks["time_ns"].to_numpy(), truths["time_ns"].to_numpy()
     epochs = np.unique(tt)
     ok = np.isin(rt, epochs)
@@ -200,7 +200,7 @@ def candidate_pairs_reference(
     max_distance_m around a track hold every truth within that distance): the reference
     (without the ``_i``/``_j`` positions)."""
     cell = cfg.max_distance_m
-    gate = float(chi2_ppf(cfg.gate_probability, 2))
+    gate = gate_threshold(cfg.gate_probability)
     shifts = pl.DataFrame({"sx": np.repeat([-1, 0, 1], 3), "sy": np.tile([-1, 0, 1], 3)})
     tr = (
         truths.select(
