@@ -66,7 +66,7 @@ import pyarrow as pa
 
 from pipeline import tables
 from pipeline.config import Config
-from pipeline.executors import make_executor
+from pipeline.executors import UnitQueue, UnitResult, make_executor
 from pipeline.families import FAMILIES, family
 from pipeline.family import Family, Relabel, Window, relabel
 from pipeline.signals import deferred_interrupts
@@ -722,22 +722,46 @@ def _safe(site: str) -> str:
 def _run_units(executor, units: list[BatchUnit], fams: tuple[Family, ...],
                summary: BatchSummary, progress: Any = None,
                warehouse: Path | None = None) -> list[UnitManifest]:
-    manifests = []
-    for result in executor.map_units(run_unit, units):
+    """Run a wave's units, and write each unit's outputs as Parquet data files in the same
+    pool as soon as it and its family's units before it are done (:class:`_Joiner`: its
+    relabelling is known then). The workers so write the early units' files while the
+    last units still compute, instead of after them all. Returns the finalised
+    manifests (none of a failed wave)."""
+    starts = {f.name: [u.start_ns for u in units if u.family == f.name] for f in fams}
+    joiners = {f.name: _Joiner(f, starts[f.name], summary, warehouse) for f in fams}
+    queue = UnitQueue(units)
+    out: list[UnitManifest] = []
+    for result in executor.map_units(batch_task, queue):
+        if isinstance(result.unit, FinalizeTask):
+            _finalized(result, out, summary)
+            continue
         if progress is not None:
             progress.batch_result(result)
         if result.ok:
-            manifests.append(result.value)
             m = result.value
             summary.family_s[m.family] = summary.family_s.get(m.family, 0.0) + m.elapsed_s
+            if not summary.failed_units:  # a failed wave commits nothing: write nothing
+                queue.add(joiners[m.family].ready(m))
         else:
             u = result.unit
             label = f"{u.family} [{_iso(u.start_ns)}, {_iso(u.end_ns)}): {result.error}"
             summary.failed_units.append(label)
             log.error("batch unit failed %s", label)
-    if summary.failed_units:
-        return manifests
-    return _finalize_units(executor, manifests, fams, summary, warehouse)
+    return [] if summary.failed_units else out
+
+
+def batch_task(task: BatchUnit | FinalizeTask) -> UnitManifest:
+    """Worker: a batch unit (:func:`run_unit`) or a unit's finalisation
+    (:func:`finalize_unit`), the two kinds of task of a wave's one map."""
+    return finalize_unit(task) if isinstance(task, FinalizeTask) else run_unit(task)
+
+
+def _finalized(result: UnitResult, out: list[UnitManifest], summary: BatchSummary) -> None:
+    if result.ok:
+        out.append(result.value)
+    else:
+        m = result.unit.manifest
+        summary.failed_units.append(f"{m.family} {_iso(m.start_ns)} write: {result.error}")
 
 
 def family_waves(families: tuple[Family, ...], cfg: Config) -> list[list[Family]]:
@@ -892,35 +916,60 @@ def _has_rows(seam: Any) -> bool:
     return len(seam) > 0 if isinstance(seam, Sized) else seam is not None
 
 
-def _finalize_units(executor, manifests: list[UnitManifest], families: tuple[Family, ...],
-                    summary: BatchSummary, warehouse: Path | None = None
-                    ) -> list[UnitManifest]:
-    """Each family's ``join_units`` over its units' seams (led by the seam of the rows
-    committed just before the window: ``stitch_lookback_s``), then every unit written as
-    Parquet data files by the executor's workers (relabelled where the join asks)."""
-    tasks: list[FinalizeTask] = []
-    for fam in families:
-        ours = sorted((m for m in manifests if m.family == fam.name), key=lambda m: m.start_ns)
-        seams = [m.seam for m in ours]
-        lead = 0
-        if (fam.join_units is not None and fam.unit_seam is not None
-                and fam.stitch_lookback_s and warehouse is not None):
-            # (no rows committed before: the seam of empty outputs leads nothing)
-            seam = fam.unit_seam(_stored_before(warehouse, fam, summary.start_ns,
-                                                  summary.site))
-            if _has_rows(seam):
-                seams, lead = [seam, *seams], 1
-        maps = (fam.join_units(_Seams(seams))[lead:]
-                if fam.join_units is not None and len(seams) > 1 else [None] * len(ours))
-        tasks += [FinalizeTask(m, mapping) for m, mapping in zip(ours, maps, strict=True)]
-    out: list[UnitManifest] = []
-    for result in executor.map_units(finalize_unit, tasks):
-        if result.ok:
-            out.append(result.value)
-        else:
-            m = result.unit.manifest
-            summary.failed_units.append(f"{m.family} {_iso(m.start_ns)} write: {result.error}")
-    return out
+class _Joiner:
+    """A family's units of a wave joined in time order as they finish (``join_units``):
+    :meth:`ready` takes a finished unit and gives the :class:`FinalizeTask` of every unit
+    that is now joined (it and the units after it that waited on it).
+
+    The join is a chain: a unit's relabelling depends on the units before it only through
+    the seam of the unit just before, relabelled. So the join of ``[seam of the last
+    joined unit, relabelled; seams of the units now done]`` gives the units now done the
+    relabelling the join of every seam at once gives them. The chain is led by the seam
+    of the rows committed just before the window (``stitch_lookback_s``)."""
+
+    def __init__(self, fam: Family, starts: list[int], summary: BatchSummary,
+                 warehouse: Path | None) -> None:
+        self.fam, self.summary, self.warehouse = fam, summary, warehouse
+        self.order = sorted(starts)
+        self.joined = 0
+        self.waiting: dict[int, UnitManifest] = {}
+        self.last_seam: Any = None  # the seam the next unit continues (None: none)
+
+    def ready(self, m: UnitManifest) -> list[FinalizeTask]:
+        self.waiting[m.start_ns] = m
+        now: list[UnitManifest] = []
+        while self.joined < len(self.order) and self.order[self.joined] in self.waiting:
+            now.append(self.waiting.pop(self.order[self.joined]))
+            self.joined += 1
+        if not now or self.fam.join_units is None:
+            return [FinalizeTask(u, None) for u in now]
+        if self.joined == len(now):  # the first units of the window
+            self.last_seam = self._lead()
+        seams = [s for s in (self.last_seam,) if s is not None] + [u.seam for u in now]
+        lead = len(seams) - len(now)
+        maps = (self.fam.join_units(_Seams(seams))[lead:] if len(seams) > 1
+                else [None] * len(now))
+        self.last_seam = _relabelled_seam(now[-1].seam, maps[-1])
+        return [FinalizeTask(u, mapping) for u, mapping in zip(now, maps, strict=True)]
+
+    def _lead(self) -> Any:
+        """The seam of the rows committed before the window, None when there are none."""
+        fam = self.fam
+        if fam.unit_seam is None or not fam.stitch_lookback_s or self.warehouse is None:
+            return None
+        seam = fam.unit_seam(_stored_before(self.warehouse, fam, self.summary.start_ns,
+                                            self.summary.site))
+        return seam if _has_rows(seam) else None
+
+
+def _relabelled_seam(seam: Any, mapping: Relabel | None) -> Any:
+    """A unit's seam with its relabelling applied (a :class:`SeamFile` is read)."""
+    if not mapping:
+        return seam
+    frame = seam.read() if isinstance(seam, SeamFile) else seam
+    if not isinstance(frame, pl.DataFrame):
+        raise TypeError(f"a seam to relabel must be a frame, not {type(frame).__name__}")
+    return relabel(frame, mapping)
 
 
 def _commit(warehouse: Path, manifests: list[UnitManifest], summary: BatchSummary,

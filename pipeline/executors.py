@@ -18,6 +18,11 @@ A unit that raises is reported as ``UnitResult(ok=False, error=...)``; nothing r
 ``map_units``, so the caller can list failed units and re-run only those. Results arrive
 in completion order (serial: input order).
 
+``units`` may be a :class:`UnitQueue`, to which the caller adds units while it reads the
+results (a unit that needs earlier results: a batch unit's finalisation once the units
+before it are done); the map takes them after each result it yields and ends when every
+unit has its result.
+
 ``map_units(fn, units, context=factory)``: ``factory`` (picklable, no arguments) makes a
 context manager that each worker enters once and leaves at its end, and ``fn`` is called
 as ``fn(unit, value)`` with what it entered to (e.g. the ingest's buffer pool and helper
@@ -41,6 +46,7 @@ import multiprocessing.util
 import os
 import pickle
 import traceback
+from collections import deque
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import (
     FIRST_COMPLETED,
@@ -97,6 +103,31 @@ class UnitResult(Generic[U, V]):
     ok: bool
     value: V | None = None
     error: str | None = None
+
+
+class UnitQueue(Generic[U]):
+    """Units for ``map_units`` that the caller may add to while it reads the results
+    (module docstring). Iterating takes the units in order, those added meanwhile too."""
+
+    def __init__(self, units: Iterable[U] = ()) -> None:
+        self._waiting: deque[U] = deque(units)
+
+    def add(self, units: Iterable[U]) -> None:
+        self._waiting.extend(units)
+
+    def take(self) -> list[U]:
+        """Every unit waiting, removed from the queue."""
+        out = list(self._waiting)
+        self._waiting.clear()
+        return out
+
+    def __iter__(self) -> Iterator[U]:
+        while self._waiting:
+            yield self._waiting.popleft()
+
+
+def as_queue(units: Iterable[U]) -> UnitQueue[U]:
+    return units if isinstance(units, UnitQueue) else UnitQueue(units)
 
 
 ContextFactory = Callable[[], AbstractContextManager[Any]]
@@ -238,12 +269,13 @@ class ProcessExecutor:
     def map_units(
         self, fn: Callable[..., V], units: Iterable[U], *, context: ContextFactory | None = None
     ) -> Iterator[UnitResult]:
-        units = list(units)
-        if not units:
+        queue = as_queue(units)
+        first = queue.take()
+        if not first:
             return
         if self._pool is not None and context is None:
             try:
-                yield from self._map(self._pool, fn, units, None)
+                yield from self._map(self._pool, fn, first, queue, None)
             except BaseException:  # interrupted: the shared pool's workers go too
                 _stop_pool(self._pool)
                 self._pool = None
@@ -251,9 +283,9 @@ class ProcessExecutor:
             return
         # a context is entered by each worker's initializer: a pool of its own
         blob = None if context is None else pickle.dumps(context)
-        pool = self._new_pool(len(units), blob)
+        pool = self._new_pool(len(first), blob)
         try:
-            yield from self._map(pool, fn, units, blob)
+            yield from self._map(pool, fn, first, queue, blob)
         except BaseException:  # interrupt, or the caller stopped early: no worker left
             _stop_pool(pool)
             raise
@@ -261,17 +293,20 @@ class ProcessExecutor:
 
     @staticmethod
     def _map(pool: ProcessPoolExecutor, fn: Callable[..., V], units: list[U],
-             blob: bytes | None) -> Iterator[UnitResult]:
-        futures: dict[Future, Any] = {
-            (pool.submit(_call_released, fn, u) if blob is None
-             else pool.submit(_call_in_worker, fn, u)): u
-            for u in units
-        }
-        pending = set(futures)
-        while pending:
-            done, pending = wait(pending, return_when=FIRST_COMPLETED)
+             queue: UnitQueue[U], blob: bytes | None) -> Iterator[UnitResult]:
+        futures: dict[Future, Any] = {}
+
+        def submit(more: list[U]) -> None:
+            for u in more:
+                call = _call_released if blob is None else _call_in_worker
+                futures[pool.submit(call, fn, u)] = u
+
+        submit(units)
+        while futures:
+            done, _ = wait(futures, return_when=FIRST_COMPLETED)
             for fut in done:
-                yield _result(futures[fut], fut)
+                yield _result(futures.pop(fut), fut)
+                submit(queue.take())  # what the caller added on reading that result
 
 
 def _stop_pool(pool: ProcessPoolExecutor, grace_s: float = 5.0) -> None:
@@ -326,18 +361,24 @@ class RayExecutor:
             max_retries=self.max_retries,
             runtime_env={"env_vars": thread_env(self.threads_per_worker)},
         )(_call_released if context is None else _call_with_own_context)
-        if context is None:
-            refs = {remote.remote(fn, u): u for u in units}
-        else:
-            refs = {remote.remote(fn, context, u): u for u in units}
-        pending = list(refs)
-        while pending:
-            done, pending = ray.wait(pending, num_returns=1)
+        queue = as_queue(units)
+        refs: dict[Any, Any] = {}
+
+        def submit(more: list[U]) -> None:
+            for u in more:
+                refs[remote.remote(fn, u) if context is None
+                     else remote.remote(fn, context, u)] = u
+
+        submit(queue.take())
+        while refs:
+            done, _ = ray.wait(list(refs), num_returns=1)
             for ref in done:
+                unit = refs.pop(ref)
                 try:
-                    yield UnitResult(refs[ref], True, value=ray.get(ref))
+                    yield UnitResult(unit, True, value=ray.get(ref))
                 except Exception as exc:  # RayTaskError wraps the unit's exception
-                    yield UnitResult(refs[ref], False, error=_describe(exc))
+                    yield UnitResult(unit, False, error=_describe(exc))
+                submit(queue.take())
 
 
 def make_executor(kind: str, max_workers: int, threads_per_worker: int) -> Executor:

@@ -25,7 +25,7 @@ import pipeline.ingest.worker
 import pipeline.warehouse.staged
 from jobs.ingest import IngestSummary, IngestUsageError, run_ingest
 from pipeline.decode import json_columns
-from pipeline.executors import ExecutorError, UnitResult, make_executor
+from pipeline.executors import ExecutorError, UnitQueue, UnitResult, make_executor
 from pipeline.families import load_config
 from pipeline.io.mcap_read import read_mcap_batches
 from pipeline.threads import HASHER_NICE, SECOND_PARSER_NICE, WRITER_NICE
@@ -270,6 +270,20 @@ def test_executor_reports_failures_per_unit(kind):
     by_unit = {r.unit: r for r in results}
     assert {u: r.value for u, r in by_unit.items() if r.ok} == {1: 1, 2: 4, 4: 16}
     assert not by_unit[3].ok and "ValueError: three is bad" in by_unit[3].error
+
+
+@pytest.mark.parametrize("kind", ["serial", "process"])
+def test_units_added_while_the_results_are_read_run_in_the_same_map(kind):
+    queue = UnitQueue([1, 2, 3])
+    results = []
+    with make_executor(kind, 2, 1) as ex:
+        for r in ex.map_units(_square_or_fail, queue):
+            results.append(r)
+            if r.ok and r.value < 10:
+                queue.add([r.unit + 10])  # a follow-up of each first unit
+    assert sorted(r.unit for r in results) == [1, 2, 3, 11, 12]
+    assert {r.unit: r.value for r in results if r.ok} == {1: 1, 2: 4, 11: 121, 12: 144}
+    assert [r.unit for r in results if not r.ok] == [3]
 
 
 def test_process_executor_caps_threads():

@@ -13,7 +13,8 @@ import pytest
 from maritime_helpers import T0_NS, scenario_tables
 from polars.testing import assert_frame_equal
 
-from pipeline.families import load_config
+from jobs.batch import BatchSummary, UnitManifest, _Joiner
+from pipeline.families import family, load_config
 from pipeline.family import Window, relabel
 from pipeline.maritime.stage import stage
 from pipeline.maritime.stitch import join_units, unit_seam
@@ -59,3 +60,26 @@ def test_units_cut_inside_faults_give_the_one_pass_rows(scenario):
             raise AssertionError(f"{name} differs: {only_cut.height} rows only in the cut "
                                  f"batch, {only_one.height} only in one pass:\n"
                                  f"{only_cut.head(8)}\n{only_one.head(8)}\n{exc}") from None
+
+
+def test_units_joined_as_they_finish_get_the_relabelling_of_one_join(scenario):
+    """The batch finalises a unit as soon as it and the units before it are done
+    (``jobs.batch._Joiner``): the join chained over the units in the order they finish
+    gives each unit the relabelling the join of every seam at once gives it."""
+    cfg, inputs = scenario
+    edges = [T0_NS + s * NS for s in (START_S, *CUTS_S, END_S)]
+    seams = [unit_seam(stage(inputs, Window(a, b), cfg)) for a, b in pairwise(edges)]
+    whole = join_units(seams)
+    assert whole[2] and whole[4]  # ids continued across the seams the chain starts from
+    joiner = _Joiner(family("maritime"), edges[:-1], BatchSummary(start_ns=edges[0],
+                                                                  end_ns=edges[-1]), None)
+    finished = [0, 2, 1, 4, 3, 5]  # completion order: joins chained at units 2 and 4
+    got: dict[int, object] = {}
+    for done, k in enumerate(finished):
+        tasks = joiner.ready(UnitManifest("maritime", edges[k], {}, seams[k]))
+        for t in tasks:  # a unit is joined only once every unit before it is done
+            i = edges.index(t.manifest.start_ns)
+            assert set(range(i + 1)) <= set(finished[: done + 1])
+            got[i] = t.mapping
+    assert sorted(got) == list(range(len(seams)))
+    assert [got[i] for i in range(len(seams))] == whole
