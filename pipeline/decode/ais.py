@@ -351,8 +351,13 @@ def _provenance(
     """log_time_ns = log time of the last fragment, time_ns = its reception time (the
     tag-block time when given, else the log time); nmea = the sentence(s)."""
     last = max(idx)
-    text = "\n".join(sentences[j].decode("ascii", "replace").strip() for j in idx)
-    return {"time_ns": int(recv[last]), "log_time_ns": int(times[last]), "nmea": text}
+    return {"time_ns": int(recv[last]), "log_time_ns": int(times[last]),
+            "nmea": _nmea_text(idx, sentences)}
+
+
+def _nmea_text(idx: list[int], sentences: list[bytes]) -> str:
+    """The ``nmea`` column: the message's sentence(s), stripped, newline-joined."""
+    return "\n".join(sentences[j].decode("ascii", "replace").strip() for j in idx)
 
 
 # -- vectorised path: single-sentence position reports (types 1, 2, 3, 18) ----------------
@@ -498,12 +503,19 @@ def _fast_table(f: FastPositions, keep: np.ndarray, sentences: list[bytes], time
 def _merge_fast(cols: dict[str, list], keys: list[int], f: FastPositions, keep: np.ndarray,
                 sentences: list[bytes], times: np.ndarray, recv: np.ndarray, source_file: str,
                 topic: str) -> pa.Table:
-    """Slow-path rows and fast rows in the order the reference makes them (by the index
-    of each message's last sentence), then conformed like :func:`_table`."""
+    """Slow-path report rows and fast rows in the reference order (see :func:`_merge`)."""
     fast = _fast_table(f, keep, sentences, times, recv)
-    parts, order = [fast], [f.index[keep]]
+    return _merge("ais_reports", cols, keys, fast, f.index[keep], source_file, topic)
+
+
+def _merge(name: str, cols: dict[str, list], keys: list[int], fast: pa.Table,
+           fast_keys: np.ndarray, source_file: str, topic: str) -> pa.Table:
+    """Slow-path rows (``cols``) and vectorised rows (``fast``) in the order the reference
+    makes them (by the index of each message's last sentence: ``keys``, ``fast_keys``),
+    then conformed like :func:`_table`."""
+    parts, order = [fast], [np.asarray(fast_keys, np.int64)]
     if cols.get("mmsi"):
-        types = {fd.name: fd.type for fd in schema("ais_reports")}
+        types = {fd.name: fd.type for fd in schema(name)}
         slow = pa.table({k: pa.array(v, type=types[k]) for k, v in cols.items()})
         parts.append(slow.select(fast.column_names))
         order.append(np.asarray(keys, np.int64))
@@ -511,10 +523,10 @@ def _merge_fast(cols: dict[str, list], keys: list[int], f: FastPositions, keep: 
     table = table.take(np.argsort(np.concatenate(order), kind="stable"))
     n = table.num_rows
     if n == 0:
-        return empty("ais_reports")
+        return empty(name)
     table = table.append_column("source_file", pa.array([source_file] * n, pa.string()))
     table = table.append_column("topic", pa.array([topic] * n, pa.string()))
-    return conform("ais_reports", table)
+    return conform(name, table)
 
 
 def _table(name: str, cols: dict[str, list], source_file: str, topic: str) -> pa.Table:
