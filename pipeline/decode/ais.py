@@ -2,11 +2,23 @@
 
 Each MCAP message of the ``nmea0183`` channel is one raw sentence (an IEC 62320-1 tag
 block ``\\...\\`` in front is accepted; time is the MCAP log time, or the reception time
-the caller read from the tag block's ``c:``, see :mod:`pipeline.decode.nmea`). A Python
-step per sentence is unavoidable here: NMEA framing, fragment assembly and the 6-bit
-payload decode are inherently sequential, and pyais decodes one message per call. The
-rest (unit conversion, not-available codes) works on the decoded values as they are
-appended to column lists; no table is built row by row.
+the caller read from the tag block's ``c:``, see :mod:`pipeline.decode.nmea`).
+
+Two vectorised paths (numpy over whole columns) decode the common messages; pyais, one
+message per call, decodes the rest and is the reference both are tested against
+(``tests/decode/test_ais_fast.py``: identical tables; ``FAST = False`` turns both off):
+
+- canonical single-sentence position reports 1, 2, 3, 18 (:func:`fast_positions`) are
+  taken before pyais sees them: framing, checksum and payload in numpy;
+- static data 5 and 24 (parts A and B; :func:`fast_static`): pyais still parses each
+  sentence and the fragment grouping stays a Python step per sentence (it is sequential,
+  and its reject rules are pyais's), but the payloads of the complete units are decoded
+  together: fields, 6-bit text, conversions.
+
+Everything unusual (tag blocks and other framing for positions, types 19 and 27, type 24
+part numbers 2 and 3, payloads too short or longer than the standard message, invalid
+armour characters) goes to pyais. There, unit conversion and not-available codes work on
+the decoded values as they are appended to column lists; no table is built row by row.
 
 What goes where (ITU-R M.1371 message ids):
 
@@ -26,8 +38,10 @@ sentence(s), newline-joined for a group.
 
 Conversions to SI: SOG knots -> m/s (``× 1852/3600``; 102.3 kn, or 63 kn for type 27, is
 "not available" -> null); COG and heading degrees -> rad (COG ≥ 360, heading 511 or
-> 359 -> null); UTC second 60-63 -> null; dimensions and ship type 0 -> null; IMO 0 ->
-null; empty text -> null.
+> 359 -> null); UTC second 60-63 -> null; dimensions and ship type 0 -> null (message
+5's ship type goes through pyais's ``ShipType``: codes it does not name become 0, or the
+reserved code of their decade); IMO 0 -> null; text: '@' padding and spaces trimmed as
+pyais and :func:`_text` do, empty -> null.
 
 Multi-part messages: fragments are matched by (sequential id, radio channel, fragment
 count) and must arrive in order; a group is abandoned after ``MAX_FRAGMENT_GAP`` other
@@ -41,11 +55,12 @@ from __future__ import annotations
 
 import math
 from collections import Counter
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 import pyarrow as pa
+from pyais.constants import ShipType
 from pyais.exceptions import UnknownMessageException
 from pyais.messages import MSG_CLASS, AISSentence, NMEASentenceFactory
 
@@ -281,39 +296,66 @@ def decode_ais(
     fast = fast_positions(sentences) if FAST else None
     dec = _Decoder(sentences, final, skip=None if fast is None else fast.index)
     carry_at = dec.run()
-    reports: dict[str, list] = {}
-    static: dict[str, list] = {}
-    rejects = [r for r in dec.rejects if max(r[0]) < carry_at]
-    not_stored: Counter = Counter()
-    report_key: list[int] = []  # index of the last sentence of each report row
-    for idx in dec.units:
-        if max(idx) >= carry_at:
+    # before the pyais path: its assembly rewrites a group's first fragment's payload
+    statics = fast_static(dec, carry_at) if FAST else None
+    rows = _decode_units(dec, carry_at, set() if statics is None else set(statics.unit.tolist()),
+                         sentences, times, recv)
+    if fast is not None and fast.index.size:
+        table = _merge_fast(rows.reports, rows.report_key, fast, fast.index < carry_at,
+                            sentences, times, recv, source_file, topic)
+    else:
+        table = _table("ais_reports", rows.reports, source_file, topic)
+    if statics is not None:
+        static = _merge("ais_static", rows.static, rows.static_key,
+                        _fast_static_table(statics, dec, sentences, times, recv),
+                        statics.index, source_file, topic)
+    else:
+        static = _table("ais_static", rows.static, source_file, topic)
+    return AisDecoded(
+        reports=table,
+        static=static,
+        rejects=_rejects(rows.rejects, sentences, times, source_file, topic),
+        not_stored=dict(rows.not_stored),
+        carry=len(sentences) - carry_at,
+    )
+
+
+@dataclass
+class _Rows:
+    """What the pyais path made of a batch's units: column lists per table, the index of
+    the last sentence of each row (``*_key``), rejects, valid-but-unstored counts."""
+
+    reports: dict[str, list] = field(default_factory=dict)
+    report_key: list[int] = field(default_factory=list)
+    static: dict[str, list] = field(default_factory=dict)
+    static_key: list[int] = field(default_factory=list)
+    rejects: list[tuple[list[int], str, str]] = field(default_factory=list)
+    not_stored: Counter = field(default_factory=Counter)
+
+
+def _decode_units(dec: _Decoder, carry_at: int, skip: set[int], sentences: list[bytes],
+                  times: np.ndarray, recv: np.ndarray) -> _Rows:
+    """The pyais path over the complete units before ``carry_at``, except the positions
+    in ``skip`` (units the vectorised static path took)."""
+    rows = _Rows(rejects=[r for r in dec.rejects if max(r[0]) < carry_at])
+    for k, idx in enumerate(dec.units):
+        if max(idx) >= carry_at or k in skip:
             continue
         out = _decode_unit([dec.parsed[j] for j in idx])  # type: ignore[misc]
         if isinstance(out, int):
-            not_stored[out] += 1
+            rows.not_stored[out] += 1
             continue
         position, static_row, problem = out
         if problem is not None:
-            rejects.append((idx, *problem))
+            rows.rejects.append((idx, *problem))
         prov = _provenance(idx, sentences, times, recv)
         if position is not None:
-            _append(reports, {**position, **prov})
-            report_key.append(max(idx))
+            _append(rows.reports, {**position, **prov})
+            rows.report_key.append(max(idx))
         if static_row is not None:
-            _append(static, {**static_row, **prov})
-    if fast is not None and fast.index.size:
-        table = _merge_fast(reports, report_key, fast, fast.index < carry_at, sentences,
-                            times, recv, source_file, topic)
-    else:
-        table = _table("ais_reports", reports, source_file, topic)
-    return AisDecoded(
-        reports=table,
-        static=_table("ais_static", static, source_file, topic),
-        rejects=_rejects(rejects, sentences, times, source_file, topic),
-        not_stored=dict(not_stored),
-        carry=len(sentences) - carry_at,
-    )
+            _append(rows.static, {**static_row, **prov})
+            rows.static_key.append(max(idx))
+    return rows
 
 
 _Unit = tuple[dict | None, dict | None, tuple[str, str] | None]
@@ -363,8 +405,8 @@ def _nmea_text(idx: list[int], sentences: list[bytes]) -> str:
 # -- vectorised path: single-sentence position reports (types 1, 2, 3, 18) ----------------
 
 FAST = True
-"""Decode canonical single-sentence position reports without pyais (tests switch it off
-to compare with the reference path)."""
+"""Decode canonical single-sentence position reports and static messages 5 and 24 with
+numpy (tests switch it off to compare with the reference path)."""
 _SENTENCE_LEN = 47  # "!AIVDM,1,1,,A," + 28 payload characters + ",0*HH"
 _HEX = np.frombuffer(b"0123456789ABCDEF", np.uint8)
 
@@ -389,7 +431,7 @@ class FastPositions:
 
 
 def _bits(six: np.ndarray, start: int, width: int, signed: bool = False) -> np.ndarray:
-    """Bit field [start, start + width) of 6-bit rows (n, 28), as int64."""
+    """Bit field [start, start + width) of 6-bit rows (n, characters), as int64."""
     first, last = start // 6, (start + width - 1) // 6
     v = np.zeros(six.shape[0], np.int64)
     for c in range(first, last + 1):
@@ -498,6 +540,270 @@ def _fast_table(f: FastPositions, keep: np.ndarray, sentences: list[bytes], time
         "log_time_ns": pa.array(times[i], pa.int64()),
         "nmea": pa.array(text, pa.string()),
     })
+
+
+# -- vectorised path: static data (message 5, message 24 parts A and B) -------------------
+
+# ITU-R M.1371-5 message 5, static and voyage related data (bit offset, width): message id
+# 0/6, repeat indicator 6/2, user ID (MMSI) 8/30, AIS version 38/2, IMO number 40/30, call
+# sign 70/42 (7 characters), name 112/120 (20 characters), type of ship and cargo 232/8,
+# overall dimension A (to bow) 240/9, B (to stern) 249/9, C (to port) 258/6, D (to
+# starboard) 264/6, EPFD type 270/4, ETA 274/20, maximum draught 294/8, destination
+# 302/120 (20 characters), DTE 422/1, spare 423/1: 424 bits, 71 characters + 2 fill bits.
+# Message 24 part A (part number 0): message id, repeat, MMSI as above, part number
+# 38/2, name 40/120: 160 bits (pyais and some transmitters add 8 spare bits: 168).
+# Message 24 part B (part number 1): part number 38/2, type of ship and cargo 40/8, vendor
+# ID 48/42, call sign 90/42, dimensions A-D 132/30 as in message 5 (for an auxiliary
+# craft, MMSI 98XXXYYYY, the mothership's MMSI instead), spare 162/6: 168 bits.
+_MSG5, _MSG24 = 5, 24
+_PART_A, _PART_B = 0, 1
+# a unit is taken when every field read lies inside its bits (pyais reads any field from
+# the front of the payload: fill bits and further bits do not change it) and its payload
+# is no longer than the standard message
+_MSG5_BITS, _PART_A_BITS, _PART_B_BITS = 422, 160, 162  # end of destination / name / D
+_MSG5_CHARS, _MSG24_CHARS = 71, 28
+_AUXILIARY_MMSI = (980_000_000, 989_999_999)  # pyais is_auxiliary_craft: no dimensions
+# pyais _SIXBIT_CHAR: 6-bit value -> ASCII (0-31 -> '@', 'A'..'Z', '[\\]^_'; 32-63 as is)
+_SIXBIT_ASCII = np.array([v + 64 if v < 32 else v for v in range(64)], np.uint8)
+_AT, _SPACE = ord("@"), ord(" ")
+# pyais decodes message 5's type of ship and cargo through ShipType.from_value: codes it
+# does not name become 0 ("not available": 1-19, 38, 39, 100-255) or the reserved code of
+# their decade (26-28 -> 25, ...); message 24 part B keeps the raw code
+_SHIP_TYPE_5 = np.array([int(ShipType.from_value(v)) for v in range(256)], np.int64)
+
+
+@dataclass(frozen=True)
+class FastStatic:
+    """The static messages the vectorised path decoded: ``unit`` their positions in
+    ``_Decoder.units``, ``index`` the batch index of each one's last sentence (the
+    reference's row order), ``table`` their ais_static field columns, row for row."""
+
+    unit: np.ndarray
+    index: np.ndarray
+    table: pa.Table
+
+
+def fast_static(dec: _Decoder, carry_at: int) -> FastStatic | None:
+    """Message 5 and message 24 (part A or B) units of a decoded batch, decoded with
+    numpy over whole columns.
+
+    Taken: a complete unit (any number of fragments) before ``carry_at`` whose assembled
+    payload has valid armour characters, message id 5 or 24 (as pyais read it from the
+    first fragment), part number 0 or 1 for 24, and every field read inside its bits and
+    no more characters than the standard message (see ``_MSG5_BITS``). Everything else
+    (type 19, part numbers 2 and 3, short or long payloads, bad characters) is left to the
+    pyais path, which gives the exact rows and reject reasons. For a taken unit the row is
+    the one :func:`_static_row` writes from pyais's decode.
+    """
+    unit, payload, fill, ais_id = _static_candidates(dec, carry_at)
+    if not unit:
+        return None
+    taken, table = _static_fields(payload, np.asarray(fill, np.int64),
+                                  np.asarray(ais_id, np.int64))
+    if taken.size == 0:
+        return None
+    unit_taken = np.asarray(unit, np.int64)[taken]
+    last = np.fromiter((max(dec.units[u]) for u in unit_taken.tolist()), np.int64,
+                       unit_taken.size)
+    return FastStatic(unit=unit_taken, index=last, table=table)
+
+
+def _static_candidates(dec: _Decoder, carry_at: int
+                       ) -> tuple[list[int], list[bytes], list[int], list[int]]:
+    """Units whose first fragment says message 5 or 24: positions, assembled payloads, fill
+    bits of the last fragment, message ids. Per unit in Python: units and payloads exist
+    only as the pyais sentences of the sequential fragment grouping (~1 us a unit)."""
+    unit: list[int] = []
+    payload: list[bytes] = []
+    fill: list[int] = []
+    ais_id: list[int] = []
+    parsed: list[AISSentence] = dec.parsed  # type: ignore[assignment]  # units: parsed only
+    for k, idx in enumerate(dec.units):
+        first = parsed[idx[0]]
+        if first.ais_id not in (_MSG5, _MSG24) or max(idx) >= carry_at:
+            continue
+        unit.append(k)
+        payload.append(b"".join(parsed[j].payload for j in idx))
+        fill.append(parsed[idx[-1]].fill_bits)
+        ais_id.append(first.ais_id)
+    return unit, payload, fill, ais_id
+
+
+def _static_fields(payload: list[bytes], fill: np.ndarray, ais_id: np.ndarray
+                   ) -> tuple[np.ndarray, pa.Table]:
+    """Which candidates are taken (positions, message 5 first, then 24 A, then 24 B) and
+    their ais_static field columns in that order."""
+    n_chars = np.fromiter(map(len, payload), np.int64, len(payload))
+    rows = np.flatnonzero((n_chars >= 1) & (n_chars <= _MSG5_CHARS))
+    six, valid = _six_bit_rows([payload[i] for i in rows.tolist()], n_chars[rows], _MSG5_CHARS)
+    n_bits = 6 * n_chars[rows] - fill[rows]
+    msg = six[:, 0].astype(np.int64)
+    ok = valid & (msg == ais_id[rows])
+    part = _bits(six, 38, 2)
+    kinds = (
+        (ok & (msg == _MSG5) & (n_bits >= _MSG5_BITS), _message_5),
+        (ok & (msg == _MSG24) & (part == _PART_A) & (n_bits >= _PART_A_BITS)
+         & (n_chars[rows] <= _MSG24_CHARS), _message_24_part_a),
+        (ok & (msg == _MSG24) & (part == _PART_B) & (n_bits >= _PART_B_BITS)
+         & (n_chars[rows] <= _MSG24_CHARS), _message_24_part_b),
+    )
+    taken = [rows[mask] for mask, _ in kinds]
+    tables = [pa.table(decode(six[mask])) for mask, decode in kinds]
+    return np.concatenate(taken), pa.concat_tables(tables)
+
+
+def _six_bit_rows(payload: list[bytes], n_chars: np.ndarray, width: int
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """De-armoured payloads as (n, width) 6-bit values, zero-padded on the right, and
+    whether every character is valid armour ('0'-'W', '`'-'w')."""
+    armour = np.full((len(payload), width), ord("0"), np.uint8)
+    flat = np.frombuffer(b"".join(payload), np.uint8)
+    row = np.repeat(np.arange(len(payload)), n_chars)
+    col = np.arange(flat.size) - np.repeat(np.cumsum(n_chars) - n_chars, n_chars)
+    armour[row, col] = flat
+    valid = (((armour >= 48) & (armour <= 87)) | ((armour >= 96) & (armour <= 119))).all(axis=1)
+    six = armour.astype(np.int16) - 48
+    return np.where(six > 40, six - 8, six), valid
+
+
+def _message_5(six: np.ndarray) -> dict[str, pa.Array]:
+    """ais_static fields of message 5 rows (layout above)."""
+    return _static_columns(
+        six, _MSG5, ais_class="A",
+        imo=_nonzero_column(_bits(six, 40, 30), pa.int64()),
+        callsign=_text_column(six, 70, 7),
+        shipname=_text_column(six, 112, 20),
+        ship_type=_nonzero_column(_SHIP_TYPE_5[_bits(six, 232, 8)], pa.int16()),
+        dimensions=_dimensions(six, 240, np.ones(six.shape[0], bool)),
+        destination=_text_column(six, 302, 20),
+    )
+
+
+def _message_24_part_a(six: np.ndarray) -> dict[str, pa.Array]:
+    """ais_static fields of message 24 part A rows: the name only."""
+    n = six.shape[0]
+    return _static_columns(
+        six, _MSG24, ais_class="B",
+        imo=pa.nulls(n, pa.int64()),
+        callsign=pa.nulls(n, pa.string()),
+        shipname=_text_column(six, 40, 20),
+        ship_type=pa.nulls(n, pa.int16()),
+        dimensions=_dimensions(six, 0, np.zeros(n, bool)),
+        destination=pa.nulls(n, pa.string()),
+    )
+
+
+def _message_24_part_b(six: np.ndarray) -> dict[str, pa.Array]:
+    """ais_static fields of message 24 part B rows: type, call sign, dimensions (none for
+    an auxiliary craft)."""
+    n = six.shape[0]
+    mmsi = _bits(six, 8, 30)
+    auxiliary = (mmsi >= _AUXILIARY_MMSI[0]) & (mmsi <= _AUXILIARY_MMSI[1])
+    return _static_columns(
+        six, _MSG24, ais_class="B",
+        imo=pa.nulls(n, pa.int64()),
+        callsign=_text_column(six, 90, 7),
+        shipname=pa.nulls(n, pa.string()),
+        ship_type=_nonzero_column(_bits(six, 40, 8), pa.int16()),
+        dimensions=_dimensions(six, 132, ~auxiliary),
+        destination=pa.nulls(n, pa.string()),
+    )
+
+
+def _static_columns(six: np.ndarray, msg_type: int, *, ais_class: str, imo: pa.Array,
+                    callsign: pa.Array, shipname: pa.Array, ship_type: pa.Array,
+                    dimensions: dict[str, pa.Array], destination: pa.Array
+                    ) -> dict[str, pa.Array]:
+    """The ais_static field columns in :func:`_static_row`'s order."""
+    n = six.shape[0]
+    return {
+        "mmsi": pa.array(_bits(six, 8, 30), pa.int64()),
+        "msg_type": pa.array(np.full(n, msg_type, np.int16), pa.int16()),
+        "ais_class": pa.array([ais_class] * n, pa.string()),
+        "imo": imo,
+        "callsign": callsign,
+        "shipname": shipname,
+        "ship_type": ship_type,
+        **dimensions,
+        "destination": destination,
+    }
+
+
+def _dimensions(six: np.ndarray, start: int, present: np.ndarray) -> dict[str, pa.Array]:
+    """Dimensions A (to bow, 9 bits), B (to stern, 9), C (to port, 6), D (to starboard, 6)
+    from bit ``start`` (240 in message 5, 132 in message 24 part B), m; 0 or not
+    ``present`` -> null."""
+    out = {}
+    for name, offset, width in (("to_bow_m", 0, 9), ("to_stern_m", 9, 9),
+                                ("to_port_m", 18, 6), ("to_starboard_m", 24, 6)):
+        v = _bits(six, start + offset, width)
+        out[name] = pa.array(v.astype(np.float64), pa.float64(), mask=(v == 0) | ~present)
+    return out
+
+
+def _nonzero_column(v: np.ndarray, kind: pa.DataType) -> pa.Array:
+    """:func:`_nonzero` over a column: 0 -> null."""
+    return pa.array(v, kind, mask=v == 0)
+
+
+def _text_column(six: np.ndarray, start: int, n_chars: int) -> pa.Array:
+    """A 6-bit ASCII text field of ``n_chars`` characters from bit ``start`` as the pyais
+    path stores it: pyais ``get_str`` (``rstrip("@").strip()``), then :func:`_text`
+    (``strip().rstrip("@").strip()``); empty -> null."""
+    codes = np.stack([_SIXBIT_ASCII[_bits(six, start + 6 * i, 6)] for i in range(n_chars)],
+                     axis=1)
+    n, width = codes.shape
+    lo, hi = np.zeros(n, np.int64), np.full(n, width, np.int64)
+    hi = _rstrip(codes, _AT, lo, hi)
+    hi = _rstrip(codes, _SPACE, lo, hi)
+    lo = _lstrip(codes, _SPACE, lo, hi)
+    # _text: strip() finds nothing more to strip at either end; rstrip("@") and strip()
+    # on the right remain (c[lo] is not a space, so nothing comes off the left)
+    hi = _rstrip(codes, _AT, lo, hi)
+    hi = _rstrip(codes, _SPACE, lo, hi)
+    return _string_column(codes, lo, hi)
+
+
+def _rstrip(codes: np.ndarray, char: int, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """New right ends of the texts ``codes[lo:hi]`` after ``rstrip(char)``, per row."""
+    p = np.arange(codes.shape[1])
+    keep = (codes != char) & (p >= lo[:, None]) & (p < hi[:, None])
+    return np.maximum(np.where(keep, p + 1, 0).max(axis=1, initial=0), lo)
+
+
+def _lstrip(codes: np.ndarray, char: int, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """New left ends of the texts ``codes[lo:hi]`` after ``lstrip(char)``, per row."""
+    p = np.arange(codes.shape[1])
+    keep = (codes != char) & (p >= lo[:, None]) & (p < hi[:, None])
+    width = codes.shape[1]
+    return np.minimum(np.where(keep, p, width).min(axis=1, initial=width), hi)
+
+
+def _string_column(codes: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> pa.Array:
+    """Rows ``codes[lo:hi]`` (ASCII) as a string column, empty -> null, built from one
+    data buffer and the offsets."""
+    n = codes.shape[0]
+    p = np.arange(codes.shape[1])
+    data = codes[(p >= lo[:, None]) & (p < hi[:, None])]  # row by row, in order
+    length = hi - lo
+    offsets = np.zeros(n + 1, np.int32)
+    np.cumsum(length, out=offsets[1:])
+    present = length > 0
+    return pa.StringArray.from_buffers(
+        n, pa.py_buffer(offsets), pa.py_buffer(data.tobytes()),
+        pa.py_buffer(np.packbits(present, bitorder="little")), int(n - present.sum()))
+
+
+def _fast_static_table(f: FastStatic, dec: _Decoder, sentences: list[bytes], times: np.ndarray,
+                       recv: np.ndarray) -> pa.Table:
+    """The taken rows' fields with :func:`_provenance`'s columns. ``nmea`` is joined per row
+    in Python: a unit's sentences are a list of any length."""
+    columns = dict(zip(f.table.column_names, f.table.columns, strict=True))
+    columns["time_ns"] = pa.chunked_array([recv[f.index]], pa.int64())
+    columns["log_time_ns"] = pa.chunked_array([times[f.index]], pa.int64())
+    text = [_nmea_text(dec.units[u], sentences) for u in f.unit.tolist()]
+    columns["nmea"] = pa.chunked_array([pa.array(text, pa.string())])
+    return pa.table(columns)
 
 
 def _merge_fast(cols: dict[str, list], keys: list[int], f: FastPositions, keep: np.ndarray,
