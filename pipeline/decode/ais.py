@@ -638,7 +638,7 @@ def _static_fields(payload: list[bytes], fill: np.ndarray, ais_id: np.ndarray
     six, valid = _six_bit_rows([payload[i] for i in rows.tolist()], n_chars[rows], _MSG5_CHARS)
     n_bits = 6 * n_chars[rows] - fill[rows]
     msg = six[:, 0].astype(np.int64)
-    ok = valid & (msg == ais_id[rows])
+    ok = valid & (msg == ais_id[rows])  # pyais decodes by the first fragment's id
     part = _bits(six, 38, 2)
     kinds = (
         (ok & (msg == _MSG5) & (n_bits >= _MSG5_BITS), _message_5),
