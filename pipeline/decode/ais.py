@@ -668,14 +668,15 @@ def _six_bit_rows(payload: list[bytes], n_chars: np.ndarray, width: int
 
 def _message_5(six: np.ndarray) -> dict[str, pa.Array]:
     """ais_static fields of message 5 rows (layout above)."""
+    callsign, shipname, destination = _text_columns(six, (70, 7), (112, 20), (302, 20))
     return _static_columns(
         six, _MSG5, ais_class="A",
         imo=_nonzero_column(_bits(six, 40, 30), pa.int64()),
-        callsign=_text_column(six, 70, 7),
-        shipname=_text_column(six, 112, 20),
+        callsign=callsign,
+        shipname=shipname,
         ship_type=_nonzero_column(_SHIP_TYPE_5[_bits(six, 232, 8)], pa.int16()),
         dimensions=_dimensions(six, 240, np.ones(six.shape[0], bool)),
-        destination=_text_column(six, 302, 20),
+        destination=destination,
     )
 
 
@@ -686,7 +687,7 @@ def _message_24_part_a(six: np.ndarray) -> dict[str, pa.Array]:
         six, _MSG24, ais_class="B",
         imo=pa.nulls(n, pa.int64()),
         callsign=pa.nulls(n, pa.string()),
-        shipname=_text_column(six, 40, 20),
+        shipname=_text_columns(six, (40, 20))[0],
         ship_type=pa.nulls(n, pa.int16()),
         dimensions=_dimensions(six, 0, np.zeros(n, bool)),
         destination=pa.nulls(n, pa.string()),
@@ -702,7 +703,7 @@ def _message_24_part_b(six: np.ndarray) -> dict[str, pa.Array]:
     return _static_columns(
         six, _MSG24, ais_class="B",
         imo=pa.nulls(n, pa.int64()),
-        callsign=_text_column(six, 90, 7),
+        callsign=_text_columns(six, (90, 7))[0],
         shipname=pa.nulls(n, pa.string()),
         ship_type=_nonzero_column(_bits(six, 40, 8), pa.int16()),
         dimensions=_dimensions(six, 132, ~auxiliary),
@@ -746,46 +747,72 @@ def _nonzero_column(v: np.ndarray, kind: pa.DataType) -> pa.Array:
     return pa.array(v, kind, mask=v == 0)
 
 
-def _text_column(six: np.ndarray, start: int, n_chars: int) -> pa.Array:
-    """A 6-bit ASCII text field of ``n_chars`` characters from bit ``start`` as the pyais
-    path stores it: pyais ``get_str`` (``rstrip("@").strip()``), then :func:`_text`
-    (``strip().rstrip("@").strip()``); empty -> null."""
-    codes = np.stack([_SIXBIT_ASCII[_bits(six, start + 6 * i, 6)] for i in range(n_chars)],
-                     axis=1)
-    n, width = codes.shape
-    lo, hi = np.zeros(n, np.int64), np.full(n, width, np.int64)
+def _text_columns(six: np.ndarray, *fields: tuple[int, int]) -> list[pa.Array]:
+    """6-bit ASCII text fields, each ``(start bit, characters)``, as the pyais path stores
+    them: pyais ``get_str`` (``rstrip("@").strip()``), then :func:`_text`
+    (``strip().rstrip("@").strip()``); empty -> null. The fields are trimmed together,
+    side by side, right-padded with '@' to the longest (the first step strips it)."""
+    n = six.shape[0]
+    width = max(n_chars for _, n_chars in fields)
+    # characters down the rows, texts across: the strips reduce over rows of n values
+    codes = np.full((width, len(fields) * n), _AT, np.uint8)
+    for k, (start, n_chars) in enumerate(fields):
+        codes[:n_chars, k * n:(k + 1) * n] = _SIXBIT_ASCII[_characters(six, start, n_chars)].T
+    lo = np.zeros(codes.shape[1], np.int16)
+    hi = np.full(codes.shape[1], width, np.int16)
     hi = _rstrip(codes, _AT, lo, hi)
     hi = _rstrip(codes, _SPACE, lo, hi)
     lo = _lstrip(codes, _SPACE, lo, hi)
     # _text: strip() finds nothing more to strip at either end; rstrip("@") and strip()
-    # on the right remain (c[lo] is not a space, so nothing comes off the left)
+    # on the right remain (codes[lo] is not a space, so nothing comes off the left)
     hi = _rstrip(codes, _AT, lo, hi)
     hi = _rstrip(codes, _SPACE, lo, hi)
-    return _string_column(codes, lo, hi)
+    text = _string_column(codes, lo, hi)
+    return [text.slice(k * n, n) for k in range(len(fields))]
+
+
+def _characters(six: np.ndarray, start: int, n_chars: int) -> np.ndarray:
+    """The (n, n_chars) 6-bit characters of a text field from bit ``start``: each one the
+    low bits of an armour character and the high bits of the next (``start`` need not be
+    a multiple of 6)."""
+    first, shift = divmod(start, 6)
+    if shift == 0:
+        return six[:, first:first + n_chars]
+    pairs = six[:, first:first + n_chars + 1].astype(np.int64)
+    return ((pairs[:, :-1] << shift) | (pairs[:, 1:] >> (6 - shift))) & 63
+
+
+def _inside(codes: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """(width, texts) mask of the characters in [lo, hi) of each text (column)."""
+    p = np.arange(codes.shape[0], dtype=np.int16)[:, None]
+    inside = p >= lo
+    inside &= p < hi
+    return inside
 
 
 def _rstrip(codes: np.ndarray, char: int, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """New right ends of the texts ``codes[lo:hi]`` after ``rstrip(char)``, per row."""
-    p = np.arange(codes.shape[1])
-    keep = (codes != char) & (p >= lo[:, None]) & (p < hi[:, None])
-    return np.maximum(np.where(keep, p + 1, 0).max(axis=1, initial=0), lo)
+    """New right ends of the texts ``codes[lo:hi]`` (columns) after ``rstrip(char)``."""
+    keep = _inside(codes, lo, hi)
+    keep &= codes != char
+    p1 = np.arange(1, codes.shape[0] + 1, dtype=np.int16)[:, None]
+    return np.maximum((keep * p1).max(axis=0, initial=0), lo)
 
 
 def _lstrip(codes: np.ndarray, char: int, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """New left ends of the texts ``codes[lo:hi]`` after ``lstrip(char)``, per row."""
-    p = np.arange(codes.shape[1])
-    keep = (codes != char) & (p >= lo[:, None]) & (p < hi[:, None])
-    width = codes.shape[1]
-    return np.minimum(np.where(keep, p, width).min(axis=1, initial=width), hi)
+    """New left ends of the texts ``codes[lo:hi]`` (columns) after ``lstrip(char)``."""
+    keep = _inside(codes, lo, hi)
+    keep &= codes != char
+    width = codes.shape[0]
+    from_end = np.arange(width, 0, -1, dtype=np.int16)[:, None]  # width - position
+    return np.minimum(width - (keep * from_end).max(axis=0, initial=0), hi)
 
 
 def _string_column(codes: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> pa.Array:
-    """Rows ``codes[lo:hi]`` (ASCII) as a string column, empty -> null, built from one
-    data buffer and the offsets."""
-    n = codes.shape[0]
-    p = np.arange(codes.shape[1])
-    data = codes[(p >= lo[:, None]) & (p < hi[:, None])]  # row by row, in order
-    length = hi - lo
+    """Texts ``codes[lo:hi]`` (columns, ASCII) as a string column, empty -> null, built
+    from one data buffer and the offsets."""
+    n = codes.shape[1]
+    data = codes.T[_inside(codes, lo, hi).T]  # text by text, each in order
+    length = (hi - lo).astype(np.int32)
     offsets = np.zeros(n + 1, np.int32)
     np.cumsum(length, out=offsets[1:])
     present = length > 0
