@@ -561,7 +561,10 @@ _PART_A, _PART_B = 0, 1
 # the front of the payload: fill bits and further bits do not change it) and its payload
 # is no longer than the standard message
 _MSG5_BITS, _PART_A_BITS, _PART_B_BITS = 422, 160, 162  # end of destination / name / D
-_MSG5_CHARS, _MSG24_CHARS = 71, 28
+_MSG5_CHARS, _MSG24_CHARS = 71, 28  # the standard messages' armour characters
+# dimensions to the reference point: column, bit offset from dimension A, width
+_DIMENSIONS = (("to_bow_m", 0, 9), ("to_stern_m", 9, 9), ("to_port_m", 18, 6),
+               ("to_starboard_m", 24, 6))
 _AUXILIARY_MMSI = (980_000_000, 989_999_999)  # pyais is_auxiliary_craft: no dimensions
 # pyais _SIXBIT_CHAR: 6-bit value -> ASCII (0-31 -> '@', 'A'..'Z', '[\\]^_'; 32-63 as is)
 _SIXBIT_ASCII = np.array([v + 64 if v < 32 else v for v in range(64)], np.uint8)
@@ -631,8 +634,8 @@ def _static_candidates(dec: _Decoder, carry_at: int
 
 def _static_fields(payload: list[bytes], fill: np.ndarray, ais_id: np.ndarray
                    ) -> tuple[np.ndarray, pa.Table]:
-    """Which candidates are taken (positions, message 5 first, then 24 A, then 24 B) and
-    their ais_static field columns in that order."""
+    """Which candidates are taken (positions in the candidate lists: message 5 first,
+    then 24 part A, then part B) and their ais_static field columns in that order."""
     n_chars = np.fromiter(map(len, payload), np.int64, len(payload))
     rows = np.flatnonzero((n_chars >= 1) & (n_chars <= _MSG5_CHARS))
     six, valid = _six_bit_rows([payload[i] for i in rows.tolist()], n_chars[rows], _MSG5_CHARS)
@@ -689,7 +692,7 @@ def _message_24_part_a(six: np.ndarray) -> dict[str, pa.Array]:
         callsign=pa.nulls(n, pa.string()),
         shipname=_text_columns(six, (40, 20))[0],
         ship_type=pa.nulls(n, pa.int16()),
-        dimensions=_dimensions(six, 0, np.zeros(n, bool)),
+        dimensions={name: pa.nulls(n, pa.float64()) for name, _, _ in _DIMENSIONS},
         destination=pa.nulls(n, pa.string()),
     )
 
@@ -735,8 +738,7 @@ def _dimensions(six: np.ndarray, start: int, present: np.ndarray) -> dict[str, p
     from bit ``start`` (240 in message 5, 132 in message 24 part B), m; 0 or not
     ``present`` -> null."""
     out = {}
-    for name, offset, width in (("to_bow_m", 0, 9), ("to_stern_m", 9, 9),
-                                ("to_port_m", 18, 6), ("to_starboard_m", 24, 6)):
+    for name, offset, width in _DIMENSIONS:
         v = _bits(six, start + offset, width)
         out[name] = pa.array(v.astype(np.float64), pa.float64(), mask=(v == 0) | ~present)
     return out
