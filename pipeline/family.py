@@ -30,6 +30,9 @@ A family (``pipeline.maritime``, ``pipeline.airfield``, ``pipeline.nav``,
   window's units, in time order, to ``join_units`` as a sequence that reads each seam
   when it is looked up; it returns per unit ``None`` or a :data:`Relabel` to apply to
   every output of that unit (the units' outputs themselves never travel to the driver).
+  The join must be a chain, as the driver joins units as they finish: a unit's
+  relabelling depends on the units before it only through the seam just before it,
+  relabelled (a frame seam, relabelled with :func:`relabel`).
 - ``stitch_lookback_s``: how far before a window the batch reads the family's committed
   outputs; their ``unit_seam`` leads the window's seams given to ``join_units`` (ids
   continue across the window's leading edge); 0: the window's units are joined alone.
