@@ -963,10 +963,11 @@ class _Joiner:
 
 
 def _relabelled_seam(seam: Any, mapping: Relabel | None) -> Any:
-    """A unit's seam with its relabelling applied (a :class:`SeamFile` is read)."""
-    if not mapping:
-        return seam
+    """A unit's seam with its relabelling applied. A :class:`SeamFile` is read now: the
+    unit's finalisation, sent next, removes its staging folder."""
     frame = seam.read() if isinstance(seam, SeamFile) else seam
+    if not mapping:
+        return frame
     if not isinstance(frame, pl.DataFrame):
         raise TypeError(f"a seam to relabel must be a frame, not {type(frame).__name__}")
     return relabel(frame, mapping)

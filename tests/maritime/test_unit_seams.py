@@ -13,7 +13,7 @@ import pytest
 from maritime_helpers import T0_NS, scenario_tables
 from polars.testing import assert_frame_equal
 
-from jobs.batch import BatchSummary, UnitManifest, _Joiner
+from jobs.batch import BatchSummary, SeamFile, UnitManifest, _Joiner, finalize_unit
 from pipeline.families import family, load_config
 from pipeline.family import Window, relabel
 from pipeline.maritime.stage import stage
@@ -62,24 +62,33 @@ def test_units_cut_inside_faults_give_the_one_pass_rows(scenario):
                                  f"{only_cut.head(8)}\n{only_one.head(8)}\n{exc}") from None
 
 
-def test_units_joined_as_they_finish_get_the_relabelling_of_one_join(scenario):
+def test_units_joined_as_they_finish_get_the_relabelling_of_one_join(scenario, tmp_path):
     """The batch finalises a unit as soon as it and the units before it are done
     (``jobs.batch._Joiner``): the join chained over the units in the order they finish
-    gives each unit the relabelling the join of every seam at once gives it."""
+    gives each unit the relabelling the join of every seam at once gives it. Each unit's
+    seam is a file in its staging folder, which its finalisation removes, here at once
+    (as a worker may before the next unit is joined)."""
     cfg, inputs = scenario
     edges = [T0_NS + s * NS for s in (START_S, *CUTS_S, END_S)]
     seams = [unit_seam(stage(inputs, Window(a, b), cfg)) for a, b in pairwise(edges)]
     whole = join_units(seams)
-    assert whole[2] and whole[4]  # ids continued across the seams the chain starts from
+    assert whole[0] is None and whole[2] and whole[4]  # chains start at both kinds
+    folders = [tmp_path / f"unit-{k}" for k in range(len(seams))]
+    for folder, seam in zip(folders, seams, strict=True):
+        folder.mkdir()
+        SeamFile.write(seam, folder / "_seam.arrow")
     joiner = _Joiner(family("maritime"), edges[:-1], BatchSummary(start_ns=edges[0],
                                                                   end_ns=edges[-1]), None)
-    finished = [0, 2, 1, 4, 3, 5]  # completion order: joins chained at units 2 and 4
+    finished = [0, 2, 1, 4, 3, 5]  # completion order: joins chained at units 0, 2 and 4
     got: dict[int, object] = {}
     for done, k in enumerate(finished):
-        tasks = joiner.ready(UnitManifest("maritime", edges[k], {}, seams[k]))
-        for t in tasks:  # a unit is joined only once every unit before it is done
+        unit = UnitManifest("maritime", edges[k], {}, SeamFile(str(folders[k] / "_seam.arrow")),
+                            staging_dir=str(folders[k]))
+        for t in joiner.ready(unit):  # a unit is joined once every unit before it is done
             i = edges.index(t.manifest.start_ns)
             assert set(range(i + 1)) <= set(finished[: done + 1])
             got[i] = t.mapping
+            finalize_unit(t)
+            assert not folders[i].exists()
     assert sorted(got) == list(range(len(seams)))
     assert [got[i] for i in range(len(seams))] == whole
