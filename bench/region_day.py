@@ -9,7 +9,9 @@ Each step runs the ``surveil`` command in its own process, as a nightly job woul
 sums the resident memory of the command and all its workers every 0.2 s: "peak RSS" is
 the whole job's (driver + workers at the same moment), "driver" the command's own process
 (the single committer), "peak worker" the largest of its worker processes. CPU seconds
-are the job's and its children's (``RUSAGE_CHILDREN``). The archive
+are the job's and its children's (``RUSAGE_CHILDREN``). Before each step the bench times
+a fixed workload (``bench/cpu_probe.py``): the VM's speed swings by a third from hour to
+hour, and a step's figures are comparable between runs only beside it. The archive
 (``--workdir``/archive, with its region.toml) is simulated once and reused while its
 parameters match; the warehouse is made anew each run.
 
@@ -132,6 +134,7 @@ def main() -> None:
     ap.add_argument("--executor", default="process", choices=["serial", "process", "ray"])
     a = ap.parse_args()
     sys.path.insert(0, str(REPO))
+    from bench.cpu_probe import probe
     from jobs.common import parse_duration
     from pipeline.units import NS
 
@@ -158,10 +161,13 @@ def main() -> None:
     end_ns = DEFAULT_START_NS + int(duration_s * NS)
     window = ["--from", str(DEFAULT_START_NS), "--to", str(end_ns)]
     day = []
+    probes = {"ingest": probe()}
     day.append(run("ingest", [*base, "ingest", "--executor", a.executor, *files]))
+    probes["batch"] = probe()
     day.append(run("batch", [*base, "batch", "--executor", a.executor, *window]))
     names = [ln.split()[0] for ln in run("list", [*base, "report", "--list"])["stdout"]
              .splitlines() if ln.strip()]
+    probes["reports"] = probe()
     t0 = time.perf_counter()
     reports = [run(f"report {n}", [*base, "report", n, *window, "--format", "csv"])
                for n in names]
@@ -173,6 +179,7 @@ def main() -> None:
     # a one-hour reprocess in the middle of the day (files re-ingested, window re-batched)
     mid = DEFAULT_START_NS + int(min(12 * 3600, duration_s / 2) // 3600 * 3600 * NS)
     hour = ["--from", str(mid), "--to", str(mid + 3600 * NS)]
+    probes["reprocess 1 h"] = probe()
     reprocess = run("reprocess 1 h", [*base, "reprocess", "--executor", a.executor, *hour])
 
     ingested = rows_of(day[0]["stdout"])
@@ -186,13 +193,16 @@ def main() -> None:
           f"ais_reports {ingested.get('ais_reports', 0):,}, truth {ingested.get('truth', 0):,});"
           f" derived rows {sum(batched.values()):,}")
     print(f"{'step':<16}{'wall s':>9}{'CPU s':>9}{'records/s':>13}{'peak RSS MB':>13}"
-          f"{'driver MB':>11}{'peak worker MB':>16}")
+          f"{'driver MB':>11}{'peak worker MB':>16}{'CPU probe s':>13}")
     for s in [*steps, *day, reprocess]:
         n = records if s["step"] in ("ingest", "batch") else 0
         rate = f"{n / s['wall_s']:,.0f}" if n else ""
+        p = probes.get(s["step"].split(" (")[0])
+        s["cpu_probe_s"] = p["cpu_s"] if p else None
+        speed = f"{p['cpu_s']:.2f}" if p else ""
         print(f"{s['step']:<16}{s['wall_s']:>9.1f}{s['cpu_s']:>9.1f}{rate:>13}"
               f"{s['peak_rss_mb']:>13.0f}{s['peak_driver_mb']:>11.0f}"
-              f"{s['peak_worker_mb']:>16.0f}")
+              f"{s['peak_worker_mb']:>16.0f}{speed:>13}")
     peak = max(s["peak_rss_mb"] for s in day)
     print(f"day (ingest + batch + reports): {total:.0f} s = {total / 60:.1f} min "
           f"(goal <= 15 min); peak RSS {peak / 1024:.2f} GB (goal <= 4), largest worker "
