@@ -786,9 +786,11 @@ class _StoredOutputs(Mapping[str, pl.DataFrame]):
     warehouse when first looked up (the maritime seam reads one of eight tables)."""
 
     def __init__(self, warehouse: Path, names: tuple[str, ...], start_ns: int,
-                 end_ns: int, site: str | None = None) -> None:
+                 end_ns: int, site: str | None = None,
+                 columns: Mapping[str, tuple[str, ...]] | None = None) -> None:
         self._warehouse, self._names, self._site = warehouse, names, site
         self._window = (start_ns, end_ns)
+        self._columns = dict(columns or {})
         self._read: dict[str, pl.DataFrame] = {}
 
     def __getitem__(self, name: str) -> pl.DataFrame:
@@ -796,8 +798,10 @@ class _StoredOutputs(Mapping[str, pl.DataFrame]):
             raise KeyError(name)
         if name not in self._read:
             lo, hi = self._window
-            self._read[name] = pl.from_arrow(read_table(self._warehouse, name, start_ns=lo,
-                                                        end_ns=hi, site=self._site))
+            cols = self._columns.get(name)
+            self._read[name] = pl.from_arrow(read_table(
+                self._warehouse, name, start_ns=lo, end_ns=hi, site=self._site,
+                columns=list(cols) if cols else None))
         return self._read[name]
 
     def __iter__(self) -> Iterator[str]:
@@ -813,7 +817,7 @@ def _stored_before(warehouse: Path, fam: Family, start_ns: int, site: str | None
     ``start_ns``: the unit before the window as its ``join_units`` sees a unit (a
     pseudo-unit); tables are read when the family's ``unit_seam`` looks them up."""
     lo = start_ns - round(fam.stitch_lookback_s * NS)
-    return _StoredOutputs(warehouse, tuple(fam.outputs), lo, start_ns, site)
+    return _StoredOutputs(warehouse, tuple(fam.outputs), lo, start_ns, site, fam.seam_columns)
 
 
 def _trailing_seams(warehouse: Path, fams: tuple[Family, ...], end_ns: int,

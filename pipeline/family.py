@@ -36,6 +36,9 @@ A family (``pipeline.maritime``, ``pipeline.airfield``, ``pipeline.nav``,
 - ``stitch_lookback_s``: how far before a window the batch reads the family's committed
   outputs; their ``unit_seam`` leads the window's seams given to ``join_units`` (ids
   continue across the window's leading edge); 0: the window's units are joined alone.
+  ``seam_columns``: the columns ``unit_seam`` reads of each table ({table: columns};
+  a table not named: every column): those committed rows are read with these only (the
+  maritime seam reads 4 of the 19 columns of 10 minutes of associations: ~6x less work).
 
 Nothing here reads files: the job reads the inputs, runs the stage in a worker and
 commits what it returns.
@@ -118,3 +121,4 @@ class Family:
     unit_seam: Callable[[Outputs], Any] | None = None
     join_units: Callable[[Sequence[Any]], list[Relabel | None]] | None = None
     stitch_lookback_s: float = 0.0
+    seam_columns: Mapping[str, tuple[str, ...]] | None = None

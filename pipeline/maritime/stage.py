@@ -35,7 +35,13 @@ from pipeline.maritime.identity import identify
 from pipeline.maritime.integrity import check_channels
 from pipeline.maritime.score import score_tracks
 from pipeline.maritime.siap import siap_by_sector
-from pipeline.maritime.stitch import LEAD_ASSOCIATIONS, SEAM_S, join_units, unit_seam
+from pipeline.maritime.stitch import (
+    LEAD_ASSOCIATIONS,
+    SEAM_COLUMNS,
+    SEAM_S,
+    join_units,
+    unit_seam,
+)
 from pipeline.maritime.sync import epoch_grid, synchronise
 from pipeline.units import NS
 
@@ -177,4 +183,5 @@ FAMILY = Family(
     unit_seam=unit_seam,
     join_units=join_units,
     stitch_lookback_s=600.0,  # the rows before a window: their last SEAM_S lie in these 10 min
+    seam_columns={"associations": SEAM_COLUMNS},
 )

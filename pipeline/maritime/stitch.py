@@ -29,6 +29,8 @@ window (time_ns, site_id, local_track_id, system_track_id): read by :func:`unit_
 never committed."""
 
 _KEY = ["time_ns", "site_id", "local_track_id"]
+SEAM_COLUMNS = (*_KEY, "system_track_id")
+"""The associations' columns :func:`unit_seam` reads."""
 
 
 def stitch_track_ids(seams: Sequence[pl.DataFrame]) -> list[dict[int, int]]:
@@ -72,7 +74,7 @@ def unit_seam(outputs: dict[str, pl.DataFrame]) -> pl.DataFrame:
     last ``SEAM_S`` (``part`` "tail"): time_ns, site_id, local_track_id, system_track_id.
     ``outputs`` may be a unit's (with :data:`LEAD_ASSOCIATIONS`) or the rows committed
     before a window (tail only)."""
-    cols = ["time_ns", "site_id", "local_track_id", "system_track_id"]
+    cols = list(SEAM_COLUMNS)
     a = outputs["associations"].select(cols)
     parts = []
     if a.height:
