@@ -33,7 +33,8 @@ scenario, and our cost per radar report against traffic density.
 2. **Cost against density** (``--densities``, ``--density-slice``): ours alone on the
    region with that many ships (mean in the scene; the slice starts at 15:00 UTC, when
    the scene holds about the mean), time per radar report and peak RSS of the batch (its
-   volume-sized units one after another in the one process). Also the stage alone: the
+   volume-sized units one after another in the one process); ``--repeat`` runs, median.
+   Also the stage alone (median of as many runs): the
    slice as one unit, read and computed, no staging, commit or views (what the batch
    adds has a part that does not shrink with the slice: it weighs on the sparse one).
 
@@ -68,7 +69,7 @@ ONE_THREAD = {k: "1" for k in ("POLARS_MAX_THREADS", "OMP_NUM_THREADS", "OPENBLA
 # Code run in a fresh interpreter per measurement (imports before the clock starts).
 CHILD = textwrap.dedent(
     r'''
-    import json, resource, sys, time
+    import json, resource, statistics, sys, time
     from pathlib import Path
     what, a = sys.argv[1], json.loads(sys.argv[2])
     sys.path.insert(0, a["repo"])
@@ -80,6 +81,15 @@ CHILD = textwrap.dedent(
 
     def clock():
         return time.perf_counter(), time.process_time()
+
+    def peak_rss_mb():
+        # this process's own high-water mark: ru_maxrss would also hold the bench's RSS
+        # at the fork (Linux keeps it across exec)
+        try:
+            with open("/proc/self/status") as f:
+                return next(int(ln.split()[1]) for ln in f if ln.startswith("VmHWM")) / 1024
+        except (OSError, StopIteration):
+            return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
     if what == "prepare":
         from jobs.ingest import run_ingest
@@ -106,13 +116,17 @@ CHILD = textwrap.dedent(
             runs.append((t1 - t0, c1 - c0))
         # the batch's peak (its units one after another in this process), before the
         # reads below hold the whole slice at once
-        out["batch_peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+        out["batch_peak_rss_mb"] = peak_rss_mb()
         n = read_inputs(fam, wh, cfg, w)["radar_tracks"].height
-        t0, c0 = clock()
-        fam.stage(read_inputs(fam, wh, cfg, w), w, cfg)
-        t1, c1 = clock()
+        stage = []
+        for _ in range(a["repeat"]):
+            t0, c0 = clock()
+            fam.stage(read_inputs(fam, wh, cfg, w), w, cfg)
+            t1, c1 = clock()
+            stage.append((t1 - t0, c1 - c0))
         out.update(reports=n, wall_s=[r[0] for r in runs], cpu_s=[r[1] for r in runs],
-                   stage_wall_s=t1 - t0, stage_cpu_s=c1 - c0, rows=dict(s.rows))
+                   stage_wall_s=statistics.median(r[0] for r in stage),
+                   stage_cpu_s=statistics.median(r[1] for r in stage), rows=dict(s.rows))
         fused = pl.from_arrow(read_table(wh, "system_tracks", start_ns=w.start_ns,
                                          end_ns=w.end_ns))
         out["estimates"] = {"time_ns": fused["time_ns"].to_list(),
@@ -148,7 +162,7 @@ CHILD = textwrap.dedent(
                    estimates={"time_ns": [t for t, k in zip(t_ns, keep) if k],
                               "x": [s[1] for s, k in zip(states, keep) if k],
                               "y": [s[2] for s, k in zip(states, keep) if k]})
-    out["peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    out["peak_rss_mb"] = peak_rss_mb()
     print(json.dumps(out))
     '''
 )
@@ -296,11 +310,11 @@ def main() -> None:
     for ships in (int(x) for x in a.densities.split(",") if x):
         d = prepare(work, ships, a.radars, a.seed, dens_s)
         cfg = str(d / "archive" / "region.toml")
-        r = child("ours", config=cfg, warehouse=str(d / "wh"), repeat=1, start_ns=START_NS,
-                  end_ns=START_NS + int(dens_s * NS))
+        r = child("ours", config=cfg, warehouse=str(d / "wh"), repeat=a.repeat,
+                  start_ns=START_NS, end_ns=START_NS + int(dens_s * NS))
         r.pop("estimates")
         targets = _targets(d)
-        cpu, wall = r["cpu_s"][0], r["wall_s"][0]
+        cpu, wall = statistics.median(r["cpu_s"]), statistics.median(r["wall_s"])
         row = {"ships": ships, "simultaneous_targets": targets, "reports": r["reports"],
                "cpu_s": cpu, "wall_s": wall, "us_per_report_cpu": cpu / r["reports"] * 1e6,
                "us_per_report_wall": wall / r["reports"] * 1e6,
