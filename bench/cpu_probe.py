@@ -1,11 +1,12 @@
 """How fast this machine is right now: a fixed single-threaded workload, timed.
 
 On a shared VM the same code can need a third more CPU time from one hour to the next
-(docs/scale.md, perf25: the same day batch took 1,756 and 2,426 CPU s). The benches
-print this probe beside their figures so that two runs can be compared: a figure that
-moved with the probe moved with the machine. The workload: 50 x ``np.sin`` over 1 M
-doubles (memory and vector units) and a 3 M-step Python loop (the interpreter), the two
-kinds of work the pipeline does. ~1.5 s on the 2-core VM in a fast phase.
+(docs/scale.md: the same day batch, the same compute code, took 1,756 CPU s in one run
+and 2,426 in another). The benches print this probe beside their figures so that two
+runs can be compared: a figure that moved with the probe moved with the machine. The
+workload: 50 x ``np.sin`` over 1 M doubles (memory and vector units) and a 3 M-step
+Python loop (the interpreter), the two kinds of work the pipeline does. It read
+0.65-0.83 CPU s on the 2-core VM on 2026-11-28 around 00:00 UTC.
 """
 
 from __future__ import annotations
