@@ -268,7 +268,12 @@ def bootstrap_step(
     inside = np.ones((G, N), bool) if admissible is None else admissible(x, rows)
     if redraw and admissible is not None and not inside.all():
         x, inside = redraw_outside(particles, x, inside, rng, redraw=redraw, admissible=admissible)
-    admissible_mass = np.sum(np.where(inside, normalised_weights(prior_logw), 0.0), axis=1)
+    # 1 - the mass outside, not the sum of the mass inside: exactly 1 when no particle is
+    # outside (the weights' float sum may be 1 - 1e-16, a constraint then "active"), 0
+    # when all are (the sum may be 1 + 1e-16) and for a degenerate filter (no weight)
+    q = normalised_weights(prior_logw)
+    outside = np.sum(np.where(inside, 0.0, q), axis=1)
+    admissible_mass = np.where(q.any(axis=1), np.maximum(1.0 - outside, 0.0), 0.0)
     lik = np.zeros((G, N)) if loglik is None else loglik(x, rows)
     lw = prior_logw + apply_constraint(lik, inside)
     ess = effective_sample_size(lw)
