@@ -9,7 +9,7 @@ scenario, and our cost per radar report against traffic density.
    ingested once, cached under ``--workdir``), then in separate processes, each with its
    libraries imported before the clock starts and its threads capped to one:
 
-   - ours: ``jobs.batch.run_batch`` of the maritime family over the slice, serial
+   - ours: ``pipeline.batch.run_batch`` of the maritime family over the slice, serial
      executor (read the inputs, align, sync, associate, fuse, identify, score, SIAP,
      cross-track, stage the outputs, commit them to Delta, rebuild the views);
      ``--repeat`` runs, median;
@@ -100,7 +100,7 @@ CHILD = textwrap.dedent(
         s = run_ingest(files, cfg, wh, executor="process")
         out["rows"] = dict(s.rows)
     elif what == "ours":
-        from jobs.batch import read_inputs, run_batch
+        from pipeline.batch import read_inputs, run_batch
         from pipeline.families import family
         from pipeline.family import Window
         from pipeline.warehouse.delta import read_table

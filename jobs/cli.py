@@ -178,8 +178,8 @@ def _window(from_: str | None, to: str | None, required: bool) -> tuple[int | No
 def _bounded(st: _State, start: int | None, end: int | None, site: str | None = None
              ) -> tuple[int, int]:
     """A batch/reprocess window clipped to the data the ledger knows (of ``site``), or
-    exit 2 when it is too long or too big for the memory budget (:mod:`jobs.window`)."""
-    from jobs.window import bounded_window
+    exit 2 when it is too long or too big for the memory budget (:mod:`pipeline.batch.window`)."""
+    from pipeline.batch.window import bounded_window
 
     w = bounded_window(st.cfg, st.warehouse, start, end, site)  # type: ignore[arg-type]
     if w.note:

@@ -10,8 +10,9 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 from pipeline.errors import UsageError
+from pipeline.units import iso
 
-__all__ = ["UsageError"]
+__all__ = ["UsageError", "iso"]
 
 EXIT_OK = 0
 EXIT_UNITS_FAILED = 1
@@ -84,7 +85,7 @@ def one_site(warehouse: Path, site: str | None, start_ns: int, end_ns: int) -> s
     (each report row keeps its ``site``), fine for sites of different families (the demo's
     channel, airfield and own ship), confusing for two VTS sites."""
     if site is None:
-        from jobs.batch import sites_in
+        from pipeline.batch import sites_in
 
         found = sites_in(warehouse, start_ns, end_ns)
         if len(found) > 1:
@@ -139,13 +140,6 @@ def parse_duration(text: str) -> float:
     if not seconds > 0 or seconds == float("inf"):
         raise ValueError(f"invalid duration {text!r}: must be positive and finite")
     return seconds
-
-
-def iso(t_ns: int) -> str:
-    """int64 ns UTC -> ISO 8601 with a Z."""
-    secs, ns = divmod(int(t_ns), 1_000_000_000)
-    base = datetime.fromtimestamp(secs, UTC).strftime("%Y-%m-%dT%H:%M:%S")
-    return f"{base}.{ns // 1_000_000:03d}Z" if ns else f"{base}Z"
 
 
 class _JsonLines(logging.Formatter):

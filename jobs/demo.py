@@ -10,11 +10,11 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from jobs.batch import SitesSummary, run_batch
 from jobs.common import iso
 from jobs.ingest import IngestSummary, run_ingest
 from jobs.report import format_report, run_named_report
 from jobs.simulate import DEFAULT_START_NS, run_simulate
+from pipeline.batch import SitesSummary, run_batch
 from pipeline.config import Config
 
 DEMO_REPORTS = ("accuracy_by_sector", "identification_by_sector", "channel_faults_by_sector")

@@ -13,9 +13,9 @@ from typing import Any
 import pyarrow as pa
 import pyarrow.compute as pc
 
-from jobs.batch import SitesSummary, run_batch
 from jobs.common import UsageError
 from jobs.ingest import IngestSummary, run_ingest
+from pipeline.batch import SitesSummary, run_batch
 from pipeline.config import Config
 from pipeline.warehouse.delta import read_table
 

@@ -27,10 +27,10 @@ from typing import Any
 
 import polars as pl
 
-from jobs.batch import SitesSummary, resume_continuations, run_batch
 from jobs.common import UsageError, iso
 from jobs.ingest import expand_paths, run_ingest
 from pipeline import tables
+from pipeline.batch import SitesSummary, resume_continuations, run_batch
 from pipeline.config import Config
 from pipeline.executors import UnitResult
 from pipeline.ingest import IngestSummary

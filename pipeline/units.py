@@ -29,6 +29,15 @@ def time_in_range(t_ns: int) -> bool:
     return TIME_MIN_NS <= t_ns <= TIME_MAX_NS
 
 
+def iso(t_ns: int) -> str:
+    """int64 ns UTC -> ISO 8601 with a Z (milliseconds shown when not whole seconds)."""
+    import datetime as dt
+
+    secs, ns = divmod(int(t_ns), NS)
+    base = dt.datetime.fromtimestamp(secs, dt.UTC).strftime("%Y-%m-%dT%H:%M:%S")
+    return f"{base}.{ns // MS_NS:03d}Z" if ns else f"{base}Z"
+
+
 def describe_time(t_ns: int) -> str:
     """``t_ns`` as ISO 8601 UTC when a calendar can show it, else the number of ns."""
     import datetime as dt

@@ -11,11 +11,11 @@ day never sits in one worker's memory. The stage reads
 - ``truth`` over the window, when the log is simulated.
 
 ``system_tracks`` are this batch's: the gaps family runs in a later wave than the
-maritime family and reads its staged rows inside the window (``jobs.batch.family_waves``),
+maritime family and reads its staged rows inside the window (``pipeline.batch.plan.family_waves``),
 the committed ones outside it. The random generator is seeded by the unit's window, so
 re-running a window reproduces its rows exactly. The unit runs its batches of gaps on
 ``execution.threads_per_worker`` threads: a worker granted spare cores (the batch's
-lone unit of a wave, ``jobs.batch``) uses them; the rows are the same either way.
+lone unit of a wave, ``pipeline.batch.plan.granted``) uses them; the rows are the same either way.
 """
 
 from __future__ import annotations

@@ -5,9 +5,9 @@
 (its raw tables, ``mcap_index``, ``ingest_ledger`` last), ``batch.<table>`` after a
 batch's commit of a table (each derived table, ``rejects``, ``batch_units``),
 ``batch.continuation`` after a batch's window committed, before the units after it are
-batched again (``jobs.batch``: the trailing-edge chain), ``views.written`` inside the
-views rebuild (the new file written, not yet swapped in) and ``views.replaced``
-(swapped in). The variable is read once, at import: unset, a point costs one
+batched again (``pipeline.batch.continuation``: the trailing-edge chain),
+``views.written`` inside the views rebuild (the new file written, not yet swapped in)
+and ``views.replaced`` (swapped in). The variable is read once, at import: unset, a point costs one
 comparison.
 """
 

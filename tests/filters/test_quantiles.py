@@ -29,7 +29,7 @@ def test_normal_quantiles_equal_scipy_stats_to_the_bit() -> None:
 
 def test_a_worker_imports_the_stages_without_scipy_stats() -> None:
     """~0.5 s of every batch worker's start (scipy.stats is only for calibration)."""
-    code = ("import sys, jobs.batch, pipeline.families as f\n"
+    code = ("import sys, pipeline.batch, pipeline.families as f\n"
             "[fam.stage for fam in f.FAMILIES]\n"
             "import pipeline.maritime.stage, pipeline.gaps.stage, pipeline.airfield.stage, "
             "pipeline.nav.stage\n"

@@ -16,7 +16,7 @@ from mcap_fixtures import T0_NS, mixed_file
 
 from jobs.common import UsageError, parse_time_ns
 from jobs.ingest import run_ingest
-from jobs.window import HOUR_NS, bounded_window, largest_unit_rows
+from pipeline.batch.window import HOUR_NS, bounded_window, largest_unit_rows
 from pipeline.config import ExecutionConfig
 from pipeline.families import family, load_config
 

@@ -10,10 +10,11 @@ from dataclasses import replace
 
 import polars as pl
 
-from jobs.batch import owned_window, plan_units, run_batch, unit_is_live
 from jobs.reprocess import run_reprocess
 from jobs.run import pending_windows
 from pipeline import tables
+from pipeline.batch import run_batch
+from pipeline.batch.plan import owned_window, plan_units, unit_is_live
 from pipeline.families import family
 from pipeline.family import TableInput
 from pipeline.units import NS

@@ -11,8 +11,9 @@ import numpy as np
 import polars as pl
 from polars.testing import assert_frame_equal
 
-from jobs.batch import family_waves, run_batch
 from jobs.report import run_named_report
+from pipeline.batch import run_batch
+from pipeline.batch.plan import family_waves
 from pipeline.families import FAMILIES
 from pipeline.warehouse import pending
 from pipeline.warehouse.delta import read_table, replace_window
@@ -82,7 +83,7 @@ def test_a_later_wave_reads_this_batchs_rows_inside_the_window(e2e, tmp_path):
     inside (as on a first batch) and the unit still gets every row."""
     import pyarrow.parquet as pq
 
-    from jobs.batch import read_inputs
+    from pipeline.batch import read_inputs
     from pipeline.families import family
     from pipeline.family import Window
     from pipeline.units import NS
@@ -115,7 +116,7 @@ def test_an_override_read_is_in_time_order_whatever_the_order_of_its_files(e2e, 
     no copy of the rows), and sorted when they are not."""
     import pyarrow.parquet as pq
 
-    from jobs.batch import is_sorted_by, read_inputs
+    from pipeline.batch.worker import is_sorted_by, read_inputs
     from pipeline.families import family
     from pipeline.family import Window
 

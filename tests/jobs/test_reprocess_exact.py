@@ -126,7 +126,7 @@ def test_a_job_killed_before_its_chain_leaves_it_to_the_next_batch(e2e, tmp_path
     right after the commit (before the units after it were batched again), the next
     batch of the site finds the rows at the window's end changed and runs the chain
     first; a job killed before its commit leaves a record the next batch drops."""
-    import jobs.batch
+    import pipeline.batch.driver
     strict, seam, wh, one = _two_windows_and_a_new_config(e2e, tmp_path)
     maritime = family("maritime").outputs
 
@@ -136,10 +136,10 @@ def test_a_job_killed_before_its_chain_leaves_it_to_the_next_batch(e2e, tmp_path
                 raise _Killed(point)
         return crash
 
-    monkeypatch.setattr(jobs.batch, "crash_point", kill_at("batch.continuation"))
+    monkeypatch.setattr(pipeline.batch.driver, "crash_point", kill_at("batch.continuation"))
     with pytest.raises(_Killed):
         run_batch(strict, wh, start_ns=e2e.start_ns, end_ns=seam, executor_kind="serial")
-    monkeypatch.setattr(jobs.batch, "crash_point", lambda point: None)
+    monkeypatch.setattr(pipeline.batch.driver, "crash_point", lambda point: None)
     assert len(list((wh / "_continue").glob("*.json"))) == 1
     if resumed_by == "batch":  # the next batch of the site (the first window again)
         res = run_batch(strict, wh, start_ns=e2e.start_ns, end_ns=seam,
@@ -163,19 +163,20 @@ def test_a_chain_that_fails_in_a_nightly_run_is_tried_once_in_it(e2e, tmp_path, 
     """Was: ``surveil run`` ran a killed job's chain, and when it failed, ran it again
     inside its batch of each pending window. Now the run tries it once; the record stays
     for the next run, and the pending window is still batched."""
-    import jobs.batch
     import jobs.run
+    import pipeline.batch.driver
+    import pipeline.batch.worker
     strict, seam, wh, _ = _two_windows_and_a_new_config(e2e, tmp_path)
 
     def crash(point: str) -> None:
         if point == "batch.continuation":
             raise _Killed(point)
 
-    monkeypatch.setattr(jobs.batch, "crash_point", crash)
+    monkeypatch.setattr(pipeline.batch.driver, "crash_point", crash)
     with pytest.raises(_Killed):
         run_batch(strict, wh, start_ns=e2e.start_ns, end_ns=seam, executor_kind="serial")
-    monkeypatch.setattr(jobs.batch, "crash_point", lambda point: None)
-    run_unit, tried = jobs.batch.run_unit, []
+    monkeypatch.setattr(pipeline.batch.driver, "crash_point", lambda point: None)
+    run_unit, tried = pipeline.batch.worker.run_unit, []
 
     def failing_after_the_seam(unit):  # the chain's units fail, the pending window's run
         if unit.start_ns >= seam:
@@ -183,8 +184,8 @@ def test_a_chain_that_fails_in_a_nightly_run_is_tried_once_in_it(e2e, tmp_path, 
             raise RuntimeError("chain unit fails")
         return run_unit(unit)
 
-    monkeypatch.setattr(jobs.batch, "run_unit", failing_after_the_seam)
-    site = jobs.batch.sites_in(wh, e2e.start_ns, seam)[0]
+    monkeypatch.setattr(pipeline.batch.worker, "run_unit", failing_after_the_seam)
+    site = pipeline.batch.sites_in(wh, e2e.start_ns, seam)[0]
     monkeypatch.setattr(jobs.run, "pending_by_site", lambda w: {site: [(e2e.start_ns, seam)]})
     res = jobs.run.run_nightly(strict, wh, folders=[str(Path(e2e.archive[0]).parent)],
                                executor_kind="serial")
@@ -226,7 +227,8 @@ def test_a_reprocess_cuts_volume_units_where_the_single_pass_cut_them(e2e, tmp_p
     half the day again). Now the cuts are a function of each hour's rows: the e2e window
     in ~8 volume units, reprocessed over unaligned sub-windows across several of them,
     keeps every table and ``batch_units`` row for row and continues nothing."""
-    import jobs.batch
+    import pipeline.batch.driver
+    import pipeline.batch.plan
     import pipeline.families
     from pipeline.families import config_from_mapping
 
@@ -243,7 +245,8 @@ def test_a_reprocess_cuts_volume_units_where_the_single_pass_cut_them(e2e, tmp_p
     small = tuple(replace(f, unit_rows=rows // 8) if f.name == "maritime" else f
                   for f in FAMILIES)
     monkeypatch.setattr(pipeline.families, "FAMILIES", small, raising=False)
-    monkeypatch.setattr(jobs.batch, "FAMILIES", small)
+    monkeypatch.setattr(pipeline.batch.driver, "FAMILIES", small)
+    monkeypatch.setattr(pipeline.batch.plan, "FAMILIES", small)
     res = run_batch(cfg, wh, start_ns=e2e.start_ns, end_ns=e2e.end_ns, executor_kind="serial")
     assert res.exit_code == 0, res.render()
     single = snapshot(wh)
@@ -264,12 +267,12 @@ def test_a_reprocess_cuts_volume_units_where_the_single_pass_cut_them(e2e, tmp_p
 def test_the_seam_before_a_window_reads_only_the_columns_it_compares(e2e):
     """The committed rows before a window are read with the family's ``seam_columns``
     (4 of the associations' columns, ~6x less work than all): the seam is the same."""
-    from jobs.batch import _stored_before
+    from pipeline.batch.seams import stored_before
     from pipeline.maritime.stitch import SEAM_COLUMNS
 
     fam = family("maritime")
     edge = e2e.start_ns + 10 * MIN
-    stored = _stored_before(e2e.warehouse, fam, edge)
+    stored = stored_before(e2e.warehouse, fam, edge)
     assert stored["associations"].columns == list(SEAM_COLUMNS)
     full = pl.from_arrow(read_table(e2e.warehouse, "associations",
                                     start_ns=edge - round(fam.stitch_lookback_s * NS),

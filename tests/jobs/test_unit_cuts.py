@@ -15,7 +15,7 @@ import polars as pl
 import pytest
 from polars.testing import assert_frame_equal
 
-import jobs.batch
+import pipeline.batch.plan
 from jobs.batch import run_batch
 from pipeline.families import family
 from pipeline.units import NS
@@ -35,8 +35,8 @@ def _batch_cut_at(e2e, wh, cuts_ns: list[int], monkeypatch) -> None:
     """Batch the e2e window again with extra maritime unit cuts at ``cuts_ns``."""
     for name in (*family("maritime").outputs, "batch_units"):
         shutil.rmtree(table_path(wh, name), ignore_errors=True)
-    volume_cuts = jobs.batch.volume_cuts
-    monkeypatch.setattr(jobs.batch, "volume_cuts",
+    volume_cuts = pipeline.batch.plan.volume_cuts
+    monkeypatch.setattr(pipeline.batch.plan, "volume_cuts",
                         lambda *a, **k: sorted({*volume_cuts(*a, **k), *cuts_ns}))
     res = run_batch(e2e.cfg, wh, start_ns=e2e.start_ns, end_ns=e2e.end_ns,
                     executor_kind="serial")

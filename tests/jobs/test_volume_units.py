@@ -11,7 +11,7 @@ import shutil
 import numpy as np
 import polars as pl
 
-from jobs import batch
+from pipeline.batch import driver, plan, seams, worker
 from pipeline.families import FAMILIES
 from pipeline.family import Window
 from pipeline.maritime.stitch import unit_seam
@@ -45,7 +45,8 @@ def test_many_units_same_association_rows(e2e, tmp_path, monkeypatch) -> None:
     assert rows > 0
     hourly = _run(e2e, wh)
     small = dataclasses.replace(FAMILIES[0], unit_rows=rows // 6)
-    monkeypatch.setattr(batch, "family", lambda name: small)
+    monkeypatch.setattr(driver, "family", lambda name: small)
+    monkeypatch.setattr(worker, "family", lambda name: small)
     cut = _run(e2e, wh, min_units=6)
     a, b = cut["a"], hourly["a"]
     assert a.sort(a.columns).equals(b.sort(b.columns))
@@ -54,7 +55,7 @@ def test_many_units_same_association_rows(e2e, tmp_path, monkeypatch) -> None:
 
 
 def _run(e2e, wh, min_units: int = 1) -> dict:
-    s = batch.run_batch(e2e.cfg, wh, start_ns=e2e.start_ns, end_ns=e2e.end_ns,
+    s = driver.run_batch(e2e.cfg, wh, start_ns=e2e.start_ns, end_ns=e2e.end_ns,
                         executor_kind="serial", families=("maritime",))
     assert s.committed and s.units_total >= min_units
     a = pl.from_arrow(read_table(wh, "associations", start_ns=e2e.start_ns, end_ns=e2e.end_ns))
@@ -74,35 +75,35 @@ def test_a_units_seam_stays_in_its_folder_until_the_join(e2e, tmp_path) -> None:
     seams one pair at a time; a region day's held 2 GB in the driver): the file holds
     the stage's seam rows, and the manifest pickles small."""
     t0 = e2e.start_ns + 600 * NS
-    unit = batch.BatchUnit(str(e2e.warehouse), str(tmp_path / "staging"), t0, t0 + 600 * NS,
+    unit = worker.BatchUnit(str(e2e.warehouse), str(tmp_path / "staging"), t0, t0 + 600 * NS,
                            e2e.cfg)
-    m = batch.run_unit(unit)
-    assert isinstance(m.seam, batch.SeamFile)
-    fam = batch.family("maritime")
-    inputs = batch.read_inputs(fam, e2e.warehouse, e2e.cfg, Window(t0, t0 + 600 * NS))
+    m = worker.run_unit(unit)
+    assert isinstance(m.seam, worker.SeamFile)
+    fam = worker.family("maritime")
+    inputs = worker.read_inputs(fam, e2e.warehouse, e2e.cfg, Window(t0, t0 + 600 * NS))
     expected = unit_seam(fam.stage(inputs, Window(t0, t0 + 600 * NS), e2e.cfg))
     assert expected.height > 100
     assert m.seam.read().equals(expected)
     assert len(pickle.dumps(m)) < 4096
-    seams = batch._Seams([m.seam, expected])
-    assert len(seams) == 2 and seams[0].equals(seams[1])
+    joined = seams.Seams([m.seam, expected])
+    assert len(joined) == 2 and joined[0].equals(joined[1])
 
 
 def test_a_wave_of_fewer_units_than_workers_is_granted_their_idle_cores(e2e, tmp_path) -> None:
     """A reprocessed hour's one gaps unit runs after its maritime wave with the pool's
     other worker idle: it gets that worker's threads (the process pool only)."""
-    def units(n: int) -> list[batch.BatchUnit]:
-        return [batch.BatchUnit(str(e2e.warehouse), str(tmp_path), i, i + 1, e2e.cfg, "gaps")
+    def units(n: int) -> list[worker.BatchUnit]:
+        return [worker.BatchUnit(str(e2e.warehouse), str(tmp_path), i, i + 1, e2e.cfg, "gaps")
                 for i in range(n)]
 
-    def threads(us: list[batch.BatchUnit]) -> list[int]:
+    def threads(us: list[worker.BatchUnit]) -> list[int]:
         return [u.cfg.execution.threads_per_worker for u in us]
 
     assert e2e.cfg.execution.threads_per_worker == 1
-    assert threads(batch.granted(units(1), "process", 2)) == [2]
-    assert threads(batch.granted(units(2), "process", 5)) == [2, 2]
-    assert threads(batch.granted(units(2), "process", 2)) == [1, 1]
-    assert threads(batch.granted(units(1), "ray", 2)) == [1]
-    assert threads(batch.granted(units(1), "serial", 1)) == [1]
-    granted = batch.granted(units(1), "process", 2)[0]
+    assert threads(plan.granted(units(1), "process", 2)) == [2]
+    assert threads(plan.granted(units(2), "process", 5)) == [2, 2]
+    assert threads(plan.granted(units(2), "process", 2)) == [1, 1]
+    assert threads(plan.granted(units(1), "ray", 2)) == [1]
+    assert threads(plan.granted(units(1), "serial", 1)) == [1]
+    granted = plan.granted(units(1), "process", 2)[0]
     assert granted.cfg.region == e2e.cfg.region and granted.start_ns == 0

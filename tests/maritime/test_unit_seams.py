@@ -13,7 +13,9 @@ import pytest
 from maritime_helpers import T0_NS, scenario_tables
 from polars.testing import assert_frame_equal
 
-from jobs.batch import BatchSummary, SeamFile, UnitManifest, _Joiner, finalize_unit
+from pipeline.batch.seams import Joiner
+from pipeline.batch.summary import BatchSummary
+from pipeline.batch.worker import SeamFile, UnitManifest, finalize_unit
 from pipeline.families import family, load_config
 from pipeline.family import Window, relabel
 from pipeline.maritime.stage import stage
@@ -64,7 +66,7 @@ def test_units_cut_inside_faults_give_the_one_pass_rows(scenario):
 
 def test_units_joined_as_they_finish_get_the_relabelling_of_one_join(scenario, tmp_path):
     """The batch finalises a unit as soon as it and the units before it are done
-    (``jobs.batch._Joiner``): the join chained over the units in the order they finish
+    (``pipeline.batch.seams.Joiner``): the join chained over the units in the order they finish
     gives each unit the relabelling the join of every seam at once gives it. Each unit's
     seam is a file in its staging folder, which its finalisation removes, here at once
     (as a worker may before the next unit is joined)."""
@@ -77,7 +79,7 @@ def test_units_joined_as_they_finish_get_the_relabelling_of_one_join(scenario, t
     for folder, seam in zip(folders, seams, strict=True):
         folder.mkdir()
         SeamFile.write(seam, folder / "_seam.arrow")
-    joiner = _Joiner(family("maritime"), edges[:-1], BatchSummary(start_ns=edges[0],
+    joiner = Joiner(family("maritime"), edges[:-1], BatchSummary(start_ns=edges[0],
                                                                   end_ns=edges[-1]), None)
     finished = [0, 2, 1, 4, 3, 5]  # completion order: joins chained at units 0, 2 and 4
     got: dict[int, object] = {}

@@ -24,9 +24,10 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
-from jobs.common import UsageError, iso
 from pipeline.config import Config
+from pipeline.errors import UsageError
 from pipeline.families import FAMILIES
+from pipeline.units import iso
 from pipeline.warehouse.delta import read_table
 
 HOUR_NS = 3600 * 10**9
@@ -35,7 +36,7 @@ BYTES_PER_ROW_IN_UNIT = 2048  # raw row + its staged and derived frames in a bat
 
 
 @dataclass(frozen=True)
-class Window:
+class BoundedWindow:
     """The window to run, and a note when it differs from the one asked for."""
 
     start_ns: int
@@ -51,7 +52,7 @@ def _memory_total_mb() -> int:
 
 
 def bounded_window(cfg: Config, warehouse: Path, start_ns: int, end_ns: int,
-                   site: str | None = None) -> Window:
+                   site: str | None = None) -> BoundedWindow:
     """``[start_ns, end_ns)`` clipped to the ledger's data hours (of ``site``, when given),
     or refused (module docstring)."""
     cols = ["status", "start_time_ns", "end_time_ns", "rows_json"]
@@ -92,7 +93,7 @@ def bounded_window(cfg: Config, warehouse: Path, start_ns: int, end_ns: int,
     note = ""
     if (s, e) != (start_ns, end_ns):
         note = f"window clipped to the data the ledger knows: {iso(s)} .. {iso(e)}"
-    return Window(s, e, note)
+    return BoundedWindow(s, e, note)
 
 
 def largest_unit_rows(cfg: Config, files: list[dict]) -> tuple[str, float]:

@@ -1,0 +1,47 @@
+"""Batch: raw tables of a window -> every sensor family's derived tables, committed once.
+
+The batch kernel, beside the ingest kernel (:mod:`pipeline.ingest`): it runs the
+families' pure stages (:mod:`pipeline.families`) over work units and commits their
+outputs; ``jobs/batch.py``, ``jobs/reprocess.py`` and ``jobs/run.py`` only call it and
+print. Each guarantee is kept in one module:
+
+- :mod:`~pipeline.batch.window`: a window bounded before any work (clipped to the data
+  the ledger knows; refused, exit 2, when too long or too big for the memory budget);
+- :mod:`~pipeline.batch.plan`: **exact reprocess**: the window widened to the committed
+  units it overlaps and cut as a single pass cuts it (hours, volume cuts), so a
+  reprocess of any sub-window re-runs exactly the units that own it;
+- :mod:`~pipeline.batch.worker`: one work unit (:class:`BatchUnit`, picklable, read and
+  written by path) -> Arrow IPC outputs and a seam; later its final Parquet files. A
+  worker commits nothing;
+- :mod:`~pipeline.batch.seams`: **ids stitched**: units joined in time order as they
+  finish, system track ids relabelled across unit seams and the window's leading edge;
+- :mod:`~pipeline.batch.continuation`: **ids continue across the trailing edge**: the
+  units after a window batched again when its end changed, a promise recorded before
+  the commit so a killed job's chain is finished by the next batch;
+- :mod:`~pipeline.batch.commit`: **one window, one commit**: one Delta transaction per
+  derived table, by the driver alone, between a pending marker and its removal;
+- :mod:`~pipeline.batch.driver`: the order of it all, site by site
+  (:func:`run_batch`);
+- :mod:`~pipeline.batch.summary`: what a batch did (:class:`BatchSummary`,
+  :class:`SitesSummary`), the exit code.
+
+The walk of one unit: docs/architecture.md, "One batch unit, from plan to commit".
+"""
+
+from pipeline.batch.driver import resume_continuations, run_batch, run_site
+from pipeline.batch.plan import sites_in
+from pipeline.batch.summary import BatchSummary, SitesSummary
+from pipeline.batch.worker import BatchUnit, UnitManifest, read_inputs, run_unit
+
+__all__ = [
+    "BatchSummary",
+    "BatchUnit",
+    "SitesSummary",
+    "UnitManifest",
+    "read_inputs",
+    "resume_continuations",
+    "run_batch",
+    "run_site",
+    "run_unit",
+    "sites_in",
+]
