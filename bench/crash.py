@@ -62,9 +62,9 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from jobs.common import iso  # noqa: E402
-from jobs.report import run_named_report  # noqa: E402
 from jobs.simulate import run_simulate  # noqa: E402
 from pipeline.families import load_config  # noqa: E402
+from pipeline.reports import run_named_report  # noqa: E402
 from pipeline.tables import table_specs  # noqa: E402
 from pipeline.units import NS  # noqa: E402
 from pipeline.warehouse.delta import read_table  # noqa: E402

@@ -52,7 +52,7 @@ STAGE = textwrap.dedent(
                       end_ns=args["end_ns"], executor_kind=args["executor"])
         out["rows"] = dict(s.rows)
     elif stage == "report":
-        from jobs.report import run_named_report
+        from pipeline.reports import run_named_report
         for name in ("accuracy_by_sector", "identification_by_sector"):
             run_named_report(Path(args["warehouse"]), name)
     elif stage == "baseline":

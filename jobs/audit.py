@@ -6,11 +6,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from jobs.report import open_warehouse
 from pipeline.audit.browser import BrowserError, find_chromium, print_pdf
 from pipeline.audit.data import AuditData, collect
 from pipeline.audit.page import render
 from pipeline.config import Config
+from pipeline.reports import open_warehouse
 from pipeline.requirements import FAIL, NOT_ENOUGH, PASS
 
 

@@ -93,7 +93,7 @@ class _State:
 def _locked(st: _State, wait: bool = False) -> contextlib.AbstractContextManager:
     """The warehouse's writer lock for a command that commits (exit 2 naming the holder
     when another job has it)."""
-    from jobs.lock import warehouse_lock
+    from pipeline.warehouse.lock import warehouse_lock
 
     return warehouse_lock(st.warehouse, command=" ".join(["surveil", *sys.argv[1:]]),
                           wait=wait)
@@ -227,6 +227,8 @@ _SITE_CAL = _site_option("that site only (default: every site with data in the w
 _WAIT = click.option("--wait", is_flag=True,
                      help="wait for another job holding the warehouse (default: exit 2 "
                           "naming it)")
+_FORMAT = click.option("--format", "fmt", type=click.Choice(["table", "csv", "json"]),
+                       default="table", show_default=True)
 _EXECUTOR = click.option(
     "--executor", type=click.Choice(["serial", "process", "ray"]), default=None,
     help="How work units run (default from config: process pool).",
@@ -292,7 +294,7 @@ def simulate(st: _State, scenario, duration, seed, start, ships, radars, out) ->
 def import_command(st: _State, paths, out_dir, base_time, site) -> None:
     """Wrap legacy captures (NMEA 0183 text, AIS CSV, raw ASTERIX, pcap) into MCAP with
     honest log times (channel metadata "log_time_source"), so `ingest` reads MCAP only."""
-    from jobs.import_legacy import run_import
+    from pipeline.convert.importer import run_import
 
     summary = run_import(paths, out_dir, base_time_ns=parse_time_ns(base_time), cfg=st.cfg,
                          site=site)
@@ -432,8 +434,7 @@ def demo(st: _State, seed, duration, scenarios, executor) -> None:
 @_FROM
 @_TO
 @_SECTOR
-@click.option("--format", "fmt", type=click.Choice(["table", "csv", "json"]), default="table",
-              show_default=True)
+@_FORMAT
 @click.option("--param", "params", multiple=True, metavar="NAME=VALUE",
               help="a parameter the report's header declares (repeatable)")
 @click.option("--list", "list_", is_flag=True, help="list the available reports")
@@ -443,19 +444,17 @@ def report(st: _State, name, from_, to, sector, fmt, params, list_, site) -> Non
     """Run a report (sql/ or a [reports] dirs folder) over the warehouse."""
     import duckdb
 
-    from jobs.report import (
-        REPORT_MEMORY,
-        explain_empty,
-        format_report,
-        named_report_batches,
-        write_csv,
-    )
+    from pipeline.catalog import explain_empty
+    from pipeline.render import format_report
     from pipeline.reports import (
+        REPORT_MEMORY,
         ReportError,
         UnknownReportError,
         list_reports,
         load_report,
+        named_report_batches,
         reports_config,
+        write_csv,
     )
 
     dirs = reports_config(st.cfg).dirs
@@ -558,8 +557,7 @@ def export(st: _State, from_, to, out_path, site) -> None:
 
 @cli.command()
 @click.argument("query", required=False)
-@click.option("--format", "fmt", type=click.Choice(["table", "csv", "json"]), default="table",
-              show_default=True)
+@_FORMAT
 @click.pass_obj
 def sql(st: _State, query, fmt) -> None:
     """Run SQL over the warehouse views (the tables reports use; `surveil schema` lists
@@ -567,7 +565,8 @@ def sql(st: _State, query, fmt) -> None:
     .quit or Ctrl-D)."""
     import duckdb
 
-    from jobs.report import format_report, open_warehouse
+    from pipeline.render import format_report
+    from pipeline.reports import open_warehouse
 
     con = open_warehouse(st.existing_warehouse)
     try:
@@ -589,7 +588,7 @@ def _prompt(con: Any, fmt: str) -> None:
 
     import duckdb
 
-    from jobs.report import format_report
+    from pipeline.render import format_report
 
     with contextlib.suppress(ImportError):
         import readline  # noqa: F401  (line editing and history for input())
@@ -619,12 +618,11 @@ def _prompt(con: Any, fmt: str) -> None:
 
 @cli.command()
 @click.argument("table", required=False, shell_complete=_complete_tables)
-@click.option("--format", "fmt", type=click.Choice(["table", "csv", "json"]), default="table",
-              show_default=True)
+@_FORMAT
 def schema(table, fmt) -> None:
     """Every warehouse table (kind, meaning), or one TABLE's columns with their types,
     units and meanings, from schemas/tables.toml."""
-    from jobs.report import format_report, schema_table
+    from pipeline.render import format_report, schema_table
     from pipeline.tables import table_specs
 
     if table is not None and table not in table_specs():
@@ -648,7 +646,7 @@ def schema(table, fmt) -> None:
 def calibrate(st: _State, from_, to, max_order, min_speed, site) -> None:
     """Fit each airfield sensor's coloured-error AR model against the reference channel
     (airfield paper eq. 2, 7, 8; order by BIC) into sensor_error_models."""
-    from jobs.calibrate import run_calibrate
+    from pipeline.batch.calibrate import run_calibrate
 
     start, end = _window(from_, to, required=True)
     warehouse = st.existing_warehouse
@@ -668,7 +666,7 @@ def calibrate(st: _State, from_, to, max_order, min_speed, site) -> None:
 def calibrate_radars(st: _State, from_, to, fmt, site) -> None:
     """Estimate each radar's range, azimuth and time bias from AIS ships in a window,
     with 95 % intervals; write radar_bias_by_site and print the config lines."""
-    from jobs.calibrate import render, run_calibration
+    from pipeline.batch.calibrate import render, run_calibration
 
     start, end = _window(from_, to, required=True)
     warehouse = st.existing_warehouse
@@ -738,8 +736,7 @@ def velocity(st: _State, sigma, dx, dy, speed, course_difference, trials, seed, 
               help="seeded runs (seeds first-seed .. first-seed + runs - 1)")
 @click.option("--first-seed", type=int, default=1000, show_default=True)
 @_EXECUTOR
-@click.option("--format", "fmt", type=click.Choice(["table", "csv", "json"]), default="table",
-              show_default=True)
+@_FORMAT
 @click.option("--out", "out_path", type=click.Path(dir_okay=False), default=None,
               help="also write every run's fault rows to this Parquet file")
 @click.pass_obj
@@ -748,8 +745,8 @@ def channel_faults(st: _State, runs, first_seed, executor, fmt, out_path) -> Non
     in a compressed channel scene, a GNSS outage and jump on the own ship; per kind the
     share detected within 3 scans / reports / fixes, the delay, fused accuracy with
     exclusion on and off; the fault-free false-alarm share against q."""
-    from jobs.report import format_report
     from pipeline.experiments.channel_montecarlo import run_montecarlo, summarise
+    from pipeline.render import format_report
 
     res = run_montecarlo(st.cfg, seeds=range(first_seed, first_seed + runs),
                          executor=executor or st.cfg.execution.executor)
@@ -766,14 +763,13 @@ def channel_faults(st: _State, runs, first_seed, executor, fmt, out_path) -> Non
               help="length of each run (the paper's scenario: the turn is in minutes 15-19)")
 @click.option("--per-seed", is_flag=True, help="one row per seed instead of the summary")
 @_EXECUTOR
-@click.option("--format", "fmt", type=click.Choice(["table", "csv", "json"]), default="table",
-              show_default=True)
+@_FORMAT
 @click.pass_obj
 def ownship(st: _State, runs, first_seed, duration, per_seed, executor, fmt) -> None:
     """Own-ship heading over seeds (gyro/GNSS/log paper): integrated heading RMS and max
     after convergence per seed against truth, the gyro alone, the gate's rejections."""
-    from jobs.report import format_report
     from pipeline.experiments.ownship_montecarlo import run_montecarlo, summarise
+    from pipeline.render import format_report
 
     table = run_montecarlo(st.cfg, seeds=range(first_seed, first_seed + runs),
                            duration_s=_duration_s(duration),
@@ -792,8 +788,7 @@ def ownship(st: _State, runs, first_seed, duration, per_seed, executor, fmt) -> 
               help="particles per gap (default: [gaps] particles)")
 @click.option("--by-lead", is_flag=True, help="one row per lead-time band and variant")
 @_EXECUTOR
-@click.option("--format", "fmt", type=click.Choice(["table", "csv", "json"]), default="table",
-              show_default=True)
+@_FORMAT
 @click.option("--out", "out_path", type=click.Path(dir_okay=False), default=None,
               help="also write every forecast (both variants) to this Parquet file")
 @click.pass_obj
@@ -802,8 +797,8 @@ def gaps_montecarlo(st: _State, runs, first_seed, duration, particles, by_lead, 
     """Seeded Monte Carlo of the data-gap forecasts on the `gaps` scenario, with and
     without the admissible-area constraint: share of true positions inside the 90%
     region, forecast errors, probability of the zone the ship actually reached."""
-    from jobs.report import format_report
     from pipeline.experiments.gaps_montecarlo import run_montecarlo, summarise
+    from pipeline.render import format_report
 
     forecasts = run_montecarlo(
         st.cfg, seeds=range(first_seed, first_seed + runs), duration_s=_duration_s(duration),

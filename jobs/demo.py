@@ -12,10 +12,11 @@ from pathlib import Path
 
 from jobs.common import iso
 from jobs.ingest import IngestSummary, run_ingest
-from jobs.report import format_report, run_named_report
 from jobs.simulate import DEFAULT_START_NS, run_simulate
 from pipeline.batch import SitesSummary, run_batch
 from pipeline.config import Config
+from pipeline.render import format_report
+from pipeline.reports import run_named_report
 
 DEMO_REPORTS = ("accuracy_by_sector", "identification_by_sector", "channel_faults_by_sector")
 DEMO_SCENARIOS = ("channel", "airfield", "ownship")

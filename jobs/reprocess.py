@@ -10,14 +10,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import pyarrow as pa
-import pyarrow.compute as pc
-
 from jobs.common import UsageError
 from jobs.ingest import IngestSummary, run_ingest
 from pipeline.batch import SitesSummary, run_batch
 from pipeline.config import Config
-from pipeline.warehouse.delta import read_table
+from pipeline.warehouse.ledger import files_overlapping
 
 
 @dataclass
@@ -38,22 +35,6 @@ class ReprocessSummary:
         parts += [f"missing archived file: {f}" for f in self.missing_files]
         parts.append(self.batch.render())
         return "\n".join(parts)
-
-
-def files_overlapping(warehouse: Path, start_ns: int, end_ns: int, site: str | None = None
-                      ) -> list[str]:
-    """Archived files (from the ingest ledger; of ``site`` when given) whose time span
-    overlaps the window."""
-    ledger = read_table(warehouse, "ingest_ledger", site=site)
-    if ledger.num_rows == 0:
-        return []
-    overlaps = pc.and_(
-        pc.less(ledger["start_time_ns"], end_ns), pc.greater_equal(ledger["end_time_ns"], start_ns)
-    )
-    # quarantined: nothing readable; duplicate: its content is ingested under another name
-    ingested = pc.is_in(ledger["status"], value_set=pa.array(["ok", "partial"]))
-    mask = pc.and_(overlaps, ingested)
-    return sorted(set(ledger.filter(mask)["source_file"].to_pylist()))
 
 
 def run_reprocess(

@@ -11,34 +11,25 @@
 4. record the run in ``runs`` (one row per run that had work).
 
 A run with nothing to ingest and no window pending writes nothing and says so. The
-caller holds the warehouse lock (:mod:`jobs.lock`).
+caller holds the warehouse lock (:mod:`pipeline.warehouse.lock`).
 """
 
 from __future__ import annotations
 
-import hashlib
-import json
-import os
 import time
 from dataclasses import dataclass, field
-from importlib import metadata
 from pathlib import Path
 from typing import Any
 
-import polars as pl
-
 from jobs.common import UsageError, iso
 from jobs.ingest import expand_paths, run_ingest
-from pipeline import tables
 from pipeline.batch import SitesSummary, resume_continuations, run_batch
+from pipeline.batch.pending import pending_by_site
 from pipeline.config import Config
 from pipeline.executors import UnitResult
 from pipeline.ingest import IngestSummary
 from pipeline.ingest.plan import IngestUsageError
-from pipeline.units import NS
-from pipeline.warehouse.delta import read_table, replace_window
-
-HOUR_NS = 3600 * NS
+from pipeline.warehouse.runs import record_run
 
 
 @dataclass
@@ -86,57 +77,6 @@ class RunSummary:
         lines += [f"  {name:<22} {n:>9} rows" for name, n in self.rows().items()]
         lines += [f"  failed: {f}" for f in self.failures]
         return "\n".join(lines)
-
-
-def pending_windows(warehouse: Path, site: str | None = None) -> list[tuple[int, int]]:
-    """Windows to batch (of ``site``, default any): :func:`pending_by_site`'s, merged
-    over the sites; ascending."""
-    by_site = pending_by_site(warehouse)
-    return _merged([w for name, windows in by_site.items() if site in (None, name)
-                    for w in windows])
-
-
-def pending_by_site(warehouse: Path) -> dict[str, list[tuple[int, int]]]:
-    """Per site, the windows to batch: the spans of its ledger files (ok or partial) not
-    covered by its ``batch_units`` committed after the file was ingested, cut out to
-    whole UTC hours and merged; ascending. Only that site is batched over them."""
-    ledger = pl.from_arrow(read_table(warehouse, "ingest_ledger")).filter(
-        pl.col("status").is_in(["ok", "partial"]) & pl.col("start_time_ns").is_not_null()
-        & pl.col("end_time_ns").is_not_null())
-    units = pl.from_arrow(read_table(warehouse, "batch_units"))
-    spans: dict[str, list[tuple[int, int]]] = {}
-    for f in ledger.iter_rows(named=True):
-        lo, hi = f["start_time_ns"], f["end_time_ns"] + 1
-        fresh = units.filter((pl.col("site") == f["site"])
-                             & (pl.col("committed_at_ns") >= f["ingested_at_ns"])
-                             & (pl.col("start_ns") < hi) & (pl.col("end_ns") > lo))
-        if not _covers(fresh, lo, hi):
-            spans.setdefault(f["site"], []).append(
-                (lo // HOUR_NS * HOUR_NS, -(-hi // HOUR_NS) * HOUR_NS))
-    return {name: _merged(windows) for name, windows in sorted(spans.items())}
-
-
-def _merged(spans: list[tuple[int, int]]) -> list[tuple[int, int]]:
-    merged: list[tuple[int, int]] = []
-    for a, b in sorted(spans):
-        if merged and a <= merged[-1][1]:
-            merged[-1] = (merged[-1][0], max(merged[-1][1], b))
-        else:
-            merged.append((a, b))
-    return merged
-
-
-def _covers(units: pl.DataFrame, lo: int, hi: int) -> bool:
-    """True when the units' intervals cover [lo, hi)."""
-    t = lo
-    for a, b in sorted(zip(units["start_ns"].to_list(), units["end_ns"].to_list(),
-                           strict=True)):
-        if a > t:
-            return False
-        t = max(t, b)
-        if t >= hi:
-            return True
-    return t >= hi
 
 
 def run_nightly(cfg: Config, warehouse: Path, *, folders: list[str] | None = None,
@@ -196,36 +136,3 @@ def run_nightly(cfg: Config, warehouse: Path, *, folders: list[str] | None = Non
     if not summary.nothing_to_do:
         record_run(warehouse, cfg, summary)
     return summary
-
-
-def record_run(warehouse: Path, cfg: Config, s: RunSummary) -> None:
-    """One ``runs`` row (one commit)."""
-    row = {
-        "started_at_ns": s.started_at_ns, "ended_at_ns": s.ended_at_ns,
-        "run_id": f"{s.started_at_ns}-{os.getpid()}", "command": s.command,
-        "status": s.status, "files_json": json.dumps(s.files, sort_keys=True),
-        "files_skipped": s.files_skipped,
-        "windows_json": json.dumps([[int(a), int(b)] for a, b in s.windows]),
-        "rows_json": json.dumps(s.rows(), sort_keys=True),
-        "failures_json": json.dumps(s.failures), "config_sha256": config_sha256(cfg),
-        "code_version": code_version(),
-    }
-    frame = tables.conform("runs", pl.DataFrame([row]))
-    replace_window(warehouse, "runs", frame, start_ns=s.started_at_ns,
-                   end_ns=s.started_at_ns + 1)
-
-
-def config_sha256(cfg: Config) -> str:
-    """sha256 of the config file (of its repr for a config built in memory)."""
-    try:
-        data = Path(cfg.source).read_bytes()
-    except OSError:
-        data = repr(cfg).encode()
-    return hashlib.sha256(data).hexdigest()
-
-
-def code_version() -> str:
-    try:
-        return metadata.version("surveil-pipeline")
-    except metadata.PackageNotFoundError:
-        return "unknown"

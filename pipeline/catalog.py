@@ -10,12 +10,13 @@ that owns them) or a calibration command.
 from __future__ import annotations
 
 from collections.abc import Iterable
+from pathlib import Path
 
 import duckdb
 
 from pipeline import families
 from pipeline.config import Config
-from pipeline.reports import ReportSql
+from pipeline.reports import ALL_TIME, ReportSql, open_warehouse
 from pipeline.tables import spec, table_specs
 
 # raw tables -> the `surveil simulate` scenario that writes them (the demo hour has
@@ -124,3 +125,16 @@ def explain_empty_report(con: duckdb.DuckDBPyConnection, report: ReportSql, *, s
     """Why report ``report`` has no rows, from the tables its header names."""
     return why_empty(con, report.source_tables(), start_ns=start_ns, end_ns=end_ns,
                      sector=sector, cfg=cfg)
+
+
+def explain_empty(warehouse: Path, report: ReportSql, *, start_ns: int | None,
+                  end_ns: int | None, sector: str | None, cfg: Config | None = None) -> str:
+    """Why ``report`` has no rows in the window: what its source tables hold and which
+    command writes them."""
+    con = open_warehouse(warehouse)
+    try:
+        return explain_empty_report(
+            con, report, start_ns=ALL_TIME[0] if start_ns is None else start_ns,
+            end_ns=ALL_TIME[1] if end_ns is None else end_ns, sector=sector, cfg=cfg)
+    finally:
+        con.close()

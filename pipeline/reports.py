@@ -22,18 +22,25 @@ groups by ``site`` so that sites are reported apart, never summed.
 
 from __future__ import annotations
 
+import contextlib
+import itertools
+import os
 import re
-from collections.abc import Iterable, Mapping, Sequence
+import tempfile
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 import duckdb
 import pyarrow as pa
+import pyarrow.csv as pacsv
 
+from pipeline.config import Config
 from pipeline.configspec import Document, setting
-from pipeline.requirements import ConfigSection, RequirementsConfig
+from pipeline.requirements import ConfigSection, RequirementsConfig, requirements_config
 from pipeline.resources import resource_path
+from pipeline.warehouse.views import register_tables
 
 _HEADER = re.compile(r"^--\s*(\w[\w ]*?):\s*(.*)$")
 _PARAM = re.compile(r"\$(\w+)\s*(?:\(([^)]*)\))?")
@@ -300,3 +307,76 @@ def run_report(
                         requirements=requirements, params=params, site=site)
     rel = con.sql(report.text, params=bound)
     return rel.to_arrow_table() if rows_per_batch is None else rel.to_arrow_reader(rows_per_batch)
+
+
+# --- running a report over the warehouse ----------------------------------------------
+
+ALL_TIME = (0, 2**63 - 1)
+ROWS_PER_BATCH = 65_536  # rows a streamed report holds at a time
+REPORT_MEMORY = os.environ.get("SURVEIL_REPORT_MEMORY", "2GB")
+"""DuckDB's memory limit for a report: a larger aggregate (``map_tracks`` over a regional
+day: tens of millions of groups) spills to the system's temporary folder."""
+_SPILLS = itertools.count()  # one spill folder per connection (DuckDB names its files alike)
+
+
+def open_warehouse(warehouse: Path, threads: int = 2) -> duckdb.DuckDBPyConnection:
+    """An in-memory DuckDB whose views are the warehouse tables' current snapshots."""
+    spill = Path(tempfile.gettempdir()) / f"surveil-duckdb-{os.getpid()}-{next(_SPILLS)}"
+    con = duckdb.connect(config={"threads": threads, "memory_limit": REPORT_MEMORY,
+                                 "temp_directory": str(spill)})  # made and removed by DuckDB
+    register_tables(con, warehouse)
+    return con
+
+
+def run_named_report(warehouse: Path, name: str, **options: Any) -> pa.Table:
+    """Report ``name`` over the warehouse as one table; ``options``: those of
+    :func:`named_report_batches` (window, sector, config, parameters, site)."""
+    with named_report_batches(warehouse, name, **options) as reader:
+        return reader.read_all()
+
+
+@contextlib.contextmanager
+def named_report_batches(
+    warehouse: Path,
+    name: str,
+    *,
+    start_ns: int | None = None,
+    end_ns: int | None = None,
+    sector: str | None = None,
+    cfg: Config | None = None,
+    params: Mapping[str, Any] | None = None,
+    site: str | None = None,
+) -> Iterator[pa.RecordBatchReader]:
+    """Report ``name``'s rows as a stream of record batches, read while the ``with``
+    block holds the warehouse open: ``surveil report --format csv`` writes a report of
+    tens of millions of rows (``map_tracks`` over a regional day) without holding it.
+    All time when no window; ``cfg``: its ``[requirements]`` are bound and its
+    ``[reports] dirs`` searched (None: the shipped figures, shipped reports only);
+    ``site``: that site's rows (None: every site, apart)."""
+    con = open_warehouse(warehouse)
+    try:
+        yield run_report(
+            con,
+            name,
+            start_ns=ALL_TIME[0] if start_ns is None else start_ns,
+            end_ns=ALL_TIME[1] if end_ns is None else end_ns,
+            sector=sector,
+            requirements=requirements_config(cfg) if cfg is not None else None,
+            params=params,
+            dirs=reports_config(cfg).dirs if cfg is not None else (),
+            site=site,
+            rows_per_batch=ROWS_PER_BATCH,
+        )
+    finally:
+        con.close()
+
+
+def write_csv(reader: pa.RecordBatchReader, sink: BinaryIO) -> int:
+    """Write ``reader``'s rows to ``sink`` as CSV (one header), batch by batch, as
+    :func:`format_report` formats them; returns the rows written."""
+    rows = 0
+    with pacsv.CSVWriter(sink, reader.schema) as writer:
+        for batch in reader:
+            writer.write_batch(batch)
+            rows += batch.num_rows
+    return rows

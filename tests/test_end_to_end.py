@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import polars as pl
 
-from jobs.report import run_named_report
 from pipeline.maritime.config import maritime_config
+from pipeline.reports import run_named_report
 from pipeline.warehouse.delta import read_table
 
 

@@ -17,6 +17,7 @@ import time
 from pathlib import Path
 
 import pyarrow as pa
+import pyarrow.compute as pc
 import pyarrow.dataset as pds
 
 from pipeline.tables import conform, default_site
@@ -112,3 +113,19 @@ def is_unchanged(warehouse: Path, path: str | Path, size: int, sha256: str) -> b
         and row["size_bytes"] == size
         and row["sha256"] == sha256
     )
+
+
+def files_overlapping(warehouse: Path, start_ns: int, end_ns: int, site: str | None = None
+                      ) -> list[str]:
+    """Archived files (from the ingest ledger; of ``site`` when given) whose time span
+    overlaps the window."""
+    ledger = read_table(warehouse, "ingest_ledger", site=site)
+    if ledger.num_rows == 0:
+        return []
+    overlaps = pc.and_(
+        pc.less(ledger["start_time_ns"], end_ns), pc.greater_equal(ledger["end_time_ns"], start_ns)
+    )
+    # quarantined: nothing readable; duplicate: its content is ingested under another name
+    ingested = pc.is_in(ledger["status"], value_set=pa.array(["ok", "partial"]))
+    mask = pc.and_(overlaps, ingested)
+    return sorted(set(ledger.filter(mask)["source_file"].to_pylist()))

@@ -419,7 +419,7 @@ def views_stale(warehouse: Path) -> bool:
 
 def refresh_views_file(warehouse: Path) -> bool:
     """Rebuild ``surveil.duckdb`` when :func:`views_stale`; returns whether it did. Every
-    writer job calls it when it takes the warehouse lock (``jobs.lock``)."""
+    writer job calls it when it takes the warehouse lock (``pipeline.warehouse.lock``)."""
     if not views_stale(warehouse):
         return False
     rebuild_views_file(warehouse)

@@ -12,12 +12,11 @@ from airfield_helpers import START_NS
 from mcap.reader import make_reader
 
 from jobs.batch import run_batch
-from jobs.calibrate import run_calibrate
 from jobs.common import UsageError
 from jobs.ingest import run_ingest
-from jobs.report import open_warehouse
 from jobs.simulate import run_simulate
-from pipeline.reports import run_report
+from pipeline.batch.calibrate import run_calibrate
+from pipeline.reports import open_warehouse, run_report
 from pipeline.units import NS
 from pipeline.warehouse.delta import read_table
 

@@ -15,7 +15,6 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "decode"))
 from test_asterix import block, cat010_record
 
-from jobs.import_legacy import run_import
 from jobs.ingest import run_ingest
 from pipeline.convert.asterix import wrap_asterix
 from pipeline.convert.asterix_framing import (
@@ -25,6 +24,7 @@ from pipeline.convert.asterix_framing import (
     oradis_time_unit,
     walk,
 )
+from pipeline.convert.importer import run_import
 from pipeline.convert.legacy import detect_format
 from pipeline.convert.output import REJECTS_TOPIC
 from pipeline.families import load_config

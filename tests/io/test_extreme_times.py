@@ -18,9 +18,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "decode"))
 from nmea_builders import sentence, tag_block
 
 from jobs.common import UsageError
-from jobs.import_legacy import run_import
 from jobs.ingest import run_ingest
 from pipeline.convert.asterix import wrap_asterix_file
+from pipeline.convert.importer import run_import
 from pipeline.convert.legacy import import_file
 from pipeline.convert.output import REJECTS_TOPIC, Message, write_converted
 from pipeline.families import load_config

@@ -1,6 +1,6 @@
 """``surveil import``: NMEA text logs and AIS CSV tables -> MCAP with honest log times;
 format detection, usage errors, the CLI (pipeline/convert/legacy.py,
-jobs/import_legacy.py, jobs/cli.py)."""
+pipeline/convert/importer.py, jobs/cli.py)."""
 
 from __future__ import annotations
 
@@ -19,7 +19,7 @@ from nmea_builders import sentence, tag_block
 
 from jobs.cli import cli
 from jobs.common import UsageError
-from jobs.import_legacy import run_import
+from pipeline.convert.importer import run_import
 from pipeline.convert.legacy import (
     AIS_TOPIC,
     CSV_TOPIC,

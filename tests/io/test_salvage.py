@@ -10,8 +10,8 @@ import json
 import pytest
 from mcap.reader import make_reader
 
-from jobs.import_legacy import run_import
 from pipeline.convert.asterix_framing import split_blocks_resync, walk_resync
+from pipeline.convert.importer import run_import
 from pipeline.decode.asterix import decoder_available
 from pipeline.simulate import hostile as h
 

@@ -73,12 +73,13 @@ def test_csv_report_is_streamed_as_the_whole_table_formats_it(e2e, monkeypatch):
     once: 7.6 GB for map_tracks over a regional day), here in 1,000-row batches."""
     import io
 
-    import jobs.report
-    from jobs.report import format_report, named_report_batches, run_named_report, write_csv
+    import pipeline.reports
+    from pipeline.render import format_report
+    from pipeline.reports import named_report_batches, run_named_report, write_csv
 
     whole = run_named_report(e2e.warehouse, "map_tracks")
     assert whole.num_rows > 3_000
-    monkeypatch.setattr(jobs.report, "ROWS_PER_BATCH", 1_000)
+    monkeypatch.setattr(pipeline.reports, "ROWS_PER_BATCH", 1_000)
     buf = io.BytesIO()
     with named_report_batches(e2e.warehouse, "map_tracks") as reader:
         assert write_csv(reader, buf) == whole.num_rows

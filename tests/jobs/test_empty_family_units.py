@@ -11,9 +11,9 @@ from dataclasses import replace
 import polars as pl
 
 from jobs.reprocess import run_reprocess
-from jobs.run import pending_windows
 from pipeline import tables
 from pipeline.batch import run_batch
+from pipeline.batch.pending import pending_windows
 from pipeline.batch.plan import owned_window, plan_units, unit_is_live
 from pipeline.families import family
 from pipeline.family import TableInput

@@ -15,7 +15,7 @@ import polars as pl
 import pytest
 
 from jobs.common import iso
-from jobs.report import run_named_report
+from pipeline.reports import run_named_report
 from pipeline.warehouse.delta import read_table
 
 DERIVED = ("system_tracks", "associations", "identifications", "track_errors")

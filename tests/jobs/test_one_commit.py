@@ -11,10 +11,10 @@ import numpy as np
 import polars as pl
 from polars.testing import assert_frame_equal
 
-from jobs.report import run_named_report
 from pipeline.batch import run_batch
 from pipeline.batch.plan import family_waves
 from pipeline.families import FAMILIES
+from pipeline.reports import run_named_report
 from pipeline.warehouse import pending
 from pipeline.warehouse.delta import read_table, replace_window
 from pipeline.warehouse.views import connect_views_file, rebuild_views_file

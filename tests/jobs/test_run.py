@@ -15,8 +15,9 @@ from pathlib import Path
 import polars as pl
 
 from jobs.ingest import run_ingest
-from jobs.run import pending_windows, run_nightly
+from jobs.run import run_nightly
 from jobs.simulate import run_simulate
+from pipeline.batch.pending import pending_windows
 from pipeline.units import NS
 from pipeline.warehouse.delta import read_table
 
@@ -89,7 +90,7 @@ def test_a_second_job_on_a_locked_warehouse_exits_2_naming_the_holder(e2e, tmp_p
         [sys.executable, "-c",
          "import sys, time\n"
          "from pathlib import Path\n"
-         "from jobs.lock import warehouse_lock\n"
+         "from pipeline.warehouse.lock import warehouse_lock\n"
          f"with warehouse_lock(Path({str(wh)!r}), command='surveil run (holder)'):\n"
          "    print('held', flush=True)\n"
          "    time.sleep(120)\n"],

@@ -13,9 +13,9 @@ import pytest
 
 from jobs.batch import run_batch
 from jobs.ingest import run_ingest
-from jobs.report import run_named_report
 from jobs.simulate import run_simulate
 from pipeline.nav.config import ownship_config
+from pipeline.reports import run_named_report
 from pipeline.simulate.ownship import simulate_ownship
 from pipeline.units import NS
 from pipeline.warehouse.delta import read_table

@@ -11,9 +11,9 @@ import pytest
 from conftest import real_data_dir
 
 from jobs.batch import run_batch
-from jobs.import_legacy import run_import
 from jobs.ingest import run_ingest
-from jobs.report import run_named_report
+from pipeline.convert.importer import run_import
+from pipeline.reports import run_named_report
 from pipeline.warehouse.delta import read_table
 
 pytestmark = [pytest.mark.realdata, pytest.mark.slow]

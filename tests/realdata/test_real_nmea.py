@@ -19,8 +19,8 @@ from pathlib import Path
 import polars as pl
 import pytest
 
-from jobs.import_legacy import run_import
 from jobs.ingest import run_ingest
+from pipeline.convert.importer import run_import
 
 pytestmark = pytest.mark.realdata
 

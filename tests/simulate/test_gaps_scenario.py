@@ -122,7 +122,7 @@ def test_whole_chain_writes_gap_forecasts_and_the_reports_read_them(cfg, tmp_pat
     """simulate -> MCAP -> ingest -> Delta -> batch (every family) -> DuckDB reports."""
     from jobs.batch import run_batch
     from jobs.ingest import run_ingest
-    from jobs.report import run_named_report
+    from pipeline.reports import run_named_report
     from pipeline.warehouse.delta import read_table
 
     duration = DURATION_S

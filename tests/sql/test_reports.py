@@ -5,8 +5,8 @@ from __future__ import annotations
 import pytest
 
 from jobs.demo import DEMO_REPORTS
-from jobs.report import format_report, run_named_report
-from pipeline.reports import UnknownReportError, list_reports, load_report
+from pipeline.render import format_report
+from pipeline.reports import UnknownReportError, list_reports, load_report, run_named_report
 
 
 @pytest.mark.parametrize("name", list_reports())

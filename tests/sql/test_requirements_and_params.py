@@ -7,15 +7,16 @@ import tomllib
 
 import pytest
 
-from jobs.report import format_report, run_named_report
 from pipeline.config import ConfigError
 from pipeline.families import config_from_mapping
+from pipeline.render import format_report
 from pipeline.reports import (
     ReportError,
     list_reports,
     load_report,
     parse_params,
     reports_config,
+    run_named_report,
 )
 from pipeline.requirements import (
     FAIL,

@@ -17,14 +17,14 @@ from pathlib import Path
 
 import polars as pl
 
-from jobs.common import UsageError, iso
 from pipeline import tables
 from pipeline.airfield.config import airfield_config
 from pipeline.airfield.stage import calibration
 from pipeline.config import Config
+from pipeline.errors import UsageError
 from pipeline.maritime.bias import correction_toml, estimate_biases
 from pipeline.maritime.config import radar_bias_config
-from pipeline.units import NS
+from pipeline.units import NS, iso
 from pipeline.warehouse.delta import read_table, replace_window
 from pipeline.warehouse.views import rebuild_views_file
 

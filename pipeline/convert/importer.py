@@ -1,4 +1,4 @@
-"""Import job: ``surveil import PATH... --out DIR`` wraps legacy captures into MCAP.
+"""``surveil import PATH... --out DIR``: legacy captures wrapped into MCAP.
 
 One work unit per input file, run in this process (files are small text logs; the work
 is file I/O plus column operations). Each input gives ``<out>/<file name>.mcap`` (see
@@ -21,11 +21,11 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from jobs.common import UsageError
 from pipeline.config import Config
 from pipeline.convert.config import import_options
 from pipeline.convert.legacy import ImportedFile, detect_format, import_file, output_path
 from pipeline.convert.output import REJECTS_TOPIC
+from pipeline.errors import UsageError
 from pipeline.units import describe_time, time_in_range
 
 

@@ -21,7 +21,8 @@ import time
 from collections.abc import Iterator
 from pathlib import Path
 
-from jobs.common import UsageError, iso
+from pipeline.errors import UsageError
+from pipeline.units import iso
 
 LOCK_FILE = ".surveil.lock"
 STAGING_DIR = "_staging"  # ingest-<pid>-<ns>, batch-<start>-<end>, rewrite-<uuid>
