@@ -34,7 +34,7 @@ from pipeline.config import Config
 from pipeline.families import FAMILIES
 from pipeline.family import Family
 from pipeline.units import NS
-from pipeline.warehouse.delta import read_table, rows_per_second, volume_cuts
+from pipeline.warehouse.delta import has_rows, read_table, rows_per_second, volume_cuts
 
 
 def owned_window(warehouse: Path, start_ns: int, end_ns: int, site: str | None = None,
@@ -89,9 +89,7 @@ def has_input_rows(warehouse: Path, fam: Family, cfg: Config, start_ns: int, end
         if spec.table in derived:
             return True
         at = site if site is not None and tables.has_site(spec.table) else None
-        time_col = tables.spec(spec.table).time_column
-        if read_table(warehouse, spec.table, start_ns=start_ns, end_ns=end_ns,
-                      columns=[time_col], sort=False, site=at).num_rows:
+        if has_rows(warehouse, spec.table, start_ns, end_ns, at):
             return True
     return False
 
@@ -118,10 +116,12 @@ def plan_units(
     committed_cuts: dict[str, list[int]] | None = None,
     site: str | None = None,
 ) -> list[BatchUnit]:
-    """Cut [start_ns, end_ns) into each family's work units (:func:`unit_cuts`). A
-    family with one unit per window plans none where its inputs hold no row
-    (:func:`has_input_rows`): a unit it does not need would own, and a reprocess of any
-    part of it would re-run, the whole window."""
+    """Cut [start_ns, end_ns) into each family's work units (:func:`unit_cuts`), planned
+    only where the family's inputs hold a row (:func:`has_input_rows`): per grid cell
+    (hour) for a family with a grid, whose unit without input rows has no output rows
+    either (an AIS-only archive plans no airfield unit; a day with two busy hours, two
+    units); per piece for a family with one unit per window, whose needless unit would
+    own, and a reprocess of any part of it would re-run, the whole window."""
     derived = frozenset(n for f in FAMILIES for n in f.outputs)
     units = []
     for fam in families:
@@ -131,6 +131,12 @@ def plan_units(
         if fam.unit_s is None:
             pieces = [(a, b) for a, b in pieces
                       if has_input_rows(warehouse, fam, cfg, a, b, site, derived)]
+        else:
+            step = fam.unit_s * NS
+            cells = {a // step for a, _ in pieces}
+            live = {c for c in cells if has_input_rows(warehouse, fam, cfg, max(c * step, start_ns),
+                                                        min((c + 1) * step, end_ns), site, derived)}
+            pieces = [(a, b) for a, b in pieces if a // step in live]
         units += [BatchUnit(str(warehouse), str(staging_dir), a, b, cfg, fam.name, site=site)
                   for a, b in pieces]
     return units

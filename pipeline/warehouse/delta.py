@@ -192,6 +192,20 @@ def read_table(
     return table
 
 
+def has_rows(warehouse: Path, name: str, start_ns: int, end_ns: int,
+             site: str | None = None) -> bool:
+    """Whether ``name`` holds a row (of ``site``) with its time in ``[start_ns, end_ns)``:
+    the scan stops at the first such row (partitions and row groups pruned first)."""
+    delta_table = _reader_table(warehouse, name)
+    if delta_table is None:
+        return False
+    expr = window_filter(name, start_ns, end_ns)
+    if site is not None:
+        expr = pds.field("site") == site if expr is None else expr & (pds.field("site") == site)
+    dataset = _snapshot_dataset(delta_table, table_path(warehouse, name), spec(name).schema)
+    return dataset.head(1, columns=[spec(name).time_column], filter=expr).num_rows > 0
+
+
 def _snapshot_dataset(snapshot: DeltaTable, path: Path, schema: pa.Schema) -> pds.Dataset:
     """``snapshot``'s (the version readers see) Parquet files as a plain pyarrow dataset
     on the local filesystem (hive ``date=`` partitions).

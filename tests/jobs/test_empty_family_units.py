@@ -87,3 +87,31 @@ def test_a_one_unit_family_with_input_rows_still_gets_its_whole_window_unit(e2e,
         ("ais_like", e2e.start_ns, e2e.end_ns)]
     later = e2e.end_ns + 60 * MIN  # no row there (its margin reaches no row either)
     assert plan_units(wh, cfg, later, later + 60 * MIN, tmp_path, (nav, ais_like)) == []
+
+
+def test_an_hourly_family_plans_units_only_in_hours_with_input_rows(e2e, tmp_path):
+    """Batch cost follows the data (issue 34): the e2e archive has no airfield sensor, and
+    radar/AIS rows only in 00:50-01:10. Over 22:00-03:00 the maritime family plans units
+    in the two hours with rows, the airfield family none (was: one unit per hour of the
+    window per family: 10 units of nothing); the tables are those of a batch over the two
+    hours alone. (The gaps family reads maritime's system_tracks, unknown before the
+    batch runs: its hourly units are still planned.)"""
+    hour = 60 * MIN
+    first, last = e2e.start_ns // hour * hour, (e2e.end_ns - 1) // hour * hour + hour
+    wide, tight = tmp_path / "wide", tmp_path / "tight"
+    for wh in (wide, tight):
+        shutil.copytree(e2e.warehouse, wh)
+        for name in (*DERIVED, "batch_units"):
+            shutil.rmtree(wh / "tables" / name, ignore_errors=True)
+    units = plan_units(wide, e2e.cfg, first - 2 * hour, last + 2 * hour, tmp_path / "staging")
+    assert {u.start_ns // hour for u in units if u.family == "maritime"} == {
+        first // hour, first // hour + 1}
+    assert not [u for u in units if u.family == "airfield"]
+    for wh, (start, end) in ((wide, (first - 2 * hour, last + 2 * hour)), (tight, (first, last))):
+        res = run_batch(e2e.cfg, wh, start_ns=start, end_ns=end, executor_kind="serial")
+        assert res.exit_code == 0, res.render()
+    assert_same(snapshot(wide, DERIVED), snapshot(tight, DERIVED), "empty hours around the data")
+    maritime = [pl.col("family") == "maritime"]
+    keys = ["start_ns", "end_ns"]
+    assert _units(wide).filter(maritime).select(keys).equals(
+        _units(tight).filter(maritime).select(keys))
