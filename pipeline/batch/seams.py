@@ -117,7 +117,9 @@ class Seams(Sequence):
 class Joiner:
     """A family's units of a wave joined in time order as they finish (``join_units``):
     :meth:`ready` takes a finished unit and gives the :class:`FinalizeTask` of every unit
-    that is now joined (it and the units after it that waited on it).
+    that is now joined (it and the units after it that waited on it). A family without
+    a ``join_units`` has nothing to relabel: each unit is finalised as soon as it is done,
+    in any order.
 
     The join is a chain: a unit's relabelling depends on the units before it only through
     the seam of the unit just before, relabelled. So the join of ``[seam of the last
@@ -134,13 +136,15 @@ class Joiner:
         self.last_seam: Any = None  # the seam the next unit continues (None: none)
 
     def ready(self, m: UnitManifest) -> list[FinalizeTask]:
+        if self.fam.join_units is None:  # nothing to relabel: finalised as soon as done
+            return [FinalizeTask(m, None)]
         self.waiting[m.start_ns] = m
         now: list[UnitManifest] = []
         while self.joined < len(self.order) and self.order[self.joined] in self.waiting:
             now.append(self.waiting.pop(self.order[self.joined]))
             self.joined += 1
-        if not now or self.fam.join_units is None:
-            return [FinalizeTask(u, None) for u in now]
+        if not now:
+            return []
         if self.joined == len(now):  # the first units of the window
             self.last_seam = self._lead()
         seams = [s for s in (self.last_seam,) if s is not None] + [u.seam for u in now]

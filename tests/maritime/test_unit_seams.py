@@ -94,3 +94,16 @@ def test_units_joined_as_they_finish_get_the_relabelling_of_one_join(scenario, t
             assert not folders[i].exists()
     assert sorted(got) == list(range(len(seams)))
     assert [got[i] for i in range(len(seams))] == whole
+
+
+def test_units_of_a_family_without_a_join_are_finalised_as_each_finishes():
+    """A family without ``join_units`` (airfield, nav, gaps) has nothing to relabel: a
+    unit finished before the units ahead of it is finalised at once (was: it waited for
+    them, time order, as a joined family's must)."""
+    fam = family("airfield")
+    assert fam.join_units is None
+    starts = [T0_NS + k * 3600 * NS for k in range(3)]
+    joiner = Joiner(fam, starts, BatchSummary(start_ns=starts[0], end_ns=starts[-1]), None)
+    for k in (2, 0, 1):
+        tasks = joiner.ready(UnitManifest("airfield", starts[k], {}))
+        assert [(t.manifest.start_ns, t.mapping) for t in tasks] == [(starts[k], None)]
