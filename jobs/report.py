@@ -20,7 +20,7 @@ import pyarrow.csv as pacsv
 
 from pipeline.catalog import explain_empty_report
 from pipeline.config import Config
-from pipeline.reports import ReportSql, reports_config, run_report
+from pipeline.reports import ReportSql, reports_config, run_report, site_geometry
 from pipeline.requirements import requirements_config
 from pipeline.tables import column_doc, column_unit, table_specs
 from pipeline.warehouse.views import register_tables
@@ -80,6 +80,7 @@ def named_report_batches(
             dirs=reports_config(cfg).dirs if cfg is not None else (),
             site=site,
             rows_per_batch=ROWS_PER_BATCH,
+            geometry=site_geometry(cfg) if cfg is not None else None,
         )
     finally:
         con.close()
