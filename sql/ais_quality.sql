@@ -20,8 +20,9 @@
 --     type present in the static data (messages 5, 24; M.1371-5 Annex 8);
 --   * position jumps: consecutive positions farther apart than $min_jump_m at an implied
 --     speed above $max_speed_kn;
---   * positions on land where the site declares a coastline (inside a [gaps] island, or
---     outside every [gaps] admissible water area within their extent); NULL without one;
+--   * positions on land where the site declares land (inside a [gaps] island polygon: the
+--     [gaps] admissible areas are where forecasts may go, not every water, so a position
+--     outside them is not taken for land); NULL without any;
 --   * SOG and COG against the track between consecutive reports (tolerances ours:
 --     $sog_tol_kn and $cog_tol_deg plus 3 sigma of the track's own noise from a GNSS
 --     position sigma $gnss_sigma_m);
@@ -33,7 +34,9 @@
 --   * clock offset between the reception time and the report's own second (utc_second,
 --     M.1371-5 Annex 2 §3.3.7.2), on reports whose reception time is their own (not
 --     interpolated, not synthetic); late: more than $late_s after it, early: before.
---   Reports with synthetic times (a file without any time) are not checked in time.
+--   Reports with synthetic times (a file without any time) are not checked in time; the
+--   interval, SOG and COG checks take only times good to a second (a reception time of
+--   their own, or one interpolated and moved to the report's utc_second).
 -- grain: one row per (site, level, sector, hour, mmsi); level = site | sector_hour |
 --   transponder (sector and hour NULL except for sector_hour, mmsi only for transponder)
 -- params: $start_ns (BIGINT, inclusive), $end_ns (BIGINT, exclusive),
@@ -49,16 +52,14 @@ WITH polys AS (   -- the config's polygon edges (pipeline/reports.py: SiteGeomet
     SELECT unnest(CAST($site_polygons AS STRUCT(kind VARCHAR, name VARCHAR, ord INTEGER,
                   lat1 DOUBLE, lon1 DOUBLE, lat2 DOUBLE, lon2 DOUBLE)[]), recursive := true)
 ),
-water_extent AS (
-    SELECT min(least(lat1, lat2)) AS lat0, max(greatest(lat1, lat2)) AS lat1,
-           min(least(lon1, lon2)) AS lon0, max(greatest(lon1, lon2)) AS lon1, count(*) AS n
-    FROM polys WHERE kind = 'water'
-),
-coast AS (SELECT count(*) FILTER (WHERE kind IN ('land', 'water')) > 0 AS declared FROM polys),
+coast AS (SELECT count(*) FILTER (WHERE kind = 'land') > 0 AS declared FROM polys),
 pos0 AS (
     SELECT site, mmsi, time_ns, msg_type, ais_class, lat_deg, lon_deg, sog_mps / 0.514444 AS sog_kn,
            degrees(cog_rad) AS cog_deg, nav_status, utc_second, time_source,
-           coalesce(time_source LIKE 'none:%' OR time_source LIKE '%:undated%', FALSE) AS synthetic
+           coalesce(time_source LIKE 'none:%' OR time_source LIKE '%:undated%', FALSE) AS synthetic,
+           -- a time good to a second: its own, or interpolated and moved to its utc_second
+           coalesce(time_source NOT LIKE 'interpolated:%' OR time_source LIKE '%+utc_second', TRUE)
+               AS precise
     FROM ais_reports
     WHERE time_ns >= $start_ns AND time_ns < $end_ns
       AND (CAST($site AS VARCHAR) IS NULL OR site = CAST($site AS VARCHAR))
@@ -79,13 +80,8 @@ place AS (
            coalesce((SELECT arg_min(i.name, i.ord) FROM inside AS i WHERE i.kind = 'sector'
                      AND i.lat_deg = p.lat_deg AND i.lon_deg = p.lon_deg), '(outside sectors)') AS sector,
            CASE WHEN NOT (SELECT declared FROM coast) THEN NULL
-                WHEN EXISTS (SELECT 1 FROM inside AS i WHERE i.kind = 'land'
-                             AND i.lat_deg = p.lat_deg AND i.lon_deg = p.lon_deg) THEN TRUE
-                WHEN (SELECT n FROM water_extent) = 0 THEN FALSE
-                WHEN EXISTS (SELECT 1 FROM inside AS i WHERE i.kind = 'water'
-                             AND i.lat_deg = p.lat_deg AND i.lon_deg = p.lon_deg) THEN FALSE
-                ELSE (SELECT p.lat_deg BETWEEN lat0 AND lat1 AND p.lon_deg BETWEEN lon0 AND lon1
-                      FROM water_extent) END AS on_land
+                ELSE EXISTS (SELECT 1 FROM inside AS i WHERE i.kind = 'land'
+                             AND i.lat_deg = p.lat_deg AND i.lon_deg = p.lon_deg) END AS on_land
     FROM pts AS p
 ),
 pos AS (   -- each report with the ones before it (per site and MMSI, in time order)
@@ -94,6 +90,7 @@ pos AS (   -- each report with the ones before it (per site and MMSI, in time or
            lag(sog_kn, 1) OVER w AS sog1, lag(cog_deg, 1) OVER w AS cog1,
            lag(msg_type, 1) OVER w AS type1, lag(ais_class, 1) OVER w AS class1,
            lag(nav_status, 1) OVER w AS status1, lag(synthetic, 1) OVER w AS synthetic1,
+           lag(precise, 1) OVER w AS precise1,
            lag(time_ns, 2) OVER w AS t2, lag(lat_deg, 2) OVER w AS la2, lag(lon_deg, 2) OVER w AS lo2,
            lag(cog_deg, 2) OVER w AS cog2,
            lag(time_ns, 3) OVER w AS t3, lag(lat_deg, 3) OVER w AS la3, lag(lon_deg, 3) OVER w AS lo3
@@ -130,8 +127,8 @@ checks AS (
 ),
 flags AS (
     SELECT site, mmsi, time_ns, sector, on_land, synthetic, implied_kn, ais_class, time_source,
-           (t1 IS NOT NULL AND NOT synthetic AND NOT synthetic1 AND dt_s > 0 AND dt_s <= $gap_s
-            AND nominal_s IS NOT NULL) AS interval_checked,
+           (t1 IS NOT NULL AND precise AND precise1 AND NOT synthetic AND NOT synthetic1
+            AND dt_s > 0 AND dt_s <= $gap_s AND nominal_s IS NOT NULL) AS interval_checked,
            dt_s <= nominal_s * (1 + $interval_slack) + 1 AS interval_ok,
            (t1 IS NOT NULL AND d_m > $min_jump_m AND implied_kn > $max_speed_kn) AS jump,
            -- back where it was 2 or 3 reports ago: a second transponder, not one bad fix
@@ -139,14 +136,14 @@ flags AS (
             AND ((t2 IS NOT NULL AND (d2_m <= $min_jump_m OR d2_m / greatest(dt2_s, 1.0) / 0.514444 <= $max_speed_kn))
               OR (t3 IS NOT NULL AND (d3_m <= $min_jump_m OR d3_m / greatest(dt3_s, 1.0) / 0.514444 <= $max_speed_kn))))
                 AS return_,
-           (t1 IS NOT NULL AND NOT synthetic AND NOT synthetic1 AND dt_s >= 2 AND dt_s <= $gap_s
-            AND sog_kn IS NOT NULL AND sog1 IS NOT NULL
+           (t1 IS NOT NULL AND precise AND precise1 AND NOT synthetic AND NOT synthetic1
+            AND dt_s >= 2 AND dt_s <= $gap_s AND sog_kn IS NOT NULL AND sog1 IS NOT NULL
             AND NOT (d_m > $min_jump_m AND implied_kn > $max_speed_kn)) AS speed_checked,
            abs((sog_kn + sog1) / 2 - d_m / dt_s / 0.514444)
                > $sog_tol_kn + 3 * sqrt(2) * $gnss_sigma_m / dt_s / 0.514444 AS sog_bad,
-           (t1 IS NOT NULL AND NOT synthetic AND NOT synthetic1 AND dt_s <= $gap_s
-            AND cog_deg IS NOT NULL AND cog1 IS NOT NULL AND (sog_kn + sog1) / 2 > 2
-            AND d_m > greatest(100, 6 * $gnss_sigma_m)
+           (t1 IS NOT NULL AND precise AND precise1 AND NOT synthetic AND NOT synthetic1
+            AND dt_s <= $gap_s AND cog_deg IS NOT NULL AND cog1 IS NOT NULL AND (sog_kn + sog1) / 2 > 2
+            AND d_m > 6 * $gnss_sigma_m
             AND NOT (d_m > $min_jump_m AND implied_kn > $max_speed_kn)) AS cog_checked,
            abs(((bearing_deg - degrees(atan2(sin(radians(cog_deg)) + sin(radians(cog1)),
                                              cos(radians(cog_deg)) + cos(radians(cog1))))) + 540) % 360 - 180)

@@ -117,7 +117,7 @@ SELECT
     a.vessels::BIGINT                                                AS vessels,           -- distinct MMSIs of vessels (class A/B messages)
     a.stations::BIGINT                                               AS stations,          -- distinct MMSIs of every sender
     a.messages::BIGINT                                               AS messages,          -- AIS messages (a multi-part message once)
-    round(a.timed / greatest((a.last_ns - a.first_ns) / 3.6e12, 1.0 / 60), 1)::DOUBLE
+    round(nullif(a.timed, 0) / greatest((a.last_ns - a.first_ns) / 3.6e12, 1.0 / 60), 1)::DOUBLE
                                                                      AS messages_per_hour, -- over the span of its timed messages (>= 1 min); NULL: synthetic times only
     round(a.with_static / nullif(a.vessels, 0), 3)::DOUBLE           AS static_share,      -- share of its vessels that sent static data in the window
     (a.messages - a.timed)::BIGINT                                   AS synthetic_messages,-- messages whose time is synthetic (no time in their file)

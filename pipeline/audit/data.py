@@ -25,6 +25,7 @@ AUDIT_REPORTS = (
     "cross_track_by_leg", "cross_track_along_leg", "radar_bias_by_site",
     "surface_accuracy_by_area", "channel_faults_by_sector", "fault_timeline", "nav_quality",
     "nav_heading_error", "gap_forecasts", "gap_forecast_calibration", "map_tracks",
+    "channel_fault_episodes", "ais_traffic", "ais_quality",
 )
 MAP_POINTS_PER_TRACK_HOUR = 180  # map_tracks thinning: one point per track every 20 s per hour
 
