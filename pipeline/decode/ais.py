@@ -402,16 +402,17 @@ def _refined(table: pa.Table, clock: _Sources, gap_s: float | None) -> pa.Table:
     ``time_source`` gains ``+utc_second``."""
     if not table.num_rows or not any(ts.is_interpolated(lab) for lab in clock.labels):
         return table
-    source = table["time_source"].to_numpy(zero_copy_only=False).astype(object)
-    interp = np.fromiter((ts.is_interpolated(x) for x in source), bool, len(source))
+    source = table["time_source"]
+    interp = pc.fill_null(pc.starts_with(source, ts.INTERPOLATED), False).to_numpy()
     second = table["utc_second"].fill_null(-1).to_numpy()
     t, hit = ts.refine_by_utc_second(table["time_ns"].to_numpy(), second, interp, gap_s)
     if not hit.any():
         return table
-    source[hit] = source[hit] + ts.REFINED
+    refined = pc.if_else(pa.array(hit), pc.binary_join_element_wise(source, ts.REFINED, ""),
+                         source)
     i = table.schema.get_field_index
     table = table.set_column(i("time_ns"), "time_ns", pa.array(t, pa.int64()))
-    table = table.set_column(i("time_source"), "time_source", pa.array(source, pa.string()))
+    table = table.set_column(i("time_source"), "time_source", refined)
     return conform("ais_reports", table.drop(["date"]) if "date" in table.column_names
                    else table)
 

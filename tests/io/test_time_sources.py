@@ -306,6 +306,7 @@ def test_asterix_time_of_day_dated_by_the_file_name(tmp_path, asterix_records):
     assert not res.warning
     got = ingest(tmp_path, [Path(res.output)], ("airfield_obs",))["airfield_obs"]
     assert got["time_ns"].to_list() == [utc(2024, 1, 31, 8, 0, 0), utc(2024, 1, 31, 8, 0, 1)]
+    assert set(got["time_source"]) == {"asterix_tod+file_name"}
 
 
 def test_undated_asterix_is_warned_and_overlaps_nothing(tmp_path, asterix_records):
@@ -315,8 +316,10 @@ def test_undated_asterix_is_warned_and_overlaps_nothing(tmp_path, asterix_record
     summary = run_import([a, b], tmp_path / "mcap")
     assert all("--base-time" in f.warning for f in summary.imported)
     assert "WARNING" in summary.render()
-    s = ingest(tmp_path, sorted((tmp_path / "mcap").glob("*.mcap")), ())["_summary"]
+    got = ingest(tmp_path, sorted((tmp_path / "mcap").glob("*.mcap")), ("airfield_obs",))
+    s = got["_summary"]
     assert s.overlaps == [] and len(s.time_warnings) == 2
+    assert set(got["airfield_obs"]["time_source"]) == {"asterix_tod:undated"}  # no batch input
 
 
 # -- synthetic times ---------------------------------------------------------------------
