@@ -78,11 +78,14 @@ PCAP_MAGICS = (b"\xa1\xb2\xc3\xd4", b"\xd4\xc3\xb2\xa1", b"\xa1\xb2\x3c\x4d",
 # an NMEA 0183 address: any 2-character talker (letters or digits: NMEA 2000 gateways write
 # "$04HDM", "$24HDG") + a 3-letter formatter, or a proprietary "$P" + maker + sentence
 _NMEA_LINE = re.compile(
-    rb"(^|[\s\\,;\]])[$!](?:[A-Z0-9]{2}[A-Z]{3}|P[A-Z0-9]{3,})[,*]", re.MULTILINE
+    rb"(^|[\s\\,;\]\"])[$!](?:[A-Z0-9]{2}[A-Z]{3}|P[A-Z0-9]{3,})[,*]", re.MULTILINE
 )
+# a time before the sentence: bare, in [...], or the first cell of a CSV row whose last
+# cell is the sentence (OpenCPN's VDR log "received_at,protocol,msg_type,source,raw_data",
+# LogAIS "timestamp,type,id,message": the cells between are kept out of the payload)
 LEADING_TS = (
-    r"^\s*\[?(\d{13}|\d{9,10}(?:\.\d+)?|\d{4}-\d{2}-\d{2}[T ]\d{2}:\d{2}:\d{2}(?:\.\d+)?"
-    r"(?:Z|[+-]\d{2}:?\d{2})?)\]?[\s,;]*"
+    r"^\s*\"?\[?(\d{13}|\d{9,10}(?:\.\d+)?|\d{4}-\d{2}-\d{2}[T ]\d{2}:\d{2}:\d{2}(?:\.\d+)?"
+    r"(?:Z|[+-]\d{2}:?\d{2})?)\]?\"?(?:[,;\t](?:\"[^\"]*\"|[^,;\t\"$!\\]*))*?[\s,;\t]*\"?"
 )
 _ANCHOR_FORMATTERS = ("RMC", "ZDA", "GGA", "GLL")
 _EOL = re.compile(r"\r\n|\n|\r")
@@ -221,7 +224,7 @@ def split_lines(text: str) -> list[str]:
 
 def _lines(data: bytes) -> pl.DataFrame:
     """Every physical line: ``line`` (0-based), ``text`` (latin-1), ``kind``
-    (content | comment | blank)."""
+    (content | comment | blank | csv_header)."""
     texts = split_lines(data.decode("latin-1"))
     df = pl.DataFrame({"text": texts}, schema={"text": pl.String}).with_row_index("line")
     stripped = pl.col("text").str.strip_chars()
@@ -232,7 +235,15 @@ def _lines(data: bytes) -> pl.DataFrame:
         .then(pl.lit("comment"))
         .otherwise(pl.lit("content"))
     )
-    return df.with_columns(kind=kind)
+    df = df.with_columns(kind=kind)
+    # a CSV header before rows of "time,...,sentence" (OpenCPN VDR, LogAIS) is no message
+    first = df.filter(pl.col("kind") == "content").head(2)
+    if first.height == 2 and re.fullmatch(r"\s*[A-Za-z_][\w \"]*(?:[,;\t][\w \"]*)+\s*",
+                                          first["text"][0]) \
+            and re.match(LEADING_TS + r"[$!\\]", first["text"][1]):
+        df = df.with_columns(kind=pl.when(pl.col("line") == first["line"][0])
+                             .then(pl.lit("csv_header")).otherwise("kind"))
+    return df
 
 
 def _leading_ts_ns(ts: pl.Expr) -> pl.Expr:
@@ -277,6 +288,11 @@ def _split_content(lines: pl.DataFrame) -> pl.DataFrame:
             .then(pl.col("text").str.slice(pl.col("prefix").str.len_chars()))
             .otherwise(pl.col("text"))
             .str.strip_chars(),
+        )
+        .with_columns(  # a CSV cell's closing quote is not part of the sentence
+            payload=pl.when(pl.col("prefix").str.ends_with('"').fill_null(False))
+            .then(pl.col("payload").str.strip_suffix('"'))
+            .otherwise("payload"),
         )
     )
     return c.with_row_index("msg").with_columns(pl.col("msg").cast(pl.Int64))
@@ -446,7 +462,11 @@ def nmea_log_times(
         source = max(sorted(counts), key=lambda k: counts[k])
         anchors = own.select("msg", "t_ns")
         extra = {"log_time_sources": json.dumps(dict(sorted(counts.items())))}
-        return LineTimes(_interpolate(n, anchors), source, ts.INTERPOLATED + source,
+        # ingest sees a sentence's own times but not the logger's stamp before it: the log
+        # time of a line is its leading timestamp where the file has them (a line without
+        # one among them is interpolated, and labelled so only by the channel's counts)
+        fallback = ts.LEADING if ts.LEADING in counts else ts.INTERPOLATED + source
+        return LineTimes(_interpolate(n, anchors), source, fallback,
                          _gaps_s(n, anchors, lines), counts, extra)
     known_day = base_time_ns is not None or file_name_date(file_name) is not None
     base = base_time_ns if base_time_ns is not None else _day_ns(file_name_date(file_name))

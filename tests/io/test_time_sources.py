@@ -461,3 +461,27 @@ def test_class_on_every_csv_dialect(tmp_path, name):
     if name == "noaa.csv":  # dimensions of the CSV in ais_static
         s = got["ais_static"].filter(pl.col("mmsi") == 367000001).row(0, named=True)
         assert (s["length_m"], s["width_m"]) == (100.0, 20.0)
+
+
+# -- logger timestamps in CSV rows ----------------------------------------------------------
+
+
+@pytest.mark.parametrize("quoted", [False, True])
+def test_vdr_csv_log_takes_the_row_times(tmp_path, quoted):
+    """OpenCPN's VDR log format (CSV, RFC 4180): a ``#`` comment block, a header
+    ``received_at,protocol,msg_type,source,raw_data``, then one row per sentence whose
+    first cell is the ISO 8601 reception time; the sentence cell quoted or not (the
+    specification's own example writes it bare, LogAIS quotes it)."""
+    a, b = pos(244000001, second=8), pos(244000002, second=8)
+    cell = (lambda s: f'"{s}"') if quoted else (lambda s: s)
+    lines = ["# VDR Log File", "# Created: 2025-06-09T02:57:03.588Z",
+             "received_at,protocol,msg_type,source,raw_data",
+             f'2025-06-09T02:57:08.053Z,NMEA0183,AIVDM,"UDP port:6039",{cell(a)}',
+             f'2025-06-09T02:57:08.591Z,NMEA0183,AIVDM,"UDP port:6039",{cell(b)}']
+    got, res = imported(tmp_path, "vdr.csv", lines)
+    assert res.log_time_source["/ais/nmea"] == "leading_timestamp" and not res.warning
+    r = got["ais_reports"]
+    assert r["time_ns"].to_list() == [utc(2025, 6, 9, 2, 57, 8, frac_ns=53_000_000),
+                                      utc(2025, 6, 9, 2, 57, 8, frac_ns=591_000_000)]
+    assert set(r["time_source"]) == {"leading_timestamp"}
+    assert got["_summary"].rejected == 0  # the header is no message, the quotes no junk
