@@ -15,21 +15,35 @@ line, garbage included (ingest rejects it with a reason) -> ``/nav/nmea``. Both 
 metadata ``platform_id`` (the file name without its extension), ``source_file`` and
 ``log_time_source``:
 
-- ``tag_block:c``: the tag block's ``c:`` (lines without a valid one are interpolated);
-- ``leading_timestamp``: a time in front of the sentence: Unix seconds (``1418169601`` or
-  ``1418169601.25``), Unix ms (13 digits), or ISO 8601 (``2014-12-10T00:00:01.5Z``, a
-  space instead of ``T``, an offset; naive = UTC), optionally in ``[...]``;
+- the lines' own times (:mod:`pipeline.time_sources`, in its order of trust): USCG N-AIS
+  receiver fields after the checksum (``nais:t``, ``nais:T``, ``nais:epoch``), a Gatehouse
+  ``$PGHP`` before an AIS message (``pghp``), the tag block's ``c:`` (``tag_block:c``),
+  or a time in front of the sentence (``leading_timestamp``: Unix seconds ``1418169601``
+  or ``1418169601.25``, Unix ms (13 digits), or ISO 8601 ``2014-12-10T00:00:01.5Z``, a
+  space instead of ``T``, an offset; naive = UTC; optionally in ``[...]`` or quotes, or
+  the first cell of a CSV row whose last cell is the sentence, OpenCPN's VDR log); the
+  other lines interpolated by line number between them (``log_time_source`` names the
+  most frequent own source, ``log_time_sources`` counts them);
 - ``nmea:<formatters>``: the UTC time of RMC/ZDA (with their date) and of GGA/GLL on the
   date of the nearest dated sentence, midnight rollover handled; lines between two
   time-bearing lines are interpolated linearly by line number, lines before the first /
   after the last take its time;
-- ``nmea_time_of_day:undated``: time of day only (no RMC/ZDA date anywhere, e.g. a ZDA
-  without date and GLL): the day of ``base_time_ns`` (default 1970-01-01, meaning
-  "unknown"), one day added at each backward jump of more than 12 h; key ``log_date``;
+- ``ais:base_station``: the UTC date and time of received AIS base station reports
+  (messages 4 and 11), the other lines interpolated;
+- ``nmea_time_of_day:<base_time|file_name|undated>``: time of day only (no RMC/ZDA date
+  anywhere, e.g. a ZDA without date and GLL): the day of ``base_time_ns``, else the date
+  in the file name, else 1970-01-01 ("undated": synthetic), one day added at each
+  backward jump of more than 12 h; keys ``log_date``, ``log_date_source``;
 - ``none:synthetic``: no time at all (the gpsd AIS logs): ``base_time_ns`` + 1 ms per
-  line (keys ``synthetic_base_ns``, ``synthetic_step_ns``). Order, not time, is real.
+  line (keys ``synthetic_base_ns``, ``synthetic_step_ns``). Order, not time, is real; the
+  file's :class:`ImportedFile` carries a ``warning`` naming ``--base-time``.
 
-The first available source in that order is used for the whole file.
+The first available source in that order gives the file's times. Channel metadata
+``time_source_fallback`` is the ``time_source`` ingest gives a row whose time is its log
+time, ``interpolation_gap_s_p99`` the bracket of the interpolated AIS lines
+(:func:`pipeline.time_sources.refine_by_utc_second`). ``$PGHP`` lines and lines holding
+only a tag block go with the AIS sentences (``/ais/nmea``): they belong to the message
+after them.
 
 **AIS CSV tables** of other tools (a header with an MMSI column; columns placed by
 header name, :mod:`pipeline.convert.ais_csv`): one JSON message per row on ``/ais/csv``

@@ -2,7 +2,8 @@
 
 Each MCAP message of the ``nmea0183`` channel is one raw sentence (an IEC 62320-1 tag
 block ``\\...\\`` in front is accepted; time is the MCAP log time, or the reception time
-the caller read from the tag block's ``c:``, see :mod:`pipeline.decode.nmea`).
+the caller read from the sentence, see :mod:`pipeline.decode.nmea` and
+:mod:`pipeline.time_sources`; each row's ``time_source`` says which).
 
 Two vectorised paths (numpy over whole columns) decode the common messages; pyais, one
 message per call, decodes the rest and is the reference both are tested against
@@ -25,8 +26,9 @@ What goes where (ITU-R M.1371 message ids):
 - position reports 1, 2, 3, 18, 19, 27 -> ``ais_reports``
 - static/voyage data 5, 19, 24 (each part of 24 is a row) -> ``ais_static``
   (19 carries both and yields a row in each table)
-- every other valid type (4, 6-17, 20-23, 25, 26) is not stored and NOT rejected: it is
-  counted in ``AisDecoded.not_stored`` (message id -> count).
+- every other valid type (4, 6-17, 20-23, 25, 26) -> ``ais_other_messages``
+  (``AisDecoded.other``: the sender's MMSI and, for base stations 4/11, SAR aircraft 9 and
+  AtoN 21, their class, position and time fields; :func:`_other_row`).
 
 Rejects (reason_code): ``bad_checksum`` (NMEA XOR checksum missing or wrong),
 ``truncated_multipart`` (a fragment group that never completes: missing, out-of-order

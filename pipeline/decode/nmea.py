@@ -24,7 +24,7 @@ a lost line feed) is split and each sentence judged on its own, so the intact on
 kept; characters outside any sentence are rejected as garbage (the sentence next to them
 is kept). One-digit or lower-case checksums are accepted when their value is right
 (OpenCPN writes ``*b``); receiver fields after the checksum (USCG NAIS
-``*hh,s36310,d-081,...``) are tolerated and not decoded.
+``*hh,s36310,d-081,...``) give the sentence's time and are otherwise not decoded.
 
 Rejects (``reason_code``): ``undecodable`` (garbage, empty line, bad address field, a
 field that is not a number, a bad hemisphere/time), ``bad_checksum`` (sentence or tag
@@ -38,8 +38,11 @@ sentence of the same talker+formatter by more than ``max_time_backstep_s``),
 
 Time (``time_ns``):
 
-- reception time ``recv_ns`` = the tag block's ``c:`` (Unix seconds; milliseconds when
-  the value is above 1e11) when present, else the MCAP log time;
+- reception time ``recv_ns`` = the first time the sentence carries in the order of
+  :data:`pipeline.time_sources.OWN_ORDER` (USCG N-AIS receiver fields ``t``/``T`` with
+  their UNIX time, the ``$PGHP`` before its AIS message, the tag block's ``c:`` in Unix
+  seconds or milliseconds above 1e11, the N-AIS UNIX time alone), else the MCAP log
+  time; each AIS row keeps what gave it (``time_source``, :func:`own_times`);
 - a sentence with a UTC time of day (GGA RMC GLL ZDA TTM TLL) gets that time on the date of
   the latest preceding dated sentence (RMC ``ddmmyy``, ZDA ``dd,mm,yyyy``) advanced by the
   reception time elapsed since it, else on the UTC date of its reception time; the day is
