@@ -284,9 +284,10 @@ def simulate(st: _State, scenario, duration, seed, start, ships, radars, out) ->
 @click.argument("paths", nargs=-1, type=click.Path(path_type=str))
 @click.option("--out", "out_dir", required=True, type=click.Path(path_type=str),
               help="directory for the MCAP files (one per input, named <input name>.mcap)")
-@click.option("--base-time", default="1970-01-01T00:00:00Z", show_default=True,
-              help="for files without any date: base of synthetic log times (no time at "
-              "all) or the day of time-of-day-only logs (ISO 8601 or ns)")
+@click.option("--base-time", default=None,
+              help="for files without any date: the day of time-of-day-only logs and ASTERIX "
+              "recordings, or the start of synthetic log times (no time at all); ISO 8601 or "
+              "ns. Default: the date in the file name, else 1970-01-01 (and a warning)")
 @_site_option("the site (deployment) the captures come from, written into each MCAP "
               "file's metadata (`surveil.import` record, key `site`) for ingest to stamp "
               "on every row (default: none named: ingest's --site or 'default')")
@@ -296,8 +297,8 @@ def import_command(st: _State, paths, out_dir, base_time, site) -> None:
     honest log times (channel metadata "log_time_source"), so `ingest` reads MCAP only."""
     from pipeline.convert.importer import run_import
 
-    summary = run_import(paths, out_dir, base_time_ns=parse_time_ns(base_time), cfg=st.cfg,
-                         site=site)
+    summary = run_import(paths, out_dir, cfg=st.cfg, site=site,
+                         base_time_ns=None if base_time is None else parse_time_ns(base_time))
     click.echo(summary.render())
     sys.exit(summary.exit_code)
 

@@ -29,7 +29,7 @@ from pipeline.ingest import FileManifest, IngestContext, IngestSummary, commit_f
 from pipeline.ingest.plan import IngestUsageError, check_sites, expand_paths, plan_units
 from pipeline.signals import deferred_interrupts
 from pipeline.warehouse.ledger import same_content
-from pipeline.warehouse.overlaps import record_overlaps
+from pipeline.warehouse.overlaps import record_overlaps, synthetic_time_channels
 from pipeline.warehouse.views import rebuild_views_file
 
 log = logging.getLogger(__name__)
@@ -90,6 +90,7 @@ def run_ingest(
         if committed:
             if start_ns is None:  # whole files: their mcap_index rows are new
                 _warn_overlaps(warehouse, summary)
+                _warn_synthetic(warehouse, summary)
             with deferred_interrupts():
                 rebuild_views_file(warehouse, ctx.views)
     return summary
@@ -103,6 +104,18 @@ def _warn_overlaps(warehouse: Path, summary: IngestSummary) -> None:
                 f"[{iso(r['overlap_start_ns'])}, {iso(r['overlap_end_ns'])}]")
         summary.overlaps.append(text)
         log.warning("two sources overlap: %s", text)
+
+
+def _warn_synthetic(warehouse: Path, summary: IngestSummary) -> None:
+    """Warn about files whose rows have no time of the world (and how to give them one)."""
+    for f, topic, source in synthetic_time_channels(warehouse, summary.committed_files):
+        text = (f"{f}: {topic} has no time of its own ({source}): its rows are kept with "
+                "synthetic times (1970-01-01, or --base-time's day, plus 1 ms per line or "
+                "times of day on an unknown date) and take no part in overlap checks or the "
+                "batch; import the recording again with `surveil import --base-time <UTC "
+                "start or date>` and ingest that file")
+        summary.time_warnings.append(text)
+        log.warning("synthetic times: %s", text)
 
 
 def _executor(executor: Executor | str | None, cfg: Config, n_units: int) -> Executor:

@@ -246,6 +246,43 @@ def load_report(name: str, dirs: Sequence[Path] = ()) -> ReportSql:
                      used=frozenset(re.findall(r"\$(\w+)", body)))
 
 
+@dataclass(frozen=True)
+class SiteGeometry:
+    """The config's polygons a report tests positions against, bound as
+    ``$site_polygons``: a list of edges ``{kind, name, ord, lat1, lon1, lat2, lon2}``
+    (deg), ``kind`` ``sector`` (``[[sectors]]``, ``ord`` their order: a point belongs to
+    the first that holds it), ``land`` (``[[gaps.islands]]``) or ``water``
+    (``[[gaps.admissible]]``). A report finds the polygons holding a point by counting
+    the edges a ray from it crosses (even-odd rule, in lat/lon: exact for the polygons'
+    straight edges in degrees, as the batch's sectors are drawn). Empty when the config
+    declares none: the reports then say "no sectors" / "no coastline"."""
+
+    polygons: tuple[tuple[str, str, tuple[tuple[float, float], ...]], ...] = ()
+
+    def edges(self) -> list[dict[str, Any]]:
+        out = []
+        for order, (kind, name, ring) in enumerate(self.polygons):
+            pts = list(ring)
+            for (lat1, lon1), (lat2, lon2) in zip(pts, pts[1:] + pts[:1], strict=True):
+                out.append({"kind": kind, "name": name, "ord": order, "lat1": float(lat1),
+                            "lon1": float(lon1), "lat2": float(lat2), "lon2": float(lon2)})
+        return out
+
+
+def site_geometry(cfg: Any) -> SiteGeometry:
+    """The sectors, land and water of a loaded config (:class:`SiteGeometry`); the one
+    place that reads them for the reports. Land and water come from the ``[gaps]``
+    section when the config has one (its islands and admissible areas), else none."""
+    polys: list[tuple[str, str, tuple[tuple[float, float], ...]]] = []
+    for sec in getattr(cfg, "sectors", ()) or ():
+        polys.append(("sector", sec.name, tuple(sec.polygon_lat_lon_deg)))
+    gaps = (getattr(cfg, "families", {}) or {}).get("gaps")
+    for kind, attr in (("land", "islands"), ("water", "admissible")):
+        for p in getattr(gaps, attr, ()) or ():
+            polys.append((kind, p.name, tuple(p.polygon_lat_lon_deg)))
+    return SiteGeometry(tuple(polys))
+
+
 def bind_params(
     report: ReportSql,
     *,
@@ -255,10 +292,13 @@ def bind_params(
     requirements: RequirementsConfig | None = None,
     params: Mapping[str, Any] | None = None,
     site: str | None = None,
+    geometry: SiteGeometry | None = None,
 ) -> dict[str, Any]:
     """The values of every ``$name`` the report's SQL uses: the window and sector, the
-    requirement figures, the caller's ``params`` (text is converted to the declared
-    type), then the header's defaults. ReportError names any parameter left unbound."""
+    requirement figures, the site's polygons (``$site_polygons``, :class:`SiteGeometry`;
+    none when ``geometry`` is None), the caller's ``params`` (text is converted to the
+    declared type), then the header's defaults. ReportError names any parameter left
+    unbound."""
     given = dict(params or {})
     unknown = set(given) - {p.name for p in report.params} - set(WINDOW_PARAMS)
     if unknown:
@@ -271,6 +311,8 @@ def bind_params(
     values: dict[str, Any] = {"start_ns": int(start_ns), "end_ns": int(end_ns), "sector": sector,
                               "site": site}
     values.update((requirements or RequirementsConfig()).sql_params())
+    if "site_polygons" in report.used:
+        values["site_polygons"] = (geometry or SiteGeometry()).edges()
     for p in report.params:
         if p.name in given:
             values[p.name] = p.convert(given[p.name])
@@ -295,6 +337,7 @@ def run_report(
     dirs: Sequence[Path] = (),
     site: str | None = None,
     rows_per_batch: int | None = None,
+    geometry: SiteGeometry | None = None,
 ) -> pa.Table | pa.RecordBatchReader:
     """Run a report on a connection whose views expose the warehouse tables.
     ``requirements``: the config's ``[requirements]`` (None: the shipped figures);
@@ -304,7 +347,8 @@ def run_report(
     without being held); None: one table."""
     report = name if isinstance(name, ReportSql) else load_report(name, dirs)
     bound = bind_params(report, start_ns=start_ns, end_ns=end_ns, sector=sector,
-                        requirements=requirements, params=params, site=site)
+                        requirements=requirements, params=params, site=site,
+                        geometry=geometry)
     rel = con.sql(report.text, params=bound)
     return rel.to_arrow_table() if rows_per_batch is None else rel.to_arrow_reader(rows_per_batch)
 
@@ -366,6 +410,7 @@ def named_report_batches(
             dirs=reports_config(cfg).dirs if cfg is not None else (),
             site=site,
             rows_per_batch=ROWS_PER_BATCH,
+            geometry=site_geometry(cfg) if cfg is not None else None,
         )
     finally:
         con.close()

@@ -17,7 +17,7 @@ import pyarrow as pa
 
 from pipeline.catalog import explain_empty_report
 from pipeline.config import Config
-from pipeline.reports import load_report, run_report
+from pipeline.reports import load_report, run_report, site_geometry
 from pipeline.requirements import Verdict, evaluate, requirements_config
 
 AUDIT_REPORTS = (
@@ -25,6 +25,7 @@ AUDIT_REPORTS = (
     "cross_track_by_leg", "cross_track_along_leg", "radar_bias_by_site",
     "surface_accuracy_by_area", "channel_faults_by_sector", "fault_timeline", "nav_quality",
     "nav_heading_error", "gap_forecasts", "gap_forecast_calibration", "map_tracks",
+    "channel_fault_episodes", "ais_traffic", "ais_quality",
 )
 MAP_POINTS_PER_TRACK_HOUR = 180  # map_tracks thinning: one point per track every 20 s per hour
 
@@ -68,7 +69,8 @@ def collect(con: duckdb.DuckDBPyConnection, cfg: Config, warehouse: Path, *, sta
         extra = {"step_s": map_step_s(start_ns, end_ns)} if name == "map_tracks" else {}
         params[name] = extra
         table = run_report(con, report, start_ns=start_ns, end_ns=end_ns, sector=sector,
-                           requirements=req, params=extra, site=site)
+                           requirements=req, params=extra, site=site,
+                           geometry=site_geometry(cfg))
         reports[name] = table
         if table.num_rows == 0:
             reasons[name] = explain_empty_report(con, report, start_ns=start_ns, end_ns=end_ns,

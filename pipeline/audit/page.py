@@ -13,10 +13,12 @@ import json
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from importlib.metadata import PackageNotFoundError, version
+from typing import Any
 
 import plotly.graph_objects as go
 from plotly.offline import get_plotlyjs
 
+from pipeline.audit import ais as ais_audit
 from pipeline.audit import charts
 from pipeline.audit.data import AuditData
 from pipeline.requirements import FAIL, NOT_ENOUGH, PASS, Verdict, requirements_config
@@ -32,6 +34,8 @@ class Section:
     reports: tuple[str, ...]
     figures: tuple[go.Figure, ...]
     empty_note: str = ""
+    html: str = ""
+    """A table (or other HTML) shown after the figures."""
 
 
 def _iso(t_ns: int) -> str:
@@ -45,12 +49,12 @@ def sections(data: AuditData) -> list[Section]:
     out: list[Section] = []
 
     def add(anchor: str, title: str, caption: str, reports: tuple[str, ...],
-            *figs: go.Figure | None) -> None:
+            *figs: go.Figure | None, table: str = "") -> None:
         kept = tuple(f for f in figs if f is not None)
-        note = "" if kept else "; ".join(
+        note = "" if kept or table else "; ".join(
             f"{r}: {data.empty_reasons[r]}" for r in reports if r in data.empty_reasons
         ) or "no rows to draw"
-        out.append(Section(anchor, title, caption, reports, kept, note))
+        out.append(Section(anchor, title, caption, reports, kept, note, table))
 
     add("map", "Map of the window",
         "Fused system tracks, each radar's synchronised tracks (click them in the legend), AIS "
@@ -71,6 +75,7 @@ def sections(data: AuditData) -> list[Section]:
         "Share of fused track time with the right MMSI, a wrong one or none, per sector and "
         "class of vessel.", ("identification_by_sector",),
         charts.identification_bars(rows("identification_by_sector"), req))
+    _ais_sections(add, rows)
     add("siap", "SIAP", "Single Integrated Air Picture measures of the fused tracks against "
         "truth (simulated logs), per sector and for all sectors.", ("siap_by_sector",),
         charts.siap_bars(rows("siap_by_sector"), req))
@@ -89,10 +94,12 @@ def sections(data: AuditData) -> list[Section]:
         charts.surface_accuracy_bars(rows("surface_accuracy_by_area"), req),
         charts.airfield_map(data.cfg, rows("map_tracks")))
     add("faults", "Channel faults",
-        "Airfield channels excluded by the integrity check (at least half of their targets) "
-        "and own-ship GNSS outages, on one timeline.",
-        ("fault_timeline", "channel_faults_by_sector"),
-        charts.fault_timeline(rows("fault_timeline"), data.start_ns, data.end_ns))
+        "Every family's channel-fault episodes on one timeline: radars and AIS transponders "
+        "excluded by the maritime integrity checks, own-ship GNSS exclusions and outages, "
+        "airfield channels excluded (at least half of their targets).",
+        ("channel_fault_episodes", "fault_timeline", "channel_faults_by_sector"),
+        ais_audit.episode_timeline(rows("channel_fault_episodes"), rows("fault_timeline"),
+                                   data.start_ns, data.end_ns))
     add("heading", "Own-ship heading error",
         "Gyro/GNSS/log paper: the gyrocompass alone against the integrated solution.",
         ("nav_heading_error", "nav_quality"), charts.heading_error(rows("nav_heading_error")))
@@ -101,6 +108,22 @@ def sections(data: AuditData) -> list[Section]:
         "reference and the radius of the 90% region (regions on the map).",
         ("gap_forecasts", "gap_forecast_calibration"), charts.gap_errors(rows("gap_forecasts")))
     return out
+
+
+def _ais_sections(add: Any, rows: Any) -> None:
+    """The AIS traffic and quality sections (:mod:`pipeline.audit.ais`)."""
+    add("ais-traffic", "AIS traffic",
+        "Vessels, messages and message rate per station class (from the message type: class "
+        "A, class B, base station, AtoN, SAR aircraft) and per hour; the share of vessels "
+        "that sent static data.", ("ais_traffic",),
+        *ais_audit.traffic_figures(rows("ais_traffic")))
+    quality = rows("ais_quality")
+    add("ais-quality", "AIS quality",
+        "Each transponder's checks (reporting interval against ITU-R M.1371-5 Annex 1 "
+        "Tables 1-2, MMSI and IMO validity, static data, position jumps, positions on land, "
+        "SOG/COG against the track, one MMSI from two transponders, clock offset and late "
+        "reports), worst transponders first.", ("ais_quality",),
+        *ais_audit.quality_figures(quality), table=ais_audit.worst_table(quality))
 
 
 _CSS = """
@@ -219,13 +242,15 @@ def render(data: AuditData, *, title: str = "") -> str:
         parts.append(f'<p class="caption">{html.escape(s.caption)} '
                      f'<span class="src">From: {", ".join(f"<code>{r}</code>" for r in s.reports)}'
                      "</span></p>")
-        if not s.figures:
+        if not s.figures and not s.html:
             parts.append(f'<div class="empty">No data to draw. {html.escape(s.empty_note)}</div>')
         for fig in s.figures:
             n += 1
             div = fig.to_html(full_html=False, include_plotlyjs=False, div_id=f"chart-{n}",
                               config={"displaylogo": False, "responsive": True})
             parts.append(f'<div class="chart" data-chart="{s.anchor}">{div}</div>')
+        if s.html:
+            parts.append(s.html)
     parts.append(f"<script>{_DRAWN_JS}</script>")
     parts.append(f"<script type='application/json' id='audit-meta'>"
                  f"{json.dumps({'charts': n, 'window': window, 'sector': data.sector})}"

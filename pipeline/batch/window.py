@@ -13,6 +13,10 @@ at once. When the ledger knows no
 data in the window (a warehouse filled by windowed ingests only, which write no ledger
 rows), the window is kept as asked and only its length is bounded.
 
+A window before 1980 (where the synthetic times of recordings without any time lie) is
+batched as asked, with a note saying why it stays empty: those rows are no batch input
+(:data:`pipeline.batch.worker.TIME_SOURCE`).
+
 Times beyond int64 ns (``--to 9999-01-01``) never get here: :func:`jobs.common.parse_time_ns`
 refuses them.
 """
@@ -33,6 +37,9 @@ from pipeline.warehouse.delta import read_table
 HOUR_NS = 3600 * 10**9
 DAY_NS = 24 * HOUR_NS
 BYTES_PER_ROW_IN_UNIT = 2048  # raw row + its staged and derived frames in a batch unit
+REAL_TIMES_FROM_NS = 315_532_800 * 10**9
+"""1980-01-01 UTC: before it no recording carries its own time (the GPS epoch is
+1980-01-06); rows before it have synthetic times."""
 
 
 @dataclass(frozen=True)
@@ -93,6 +100,14 @@ def bounded_window(cfg: Config, warehouse: Path, start_ns: int, end_ns: int,
     note = ""
     if (s, e) != (start_ns, end_ns):
         note = f"window clipped to the data the ledger knows: {iso(s)} .. {iso(e)}"
+    if s < REAL_TIMES_FROM_NS:
+        why = (f"the window {'lies' if e <= REAL_TIMES_FROM_NS else 'begins'} before "
+               f"{iso(REAL_TIMES_FROM_NS)}: no recording's own times lie there; rows there "
+               "have synthetic times (recordings without any time, times of day without a "
+               "date) and are no batch input, so that part of the window stays empty; give "
+               "such recordings their time with `surveil import --base-time` and ingest them "
+               "again")
+        note = f"{note}\n{why}" if note else why
     return BoundedWindow(s, e, note)
 
 

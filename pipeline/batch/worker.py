@@ -27,6 +27,7 @@ from pipeline import tables
 from pipeline.config import Config
 from pipeline.families import family
 from pipeline.family import Family, Relabel, Window, relabel
+from pipeline.time_sources import synthetic_expr
 from pipeline.warehouse.delta import read_table
 from pipeline.warehouse.staged import StagedFile, TableStager
 
@@ -107,6 +108,9 @@ def read_inputs(fam: Family, warehouse: Path, cfg: Config, window: Window,
             out[spec.table] = _overridden(warehouse, spec.table, overrides[spec.table],
                                           batch_window, lo, hi, columns, at)
             continue
+        timed = TIME_SOURCE in tables.spec(spec.table).schema.names
+        if timed and columns is not None and TIME_SOURCE not in columns:
+            columns = [*columns, TIME_SOURCE]
         if spec.whole_table:
             table = read_table(warehouse, spec.table, columns=columns, sort=spec.sorted,
                                site=at)
@@ -114,8 +118,19 @@ def read_inputs(fam: Family, warehouse: Path, cfg: Config, window: Window,
             lo, hi = spec.span_ns(window)
             table = read_table(warehouse, spec.table, start_ns=lo, end_ns=hi, columns=columns,
                                sort=spec.sorted, site=at)
-        out[spec.table] = pl.from_arrow(table)
+        frame = pl.from_arrow(table)
+        if timed and TIME_SOURCE in frame.columns:  # synthetic times: never batch input
+            frame = frame.filter(~synthetic_expr(TIME_SOURCE))
+            if spec.columns and TIME_SOURCE not in spec.columns:
+                frame = frame.drop(TIME_SOURCE)
+        out[spec.table] = frame
     return out
+
+
+TIME_SOURCE = "time_source"
+"""Rows whose ``time_source`` is synthetic (:func:`pipeline.time_sources.is_synthetic`:
+a file without any time, 1970-01-01 + 1 ms per line) are no family's input: no
+association, identity or integrity decision is made on reports 1 ms apart."""
 
 
 def _overridden(warehouse: Path, name: str, paths: tuple[str, ...], batch_window: tuple[int, int],

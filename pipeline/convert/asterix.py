@@ -16,7 +16,10 @@ Inputs, recognised by their first bytes:
   CAT062 + CAT065); bytes that do not frame become one message of their own, which the
   decoder rejects as ``undecodable``. **log time = the capture timestamp** of the packet
   (``log_time_source`` = ``pcap``). One channel per UDP flow
-  ``/asterix/<src ip>:<src port>/<dst ip>:<dst port>``, with metadata ``src_ip``,
+  ``/asterix/<src ip>:<src port>/<dst ip>:<dst port>``; a flow of NMEA 0183 text (an AIS
+  receiver's ``!AIVDM`` lines over UDP, :func:`is_nmea_text`) is one ``nmea0183``
+  channel ``/nmea/<src ip>:<src port>/<dst ip>:<dst port>``, one message per line (a
+  tag block or N-AIS fields in a line still give its time at ingest), with metadata ``src_ip``,
   ``src_port``, ``dst_ip``, ``dst_port``. Packets that are not UDP over IPv4/IPv6, and IP
   fragments (not reassembled), are counted in the file metadata record
   ``surveil.import`` (``packets_skipped``, by reason), not written.
@@ -36,6 +39,7 @@ do not frame as an ASTERIX data block, or the file looks like text).
 
 from __future__ import annotations
 
+import re
 import struct
 from collections import Counter
 from collections.abc import Iterator, Mapping
@@ -98,6 +102,16 @@ class _Messages:
     topics: dict[str, dict[str, str]] = field(default_factory=dict)
     rows: list[Message] = field(default_factory=list)
     skipped: Counter = field(default_factory=Counter)
+    encodings: dict[str, str] = field(default_factory=dict)  # topic -> not "asterix"
+
+    def add_nmea(self, topic: str, meta: dict[str, str], t: int, payload: bytes) -> None:
+        """One ``nmea0183`` message per line of a UDP payload of NMEA text (AIS receivers
+        send ``!AIVDM`` lines over UDP), log time = the packet's capture time."""
+        self.topics.setdefault(topic, meta)
+        self.encodings[topic] = "nmea0183"
+        for line in re.split(rb"\r\n|\n|\r", payload):
+            if line.strip():
+                self.rows.append(Message(topic, t, line.strip()))
 
     def reject_tail(self, topic: str, t: int, tail: Tail) -> None:
         """A damaged stretch of the file: one rejects message (its first
@@ -145,12 +159,15 @@ def wrap_asterix(
     day: date | None = None,
     editions: Mapping[int, str] | None = None,
     site: str | None = None,
+    day_source: str = "",
 ) -> WrappedAsterix:
     """Wrap a raw ASTERIX file, a framed recording (GPS, FINAL, IOSS, HDLC, ORADIS) or a
     pcap/pcapng capture into ``out_dir/<name>.mcap``.
 
     ``day``: UTC date of a recording whose records carry only the time of day (raw and
-    framed files); ignored for captures, which carry their own timestamps. ``editions``:
+    framed files; None: 1970-01-01, unknown); ignored for captures, which carry their own
+    timestamps. ``day_source``: where ``day`` came from (``base_time``, ``file_name``),
+    written as the channels' ``log_date_source``. ``editions``:
     the config's ``[asterix] editions``, written to every channel's metadata
     (``asterix_editions``) for ingest. Raises ``ValueError`` when the file is none of
     these, or holds nothing to write.
@@ -182,6 +199,9 @@ def wrap_asterix(
         text = ",".join(f"{c:03d}={e}" for c, e in sorted(editions.items()))
         for m in msgs.topics.values():
             m["asterix_editions"] = text
+    for m in msgs.topics.values():  # where the day of a time-of-day recording came from
+        if "log_date" in m:
+            m["log_date_source"] = day_source or ("unknown" if day is None else "given")
     counts = _write_mcap(out, msgs, meta)
     sources = {t: m.get("log_time_source", "") for t, m in msgs.topics.items()}
     return WrappedAsterix(out, kind, counts, sources)
@@ -351,16 +371,32 @@ def _from_capture(data: bytes, path: Path) -> _Messages:
         if udp is None:
             continue
         (src, sport, dst, dport), payload = udp
-        topic = f"/asterix/{src}:{sport}/{dst}:{dport}"
+        flow = f"{src}:{sport}/{dst}:{dport}"
         meta = {
             "log_time_source": "pcap",
             "src_ip": src, "src_port": str(sport), "dst_ip": dst, "dst_port": str(dport),
         }  # fmt: skip
+        if is_nmea_text(payload):
+            msgs.add_nmea(f"/nmea/{flow}", {**meta, "time_source_fallback": "pcap",
+                                            "platform_id": flow}, pkt.time_ns, payload)
+            continue
         for content in _oradis_unwrapped(payload):
-            msgs.add(topic, meta, pkt.time_ns, content)
+            msgs.add(f"/asterix/{flow}", meta, pkt.time_ns, content)
     for tail in tails:
         msgs.reject_tail(CAPTURE_TOPIC, last_t, tail)
     return msgs
+
+
+_NMEA_START = re.compile(rb"^\s*(?:\\[^\\]*\\)?[!$][A-Z0-9]{2}[A-Z0-9]{3,}[,*]")
+
+
+def is_nmea_text(payload: bytes) -> bool:
+    """A UDP payload of NMEA 0183 text: printable, its first line a sentence (``!AIVDM``,
+    ``$GPRMC``, with or without a tag block). An ASTERIX block starts with a category
+    octet and its length, never with ``!``/``$``/``\\`` followed by an address."""
+    if not payload or not _NMEA_START.match(payload):
+        return False
+    return all(b >= 32 or b in (9, 10, 13) for b in payload[:512])
 
 
 def _oradis_unwrapped(payload: bytes) -> list[bytes]:
@@ -566,7 +602,8 @@ def _ipv6(b: bytes) -> str:
 
 def _write_mcap(out: Path, msgs: _Messages, meta: dict[str, str]) -> dict[str, int]:
     channels = [
-        ChannelSpec(topic, "asterix", metadata=m) for topic, m in sorted(msgs.topics.items())
+        ChannelSpec(topic, msgs.encodings.get(topic, "asterix"), metadata=m)
+        for topic, m in sorted(msgs.topics.items())
     ]
     return write_converted(out, channels, msgs.rows, metadata={"surveil.import": meta},
                     library=MCAP_LIBRARY)  # fmt: skip

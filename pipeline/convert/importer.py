@@ -68,6 +68,9 @@ class ImportSummary:
                 + (f": {chans}" if chans else "")
                 + (f"; not messages: {not_messages}" if not_messages else "")
             )
+        for f in self.imported:
+            if f.warning:
+                lines.append(f"WARNING: {f.warning}")
         for path in self.skipped[:10]:
             lines.append(f"  skipped {path}")
         for path, err in self.failed:
@@ -119,7 +122,7 @@ def run_import(
     paths: Sequence[Path | str],
     out_dir: Path | str,
     *,
-    base_time_ns: int = 0,
+    base_time_ns: int | None = None,
     cfg: Config | None = None,
     site: str | None = None,
 ) -> ImportSummary:
@@ -127,7 +130,7 @@ def run_import(
     its ``[import.csv]`` / ``[asterix]`` sections (defaults without one). ``site``: written
     into every output's metadata (``surveil.import`` record, key ``site``)."""
     options = import_options(cfg)
-    if not time_in_range(base_time_ns):
+    if base_time_ns is not None and not time_in_range(base_time_ns):
         raise UsageError(
             f"--base-time {describe_time(base_time_ns)} is outside 1970-01-01 .. 2262-04-11 UTC"
         )

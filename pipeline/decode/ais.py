@@ -2,7 +2,8 @@
 
 Each MCAP message of the ``nmea0183`` channel is one raw sentence (an IEC 62320-1 tag
 block ``\\...\\`` in front is accepted; time is the MCAP log time, or the reception time
-the caller read from the tag block's ``c:``, see :mod:`pipeline.decode.nmea`).
+the caller read from the sentence, see :mod:`pipeline.decode.nmea` and
+:mod:`pipeline.time_sources`; each row's ``time_source`` says which).
 
 Two vectorised paths (numpy over whole columns) decode the common messages; pyais, one
 message per call, decodes the rest and is the reference both are tested against
@@ -25,8 +26,9 @@ What goes where (ITU-R M.1371 message ids):
 - position reports 1, 2, 3, 18, 19, 27 -> ``ais_reports``
 - static/voyage data 5, 19, 24 (each part of 24 is a row) -> ``ais_static``
   (19 carries both and yields a row in each table)
-- every other valid type (4, 6-17, 20-23, 25, 26) is not stored and NOT rejected: it is
-  counted in ``AisDecoded.not_stored`` (message id -> count).
+- every other valid type (4, 6-17, 20-23, 25, 26) -> ``ais_other_messages``
+  (``AisDecoded.other``: the sender's MMSI and, for base stations 4/11, SAR aircraft 9 and
+  AtoN 21, their class, position and time fields; :func:`_other_row`).
 
 Rejects (reason_code): ``bad_checksum`` (NMEA XOR checksum missing or wrong),
 ``truncated_multipart`` (a fragment group that never completes: missing, out-of-order
@@ -55,15 +57,18 @@ from __future__ import annotations
 
 import math
 from collections import Counter
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 import pyarrow as pa
+import pyarrow.compute as pc
 from pyais.constants import ShipType
 from pyais.exceptions import UnknownMessageException
 from pyais.messages import MSG_CLASS, AISSentence, NMEASentenceFactory
 
+from pipeline import time_sources as ts
 from pipeline.decode.registry import make_rejects
 from pipeline.tables import conform, empty, schema
 from pipeline.units import KNOT_MPS
@@ -86,6 +91,7 @@ class AisDecoded:
     rejects: pa.Table
     not_stored: dict[int, int]
     carry: int = 0
+    other: pa.Table = field(default_factory=lambda: empty("ais_other_messages"))
 
 
 @dataclass
@@ -283,41 +289,134 @@ def decode_ais(
     topic: str,
     final: bool = True,
     time_ns: np.ndarray | None = None,
+    time_source: Sequence[str] | None = None,
+    refine_gap_s: float | None = None,
 ) -> AisDecoded:
     """Decode a batch of raw AIS sentences (see module docstring).
 
     ``log_time_ns``: int64 MCAP log times of the sentences, ns. ``time_ns``: reception
-    times of the sentences (IEC 62320-1 tag block ``c:``, see
-    :mod:`pipeline.decode.nmea`), ns; ``None`` means the log times.
+    times of the sentences (the time each carries, see :mod:`pipeline.decode.nmea` and
+    :mod:`pipeline.time_sources`), ns; ``None`` means the log times.
+    ``time_source``: what gave each sentence's time (default ``mcap_log_time``); a row
+    keeps its last sentence's, or, when that one has no time of its own, the first
+    sentence's of its message that has (:func:`_unit_times`). Position reports whose
+    time was interpolated are moved to the second they state
+    (:func:`pipeline.time_sources.refine_by_utc_second`, bracket ``refine_gap_s``).
     """
     times = np.asarray(log_time_ns, dtype=np.int64)
-    recv = times if time_ns is None else np.asarray(time_ns, dtype=np.int64)
+    recv = (times if time_ns is None else np.asarray(time_ns, dtype=np.int64)).copy()
     sentences = list(sentences)
+    clock = _Sources.of(time_source, len(sentences))
     fast = fast_positions(sentences) if FAST else None
     dec = _Decoder(sentences, final, skip=None if fast is None else fast.index)
     carry_at = dec.run()
+    _unit_times(dec, carry_at, recv, clock)
     # before the pyais path: its assembly rewrites a group's first fragment's payload
     statics = fast_static(dec, carry_at) if FAST else None
     rows = _decode_units(dec, carry_at, set() if statics is None else set(statics.unit.tolist()),
                          sentences, times, recv)
     if fast is not None and fast.index.size:
         table = _merge_fast(rows.reports, rows.report_key, fast, fast.index < carry_at,
-                            sentences, times, recv, source_file, topic)
+                            sentences, times, recv, source_file, topic, clock)
     else:
-        table = _table("ais_reports", rows.reports, source_file, topic)
+        table = _table("ais_reports", rows.reports, rows.report_key, source_file, topic, clock)
+    table = _refined(table, clock, refine_gap_s)
     if statics is not None:
         static = _merge("ais_static", rows.static, rows.static_key,
                         _fast_static_table(statics, dec, sentences, times, recv),
-                        statics.index, source_file, topic)
+                        statics.index, source_file, topic, clock)
     else:
-        static = _table("ais_static", rows.static, source_file, topic)
+        static = _table("ais_static", rows.static, rows.static_key, source_file, topic, clock)
+    static = _overall_dimensions(static)
+    other = _table("ais_other_messages", rows.other, rows.other_key, source_file, topic, clock)
     return AisDecoded(
         reports=table,
         static=static,
         rejects=_rejects(rows.rejects, sentences, times, source_file, topic),
         not_stored=dict(rows.not_stored),
         carry=len(sentences) - carry_at,
+        other=other,
     )
+
+
+@dataclass(frozen=True)
+class _Sources:
+    """What gave each sentence's time: ``code`` (int32 per sentence) into ``labels``."""
+
+    code: np.ndarray
+    labels: tuple[str, ...]
+
+    @classmethod
+    def of(cls, time_source: Sequence[str] | None, n: int) -> _Sources:
+        if time_source is None:
+            return cls(np.zeros(n, np.int32), (ts.MCAP_LOG_TIME,))
+        if len(time_source) != n:
+            raise ValueError(f"{n} sentences but {len(time_source)} time sources")
+        labels = tuple(sorted(set(time_source)))
+        index = {lab: i for i, lab in enumerate(labels)}
+        return cls(np.fromiter((index[t] for t in time_source), np.int32, n), labels)
+
+    def column(self, keys: np.ndarray) -> pa.Array:
+        """The ``time_source`` of rows whose last sentences are ``keys``."""
+        codes = pa.array(self.code[np.asarray(keys, np.int64)], pa.int32())
+        return pa.DictionaryArray.from_arrays(codes, pa.array(self.labels, pa.string())
+                                              ).cast(pa.string())
+
+    def own(self) -> np.ndarray:
+        """Per label: is it a time the sentence carries itself (not its log time)?"""
+        return np.array([lab in ts.OWN_ORDER for lab in self.labels], bool)
+
+
+def _unit_times(dec: _Decoder, carry_at: int, recv: np.ndarray, clock: _Sources) -> None:
+    """A multi-sentence message whose last sentence has no time of its own takes the
+    first own time among its sentences (in place, at its last sentence). Per unit in
+    Python: multi-sentence units only, a few per cent of a recording."""
+    own = clock.own()
+    if not own.any():
+        return
+    for idx in dec.units:
+        if len(idx) < 2 or max(idx) >= carry_at:
+            continue
+        last = idx[-1]
+        if own[clock.code[last]]:
+            continue
+        first = next((j for j in idx if own[clock.code[j]]), None)
+        if first is not None:
+            recv[last] = recv[first]
+            clock.code[last] = clock.code[first]
+
+
+def _overall_dimensions(static: pa.Table) -> pa.Table:
+    """``length_m`` = A + B and ``width_m`` = C + D where both dimensions are given
+    (ITU-R M.1371-5 Annex 8, message 5 Fig. 42: the reference point's distances)."""
+    if not static.num_rows:
+        return static
+    i = static.schema.get_field_index
+    length = pc.add(static["to_bow_m"], static["to_stern_m"])
+    width = pc.add(static["to_port_m"], static["to_starboard_m"])
+    static = static.set_column(i("length_m"), "length_m", length)
+    return static.set_column(i("width_m"), "width_m", width)
+
+
+def _refined(table: pa.Table, clock: _Sources, gap_s: float | None) -> pa.Table:
+    """Position reports whose time was interpolated at the second they state, where it
+    agrees (:func:`pipeline.time_sources.refine_by_utc_second`); their
+    ``time_source`` gains ``+utc_second``."""
+    if not table.num_rows or not any(ts.is_interpolated(lab) for lab in clock.labels):
+        return table
+    source = table["time_source"]
+    interp = pc.fill_null(pc.starts_with(source, ts.INTERPOLATED), False).to_numpy()
+    second = table["utc_second"].fill_null(-1).to_numpy()
+    t, hit = ts.refine_by_utc_second(table["time_ns"].to_numpy(), second, interp, gap_s)
+    if not hit.any():
+        return table
+    refined = pc.if_else(pa.array(hit), pc.binary_join_element_wise(source, ts.REFINED, ""),
+                         source)
+    i = table.schema.get_field_index
+    table = table.set_column(i("time_ns"), "time_ns", pa.array(t, pa.int64()))
+    table = table.set_column(i("time_source"), "time_source", refined)
+    return conform("ais_reports", table.drop(["date"]) if "date" in table.column_names
+                   else table)
 
 
 @dataclass
@@ -329,6 +428,8 @@ class _Rows:
     report_key: list[int] = field(default_factory=list)
     static: dict[str, list] = field(default_factory=dict)
     static_key: list[int] = field(default_factory=list)
+    other: dict[str, list] = field(default_factory=dict)
+    other_key: list[int] = field(default_factory=list)
     rejects: list[tuple[list[int], str, str]] = field(default_factory=list)
     not_stored: Counter = field(default_factory=Counter)
 
@@ -342,10 +443,7 @@ def _decode_units(dec: _Decoder, carry_at: int, skip: set[int], sentences: list[
         if max(idx) >= carry_at or k in skip:
             continue
         out = _decode_unit([dec.parsed[j] for j in idx])  # type: ignore[misc]
-        if isinstance(out, int):
-            rows.not_stored[out] += 1
-            continue
-        position, static_row, problem = out
+        position, static_row, problem = out[:3]
         if problem is not None:
             rows.rejects.append((idx, *problem))
         prov = _provenance(idx, sentences, times, recv)
@@ -355,15 +453,19 @@ def _decode_units(dec: _Decoder, carry_at: int, skip: set[int], sentences: list[
         if static_row is not None:
             _append(rows.static, {**static_row, **prov})
             rows.static_key.append(max(idx))
+        if len(out) > 3 and out[3] is not None:
+            _append(rows.other, {**out[3], **prov})
+            rows.other_key.append(max(idx))
     return rows
 
 
-_Unit = tuple[dict | None, dict | None, tuple[str, str] | None]
+_Unit = tuple[dict | None, dict | None, tuple[str, str] | None] | tuple[
+    dict | None, dict | None, tuple[str, str] | None, dict | None]
 
 
-def _decode_unit(parts: list[AISSentence]) -> _Unit | int:
-    """Decode one complete message: ``(position row, static row, problem)``, or the
-    message id when it is a valid type we do not store."""
+def _decode_unit(parts: list[AISSentence]) -> _Unit:
+    """Decode one complete message: ``(position row, static row, problem)``, or, for a
+    message of another type, ``(None, None, problem, ais_other_messages row)``."""
     msg = _assemble(parts)
     if not msg.payload:
         return None, None, ("undecodable", "empty payload")
@@ -371,7 +473,10 @@ def _decode_unit(parts: list[AISSentence]) -> _Unit | int:
     if ais_id not in MSG_CLASS:
         return None, None, ("unsupported_type", f"message id {ais_id} is not defined")
     if ais_id not in POSITION_TYPES and ais_id not in STATIC_TYPES:
-        return ais_id
+        other = _other_row(ais_id, msg)
+        if other is None:
+            return None, None, ("undecodable", f"type {ais_id}: payload too short for an MMSI")
+        return None, None, None, other
     try:
         d = msg.decode()
     except Exception as exc:  # pyais: bad bit lengths, unknown part numbers, ...
@@ -385,6 +490,79 @@ def _decode_unit(parts: list[AISSentence]) -> _Unit | int:
             position = {**_position_row(ais_id, d), "radio_channel": msg.channel or None}
     static_row = _static_row(ais_id, d) if ais_id in STATIC_TYPES else None
     return position, static_row, problem
+
+
+OTHER_CLASS = {4: "base_station", 11: "base_station", 21: "aton", 9: "sar_aircraft"}
+"""The station kind a message id says (ITU-R M.1371-5 Annex 8: base station report 4,
+UTC/date response 11, aids-to-navigation report 21, standard SAR aircraft position
+report 9); every other id of ``ais_other_messages`` may come from any station."""
+
+
+_OTHER_EMPTY: dict[str, Any] = dict.fromkeys((
+    "lat_deg", "lon_deg", "sog_mps", "cog_rad", "altitude_m", "utc_second", "station_utc_ns",
+    "name", "aton_type", "virtual_aton", "off_position"))  # every row has every column
+
+
+def _other_row(ais_id: int, msg: AISSentence) -> dict | None:
+    """The ``ais_other_messages`` row of a message of another type: MMSI (bits 8-37 of
+    every message), the station kind, and for 4/11, 9 and 21 their position, time and
+    identity fields; None when the payload is too short for an MMSI. A field pyais
+    cannot read stays null (the message still counts)."""
+    bits = msg.bv
+    if len(bits) < 38:
+        return None
+    row: dict[str, Any] = {**_OTHER_EMPTY, "mmsi": int(bits.get(8, 30)), "msg_type": ais_id,
+                           "ais_class": OTHER_CLASS.get(ais_id),
+                           "radio_channel": msg.channel or None}
+    if ais_id not in OTHER_CLASS:
+        return row
+    try:
+        d = msg.decode()
+    except Exception:  # pyais: bad bit lengths; the row keeps its MMSI and kind
+        return row
+
+    def get(k: str) -> Any:
+        return getattr(d, k, None)
+
+    lat, lon = get("lat"), get("lon")
+    if lat is not None and lon is not None and abs(lat) <= 90 and abs(lon) <= 180:
+        row.update(lat_deg=float(lat), lon_deg=float(lon))
+    second = get("second")
+    if ais_id in (4, 11):
+        row["station_utc_ns"] = station_utc_ns(d)
+    else:
+        row["utc_second"] = int(second) if second is not None and second < 60 else None
+    if ais_id == 9:
+        speed, course, alt = get("speed"), get("course"), get("alt")
+        row["sog_mps"] = speed * KNOT_MPS if speed is not None and speed < 1023 else None
+        row["cog_rad"] = _cog_rad(course)
+        row["altitude_m"] = float(alt) if alt is not None and alt < 4095 else None
+    if ais_id == 21:
+        name = "".join(t for t in (_text(get("name")), _text(get("name_ext"))) if t)
+        row.update(name=name or None, aton_type=_nonzero(get("aid_type")),
+                   virtual_aton=_flag(get("virtual_aid")), off_position=_flag(get("off_position")))
+    return row
+
+
+def _flag(v: Any) -> bool | None:
+    return None if v is None else bool(v)
+
+
+def station_utc_ns(d: object) -> int | None:
+    """The UTC a base station (message 4, 11) transmitted, ns; None when any field is
+    "not available" (year 0, month 0, day 0, hour 24, minute 60, second 60) or the date
+    does not exist."""
+    from datetime import UTC, datetime
+
+    f = [getattr(d, k, None) for k in ("year", "month", "day", "hour", "minute", "second")]
+    if any(v is None for v in f) or not (1970 <= f[0] <= 2261) or f[3] > 23 or f[4] > 59 \
+            or f[5] > 59:
+        return None
+    try:
+        t = datetime(f[0], f[1], f[2], f[3], f[4], f[5], tzinfo=UTC)
+    except ValueError:
+        return None
+    return int(t.timestamp()) * 1_000_000_000
 
 
 def _provenance(
@@ -837,14 +1015,14 @@ def _fast_static_table(f: FastStatic, dec: _Decoder, sentences: list[bytes], tim
 
 def _merge_fast(cols: dict[str, list], keys: list[int], f: FastPositions, keep: np.ndarray,
                 sentences: list[bytes], times: np.ndarray, recv: np.ndarray, source_file: str,
-                topic: str) -> pa.Table:
+                topic: str, clock: _Sources) -> pa.Table:
     """Slow-path report rows and fast rows in the reference order (see :func:`_merge`)."""
     fast = _fast_table(f, keep, sentences, times, recv)
-    return _merge("ais_reports", cols, keys, fast, f.index[keep], source_file, topic)
+    return _merge("ais_reports", cols, keys, fast, f.index[keep], source_file, topic, clock)
 
 
 def _merge(name: str, cols: dict[str, list], keys: list[int], fast: pa.Table,
-           fast_keys: np.ndarray, source_file: str, topic: str) -> pa.Table:
+           fast_keys: np.ndarray, source_file: str, topic: str, clock: _Sources) -> pa.Table:
     """Slow-path rows (``cols``) and vectorised rows (``fast``) in the order the reference
     makes them (by the index of each message's last sentence: ``keys``, ``fast_keys``),
     then conformed like :func:`_table`."""
@@ -855,16 +1033,20 @@ def _merge(name: str, cols: dict[str, list], keys: list[int], fast: pa.Table,
         parts.append(slow.select(fast.column_names))
         order.append(np.asarray(keys, np.int64))
     table = pa.concat_tables(parts)
-    table = table.take(np.argsort(np.concatenate(order), kind="stable"))
+    all_keys = np.concatenate(order)
+    perm = np.argsort(all_keys, kind="stable")
+    table = table.take(perm)
     n = table.num_rows
     if n == 0:
         return empty(name)
     table = table.append_column("source_file", pa.array([source_file] * n, pa.string()))
     table = table.append_column("topic", pa.array([topic] * n, pa.string()))
+    table = table.append_column("time_source", clock.column(all_keys[perm]))
     return conform(name, table)
 
 
-def _table(name: str, cols: dict[str, list], source_file: str, topic: str) -> pa.Table:
+def _table(name: str, cols: dict[str, list], keys: list[int], source_file: str, topic: str,
+           clock: _Sources) -> pa.Table:
     n = len(cols.get("mmsi", []))
     if not n:
         return empty(name)
@@ -872,6 +1054,7 @@ def _table(name: str, cols: dict[str, list], source_file: str, topic: str) -> pa
     arrays = {k: pa.array(v, type=types[k]) for k, v in cols.items()}
     arrays["source_file"] = pa.array([source_file] * n, pa.string())
     arrays["topic"] = pa.array([topic] * n, pa.string())
+    arrays["time_source"] = clock.column(np.asarray(keys, np.int64))
     return conform(name, pa.table(arrays))
 
 

@@ -12,14 +12,15 @@ for the codes):
 - ``msg_type``: the source's message id when it has a message-type column, else 0 (a
   table row does not say which message it came from). A static-only message (5, 24)
   without a position gives its ``ais_static`` row and no reject; a message id that is
-  neither a position report (1, 2, 3, 18, 19, 27) nor static data is valid but not
-  kept: counted in ``not_stored``.
-  ``ais_class``: the source's class, ``"A"`` when it has none (Stone Soup's Solent file).
+  neither a position report (1, 2, 3, 18, 19, 27) nor static data goes to
+  ``ais_other_messages``.
 - Static data (name, call sign, IMO, ship type, destination) -> one ``ais_static`` row
   per message that has any of them.
-- Base stations, AtoN and SAR aircraft are not vessels: not stored and not rejected,
-  counted in ``not_stored`` under the message id they transmit (4, 21, 9), as the NMEA
-  AIS decoder does.
+- Base stations, AtoN and SAR aircraft are not vessels: one ``ais_other_messages`` row
+  each under the message id they transmit (4, 21, 9), as the NMEA AIS decoder writes
+  them; so is a row whose message id is neither a position report nor static data.
+- ``ais_class`` of a vessel row: :func:`vessel_class` (the message id first: 18, 19, 24
+  are class B whatever the source's class column says).
 
 Rejects: ``undecodable`` (payload not JSON of this schema, MMSI or time missing),
 ``no_position`` (lat 91 / lon 181, or a missing coordinate), ``out_of_range`` (|lat| >
@@ -45,10 +46,16 @@ from pipeline.units import KNOT_MPS
 
 DEG = math.pi / 180.0
 MAX_SPEED_MPS = 40.0
-NOT_VESSEL_MSG_ID = {"base station": 4, "aton": 21, "sar airborne": 9}
+NOT_VESSEL_MSG_ID = {"base station": 4, "aton": 21, "sar airborne": 9, "sar aircraft": 9,
+                     "search and rescue aircraft": 9}
+"""A source's station kind (DMA ``Type of mobile``) that is not a vessel -> the message id
+such a station sends (base station report 4, AtoN report 21, SAR aircraft report 9)."""
 POSITION_MSG_IDS = frozenset({1, 2, 3, 18, 19, 27})
 STATIC_MSG_IDS = frozenset({5, 24})
 KEPT_MSG_IDS = POSITION_MSG_IDS | STATIC_MSG_IDS
+CLASS_B_MSG_IDS = frozenset({18, 19, 24})
+CLASS_A_MSG_IDS = frozenset({1, 2, 3, 5, 27})
+OTHER_CLASS = {4: "base_station", 11: "base_station", 21: "aton", 9: "sar_aircraft"}
 
 SCHEMA = message_layout("ais_report.schema.json").polars_schema()
 """The fields of ``schemas/ais_report.schema.json`` (the source's units and codes)."""
@@ -107,16 +114,49 @@ def _problems(max_speed_mps: float) -> tuple[pl.Expr, pl.Expr]:
     return code, reason
 
 
+def vessel_class() -> pl.Expr:
+    """A vessel row's class: from its message id when the source has one (18, 19, 24 are
+    class B, 1-3, 5, 27 class A: ITU-R M.1371-5 Annex 8), else the source's class or
+    station kind (``Class B``), else ``"A"`` (a table without either, Stone Soup's)."""
+    msg = pl.col("msg_type")
+    cls = pl.col("ais_class").str.to_uppercase()
+    kind = pl.col("mobile_type").str.to_lowercase().str.extract(r"^\s*class\s*([ab])\s*$", 1)
+    return (pl.when(msg.is_in(list(CLASS_B_MSG_IDS))).then(pl.lit("B"))
+            .when(msg.is_in(list(CLASS_A_MSG_IDS))).then(pl.lit("A"))
+            .when(cls.is_in(["A", "B"])).then(cls)
+            .when(kind.is_not_null()).then(kind.str.to_uppercase())
+            .otherwise(pl.lit("A")))  # fmt: skip
+
+
 def _si_columns() -> list[pl.Expr]:
     sog, cog, hdg = pl.col("sog_kn"), pl.col("cog_deg"), pl.col("heading_deg")
-    cls = pl.col("ais_class").str.to_uppercase()
     return [
         pl.when(~_sog_na()).then(sog * KNOT_MPS).alias("sog_mps"),
         pl.when((cog >= 0) & (cog < 360)).then(cog * DEG).alias("cog_rad"),
         pl.when((hdg >= 0) & (hdg <= 359)).then(hdg * DEG).alias("heading_rad"),
-        pl.when(cls.is_in(["A", "B"])).then(cls).otherwise(pl.lit("A")).alias("ais_class"),
+        vessel_class().alias("ais_class"),
         pl.col("msg_type").fill_null(0).cast(pl.Int16).alias("msg_type"),
         pl.col("time_ns").alias("time_ns"),
+        pl.col("raw").alias("nmea"),
+    ]
+
+
+def _other_columns() -> list[pl.Expr]:
+    """``ais_other_messages`` columns of a row of a station that is not a vessel, or of
+    another message id (``_not_vessel``: the message id)."""
+    lat, lon = pl.col("lat_deg"), pl.col("lon_deg")
+    placed = lat.is_between(-90, 90) & lon.is_between(-180, 180)
+    sar = pl.col("_not_vessel") == 9
+    cog = pl.col("cog_deg")
+    return [
+        pl.col("_not_vessel").cast(pl.Int16).alias("msg_type"),
+        pl.col("_not_vessel").replace_strict(OTHER_CLASS, default=None, return_dtype=pl.String)
+        .alias("ais_class"),
+        pl.when(placed).then(lat).alias("lat_deg"),
+        pl.when(placed).then(lon).alias("lon_deg"),
+        pl.when(sar & ~_sog_na()).then(pl.col("sog_kn") * KNOT_MPS).alias("sog_mps"),
+        pl.when(sar & (cog >= 0) & (cog < 360)).then(cog * DEG).alias("cog_rad"),
+        pl.when(pl.col("_not_vessel") == 21).then(pl.col("shipname")).alias("name"),
         pl.col("raw").alias("nmea"),
     ]
 
@@ -135,9 +175,12 @@ def decode_ais_json(
     source_file: str,
     topic: str,
     max_speed_mps: float = MAX_SPEED_MPS,
+    time_source: str = "csv",
 ) -> tuple[dict[str, pa.Table], dict[int, int]]:
-    """``({"ais_reports", "ais_static", "rejects"}, not_stored)`` of a batch of
-    ``surveil.AisReport`` payloads (see module docstring); ``log_time_ns`` int64 ns."""
+    """``({"ais_reports", "ais_static", "ais_other_messages", "rejects"}, not_stored)`` of
+    a batch of ``surveil.AisReport`` payloads (see module docstring); ``log_time_ns``
+    int64 ns; ``time_source``: the rows' ``time_source`` (the channel's
+    ``log_time_source``, ``csv:<column>``)."""
     df, bad = parse_payloads(payloads)
     n = df.height
     mask = np.zeros(n, dtype=bool)
@@ -147,6 +190,7 @@ def decode_ais_json(
         log_time_ns=pl.Series(np.asarray(log_time_ns, dtype=np.int64)),
         source_file=pl.lit(source_file),
         topic=pl.lit(topic),
+        time_source=pl.lit(time_source),
         _kind=pl.col("mobile_type").str.to_lowercase().str.strip_chars(),
     )
     not_vessel = pl.col("_kind").replace_strict(
@@ -157,8 +201,10 @@ def decode_ais_json(
     df = df.with_columns(
         _not_vessel=pl.when(other_msg).then(msg).otherwise(not_vessel).fill_null(-1)
     )
-    skipped = df.filter((pl.col("_not_vessel") >= 0) & ~pl.col("_bad"))
-    not_stored = dict(Counter(skipped["_not_vessel"].to_list()))
+    other = df.filter((pl.col("_not_vessel") >= 0) & ~pl.col("_bad")
+                      & pl.col("mmsi").is_not_null() & pl.col("time_ns").is_not_null())
+    other = other.with_columns(_other_columns())
+    not_stored: dict[int, int] = {}
     code, reason = _problems(max_speed_mps)
     df = df.filter((pl.col("_not_vessel") < 0) | pl.col("_bad")).with_columns(
         code=code, reason=reason
@@ -187,6 +233,8 @@ def decode_ais_json(
         "ais_static": conform("ais_static", static.to_arrow())
         if static.height
         else empty("ais_static"),
+        "ais_other_messages": conform("ais_other_messages", other.to_arrow())
+        if other.height else empty("ais_other_messages"),
         "rejects": _rejects(rej, payloads, source_file, topic),
     }
     return tables, not_stored
@@ -214,14 +262,16 @@ class AisJsonChannelDecoder:
     """Stateful per-channel adapter for :mod:`pipeline.decode.registry`: decodes each
     batch as it comes (rows are independent) and counts ``not_stored``."""
 
-    def __init__(self, source_file: str, topic: str):
+    def __init__(self, source_file: str, topic: str, time_source: str = "csv"):
         self.source_file = source_file
         self.topic = topic
+        self.time_source = time_source
         self.not_stored: Counter = Counter()
 
     @classmethod
     def for_channel(cls, batch: Any, source_file: str) -> AisJsonChannelDecoder:
-        return cls(source_file, batch.topic)
+        meta = getattr(batch, "metadata", None) or {}
+        return cls(source_file, batch.topic, meta.get("log_time_source") or "csv")
 
     def feed(self, batch: Any) -> dict[str, pa.Table]:
         tables, not_stored = decode_ais_json(
@@ -229,6 +279,7 @@ class AisJsonChannelDecoder:
             batch.log_time_ns,
             source_file=self.source_file,
             topic=self.topic,
+            time_source=self.time_source,
         )
         self.not_stored.update({f"ais_type_{k}": v for k, v in not_stored.items()})
         return {k: v for k, v in tables.items() if v.num_rows}

@@ -96,6 +96,7 @@ from pipeline.decode.asterix_editions import (
 from pipeline.decode.registry import make_rejects
 from pipeline.io.mcap_read import ChannelBatch
 from pipeline.tables import conform, empty
+from pipeline.time_sources import channel_synthetic, fallback_label
 from pipeline.units import NM_M, NS
 
 DAY_NS = 86_400 * NS
@@ -654,6 +655,25 @@ class _Context:
     topic: str
     sensor_id: str | None
     sensor_kind: str | None
+    time_source: tuple[str, str] = ("asterix_tod+mcap_log_time", "mcap_log_time")
+    """``time_source`` of a record with a time of day, and of one without."""
+
+
+def time_source_labels(meta: Mapping[str, str]) -> tuple[str, str]:
+    """``(with time of day, without)`` labels of a channel's rows (``time_source``,
+    :mod:`pipeline.time_sources`): the time of day on the day of the capture (``pcap``),
+    of ``--base-time`` or the file name (``log_date_source``), of a framed recording's
+    header, or of the MCAP log time; ``asterix_tod:undated`` when nothing gave the day
+    (1970-01-01: synthetic, no batch input)."""
+    src = meta.get("log_time_source") or ""
+    without = fallback_label(meta)
+    if channel_synthetic(meta):
+        return "asterix_tod:undated", without
+    if src == "pcap" or not src:
+        return f"asterix_tod+{src or 'mcap_log_time'}", without
+    if "log_date" in meta:
+        return f"asterix_tod+{meta.get('log_date_source') or 'given'}", without
+    return f"asterix_tod+{src}", without
 
 
 @dataclass
@@ -709,7 +729,8 @@ def decode_asterix(
     meta = metadata or {}
     forced = {**parse_edition_metadata(meta.get("asterix_editions")), **(editions or {})}
     learned = {} if learned is None else learned
-    ctx = _Context(source_file, topic, meta.get("sensor_id"), meta.get("sensor_kind"))
+    ctx = _Context(source_file, topic, meta.get("sensor_id"), meta.get("sensor_kind"),
+                   time_source_labels(meta))
     times = np.asarray(log_time_ns, dtype=np.int64)
     obs, svc, rej = _Rows(OBS_COLUMNS), _Rows(SERVICE_COLUMNS), _Rejects()
     unsupported: dict[int, Unsupported] = {}
@@ -829,8 +850,10 @@ def _table(name: str, rows: _Rows, ctx: _Context) -> pa.Table:
         ]
     if "sensor_kind" in data:
         data["sensor_kind"] = [ctx.sensor_kind or k or "other" for k in data["sensor_kind"]]
+    tod = np.asarray(rows.tod, dtype=np.float64)
     data |= {
-        "time_ns": tod_to_time_ns(np.asarray(rows.tod), log_t),
+        "time_ns": tod_to_time_ns(tod, log_t),
+        "time_source": np.where(np.isfinite(tod), *ctx.time_source).tolist(),
         "asterix_category": rows.category,
         "source_file": [ctx.source_file] * len(rows),
         "topic": [ctx.topic] * len(rows),

@@ -24,7 +24,7 @@ a lost line feed) is split and each sentence judged on its own, so the intact on
 kept; characters outside any sentence are rejected as garbage (the sentence next to them
 is kept). One-digit or lower-case checksums are accepted when their value is right
 (OpenCPN writes ``*b``); receiver fields after the checksum (USCG NAIS
-``*hh,s36310,d-081,...``) are tolerated and not decoded.
+``*hh,s36310,d-081,...``) give the sentence's time and are otherwise not decoded.
 
 Rejects (``reason_code``): ``undecodable`` (garbage, empty line, bad address field, a
 field that is not a number, a bad hemisphere/time), ``bad_checksum`` (sentence or tag
@@ -38,8 +38,11 @@ sentence of the same talker+formatter by more than ``max_time_backstep_s``),
 
 Time (``time_ns``):
 
-- reception time ``recv_ns`` = the tag block's ``c:`` (Unix seconds; milliseconds when
-  the value is above 1e11) when present, else the MCAP log time;
+- reception time ``recv_ns`` = the first time the sentence carries in the order of
+  :data:`pipeline.time_sources.OWN_ORDER` (USCG N-AIS receiver fields ``t``/``T`` with
+  their UNIX time, the ``$PGHP`` before its AIS message, the tag block's ``c:`` in Unix
+  seconds or milliseconds above 1e11, the N-AIS UNIX time alone), else the MCAP log
+  time; each AIS row keeps what gave it (``time_source``, :func:`own_times`);
 - a sentence with a UTC time of day (GGA RMC GLL ZDA TTM TLL) gets that time on the date of
   the latest preceding dated sentence (RMC ``ddmmyy``, ZDA ``dd,mm,yyyy``) advanced by the
   reception time elapsed since it, else on the UTC date of its reception time; the day is
@@ -67,14 +70,16 @@ import numpy as np
 import polars as pl
 import pyarrow as pa
 
+from pipeline import time_sources as ts
 from pipeline.decode.registry import make_rejects
 from pipeline.tables import conform, empty
-from pipeline.units import NS, TIME_MAX_NS
+from pipeline.time_sources import nais_time, pghp_time, tag_block_time
+from pipeline.units import NS
 
 DAY_NS = 86_400 * NS
 AIS_FORMATTERS = frozenset({"VDM", "VDO"})
 NAV_TABLES = ("nav_gnss", "nav_heading", "nav_speed_log", "arpa_targets", "arpa_own_ship")
-NMEA_TABLES = (*NAV_TABLES, "ais_reports", "ais_static", "rejects")
+NMEA_TABLES = (*NAV_TABLES, "ais_reports", "ais_static", "ais_other_messages", "rejects")
 
 # a sentence (optionally behind a tag block) runs to the next start character
 PIECE_RE = r"(?:\\[^\\]*\\)?[$!][^$!\\\r\n]*"
@@ -106,14 +111,18 @@ class NmeaCarry:
     """What a channel's next batch needs from the previous one.
 
     ``ais``: trailing AIS sentences of a multi-part message still open (bytes, log time,
-    reception time); ``anchor_ns``/``anchor_recv_ns``: the latest dated sentence's time and
-    its reception time; ``last_time_ns``: latest UTC sentence time per talker+formatter.
+    reception time, time source); ``anchor_ns``/``anchor_recv_ns``: the latest dated
+    sentence's time and its reception time; ``last_time_ns``: latest UTC sentence time
+    per talker+formatter.
     """
 
-    ais: tuple[tuple[bytes, int, int], ...] = ()
+    ais: tuple[tuple[bytes, int, int, str], ...] = ()
     anchor_ns: int | None = None
     anchor_recv_ns: int | None = None
     last_time_ns: Mapping[str, int] = field(default_factory=dict)
+    pghp: tuple[int, int, int] | None = None
+    """A ``$PGHP`` whose message has not ended yet: (its time, AIS sentences after it
+    so far, the fragment count of the first of them, 0 before it)."""
 
 
 @dataclass(frozen=True)
@@ -192,11 +201,13 @@ def frame(texts: Sequence[str]) -> tuple[pl.DataFrame, pl.DataFrame]:
 
 
 def _parse_pieces(pieces: pl.DataFrame) -> pl.DataFrame:
+    p = pieces.with_columns(
+        tag=pl.col("piece").str.extract(_TAG_RE, 1),
+        body=pl.col("piece").str.replace(_TAG_RE, ""),
+    )
+    nais_ns, nais_src = nais_time(pl.col("body"))
     p = (
-        pieces.with_columns(
-            tag=pl.col("piece").str.extract(_TAG_RE, 1),
-            body=pl.col("piece").str.replace(_TAG_RE, ""),
-        )
+        p.with_columns(nais_ns=nais_ns, nais_source=nais_src)
         .with_columns(
             # receiver fields after the checksum (USCG NAIS ",d-077,S1832,...,1272415370")
             body=pl.col("body").str.replace(_TRAILER_RE, "$1"),
@@ -221,9 +232,9 @@ def _parse_pieces(pieces: pl.DataFrame) -> pl.DataFrame:
     p = p.with_columns(
         address=parts.list.first(),
         fields=parts.list.slice(1),
-        tag_c=pl.col("tag_text").str.extract(r"(?:^|,)c:(\d+)", 1).cast(pl.Int64, strict=False),
         tag_source=pl.col("tag_text").str.extract(r"(?:^|,)s:([^,*]*)", 1),
     )
+    tag_c_ns, tag_c_bad = tag_block_time(pl.col("tag_text"))
     # talker: any 2 characters, letters or digits ("04HDM" from an NMEA 2000 gateway)
     proprietary = pl.col("address").str.contains(r"^P[A-Z0-9]+$")
     std = pl.col("address").str.contains(r"^[A-Z0-9]{2}[A-Z]{3}$")
@@ -238,13 +249,10 @@ def _parse_pieces(pieces: pl.DataFrame) -> pl.DataFrame:
         .then(pl.col("address").str.slice(2, 3)),
         # the c: digits are checked against the range BEFORE the multiplication (polars
         # int64 arithmetic wraps around silently); 20+ digits do not even cast
-        tag_c_ns=pl.when(pl.col("tag_c").is_between(100_000_000_001, TIME_MAX_NS // 1_000_000))
-        .then(pl.col("tag_c") * 1_000_000)
-        .when(pl.col("tag_c").is_between(0, TIME_MAX_NS // NS))
-        .then(pl.col("tag_c") * NS),
+        tag_c_ns=tag_c_ns,
+        tag_c_bad=tag_c_bad,
     ).with_columns(
-        tag_c_bad=pl.col("tag_text").str.contains(r"(?:^|,)c:\d").fill_null(False)
-        & pl.col("tag_c_ns").is_null(),
+        pghp_ns=pl.when(pl.col("formatter") == "PGHP").then(pghp_time(pl.col("fields"))),
     )
     code, reason = _framing_problem()
     return p.with_columns(code=code, reason=reason).select(
@@ -259,6 +267,9 @@ def _parse_pieces(pieces: pl.DataFrame) -> pl.DataFrame:
         "reason",
         "tag_c_ns",
         "tag_source",
+        "nais_ns",
+        "nais_source",
+        "pghp_ns",
     )
 
 
@@ -337,11 +348,17 @@ def decode_nmea(
     carry: NmeaCarry | None = None,
     final: bool = True,
     limits: NmeaLimits | None = None,
+    fallback_time_source: str = ts.MCAP_LOG_TIME,
+    refine_gap_s: float | None = None,
 ) -> NmeaDecoded:
     """Decode one batch of a channel; ``carry`` comes from the channel's previous batch.
 
     With ``final=False`` an AIS multi-part message still open at the end is carried to
     the next batch instead of being rejected (see :func:`pipeline.decode.ais.decode_ais`).
+    ``fallback_time_source``: the ``time_source`` of rows whose time is the log time
+    (:func:`pipeline.time_sources.fallback_label` of the channel's metadata);
+    ``refine_gap_s``: the interpolation bracket of such rows when it is an interpolated
+    time (:func:`pipeline.time_sources.refine_by_utc_second`).
     """
     carry = carry or NmeaCarry()
     limits = limits or NmeaLimits()
@@ -350,29 +367,106 @@ def decode_nmea(
         raise ValueError(f"{len(sentences)} sentences but {len(log)} log times")
     pieces, garbage = frame(_to_text(sentences))
     log_s = pl.Series(log, dtype=pl.Int64)
-    pieces = (
-        pieces.with_row_index("idx")
-        .with_columns(
-            log_time_ns=log_s.gather(pieces["msg"]),
-        )
-        .with_columns(recv_ns=pl.coalesce("tag_c_ns", "log_time_ns"))
+    pieces = pieces.with_row_index("idx").with_columns(
+        log_time_ns=log_s.gather(pieces["msg"]),
     )
+    pieces, pghp_carry = own_times(pieces, carry.pghp, fallback_time_source)
     ctx = _Ctx(source_file, topic, platform_id)
+    garbage, lone_tags = _lone_tag_blocks(garbage)
     rejects = [_garbage_rejects(garbage, log, ctx), _framing_rejects(pieces, ctx)]
     good = pieces.filter(pl.col("code").is_null())
     is_ais = pl.col("formatter").is_in(list(AIS_FORMATTERS))
     is_nav = pl.col("formatter").is_in(list(_nav_decoders()))
     not_stored = _not_stored(good.filter(~is_ais & ~is_nav))
-    ais = _decode_ais(good.filter(is_ais), carry, final, ctx)
+    if lone_tags:
+        not_stored["nmea_tag_block"] = lone_tags
+    ais = _decode_ais(good.filter(is_ais), carry, final, ctx, refine_gap_s)
     nav, nav_rejects, anchor, last = _decode_nav(good.filter(is_nav), carry, limits, ctx)
     rejects += [ais.rejects, nav_rejects]
-    tables = {**nav, "ais_reports": ais.reports, "ais_static": ais.static}
+    tables = {**nav, "ais_reports": ais.reports, "ais_static": ais.static,
+              "ais_other_messages": ais.other}
     tables["rejects"] = _concat("rejects", rejects)
     new_carry = NmeaCarry(
-        ais=ais.carry, anchor_ns=anchor[0], anchor_recv_ns=anchor[1], last_time_ns=last
+        ais=ais.carry, anchor_ns=anchor[0], anchor_recv_ns=anchor[1], last_time_ns=last,
+        pghp=pghp_carry,
     )
     not_stored.update({f"ais_type_{k}": v for k, v in ais.not_stored.items()})
     return NmeaDecoded(tables=tables, not_stored=not_stored, carry=new_carry)
+
+
+def own_times(
+    pieces: pl.DataFrame, pending: tuple[int, int, int] | None, fallback: str
+) -> tuple[pl.DataFrame, tuple[int, int, int] | None]:
+    """Each sentence's reception time ``recv_ns`` and its ``time_source``: the first time
+    it carries in the order of :data:`pipeline.time_sources.OWN_ORDER` (N-AIS
+    ``t``/``T``, the ``$PGHP`` before its message, tag-block ``c:``, the N-AIS UNIX time),
+    else its log time (``fallback``). ``pending``: a ``$PGHP`` of the previous batch whose
+    message continues here; returns the one left open at the end of this batch.
+
+    A ``$PGHP`` stamps the AIS sentences of the one message right after it: the first AIS
+    sentence and as many more as its fragment count says."""
+    ok = pl.col("code").is_null()
+    is_pghp = ok & pl.col("pghp_ns").is_not_null()
+    is_ais = ok & pl.col("formatter").is_in(list(AIS_FORMATTERS))
+    frag_cnt = pl.col("fields").list.get(0, null_on_oob=True).cast(pl.Int64, strict=False)
+    p = pieces.with_columns(_grp=is_pghp.cast(pl.Int64).cum_sum(), _ais=is_ais)
+    p = p.with_columns(
+        _rank=pl.col("_ais").cast(pl.Int64).cum_sum().over("_grp"),
+        _first_cnt=pl.when(pl.col("_ais")).then(frag_cnt).drop_nulls().first().over("_grp"),
+        _stamp=pl.col("pghp_ns").drop_nulls().first().over("_grp"),
+    )
+    if pending is not None:  # group 0 continues the previous batch's open message
+        ns, taken, first = pending
+        grp0 = pl.col("_grp") == 0
+        p = p.with_columns(
+            _stamp=pl.when(grp0).then(pl.lit(ns, pl.Int64)).otherwise("_stamp"),
+            _first_cnt=pl.when(grp0 & (first > 0)).then(pl.lit(first, pl.Int64))
+            .otherwise("_first_cnt"),
+            _rank=pl.when(grp0).then(pl.col("_rank") + taken).otherwise("_rank"),
+        )
+    applied = pl.col("_ais") & pl.col("_stamp").is_not_null() & (
+        pl.col("_rank") <= pl.col("_first_cnt").fill_null(1))
+    p = p.with_columns(_pghp_ns=pl.when(applied).then(pl.col("_stamp")))
+    fine = pl.col("nais_source").is_in([ts.NAIS_T, ts.NAIS_T_ONLY])
+    own_ns = pl.when(ok).then(
+        pl.coalesce(pl.when(fine).then("nais_ns"), "_pghp_ns", "tag_c_ns", "nais_ns"))
+    own_src = pl.when(ok).then(pl.coalesce(
+        pl.when(fine).then("nais_source"),
+        pl.when(pl.col("_pghp_ns").is_not_null()).then(pl.lit(ts.PGHP)),
+        pl.when(pl.col("tag_c_ns").is_not_null()).then(pl.lit(ts.TAG_BLOCK)),
+        "nais_source",
+    ))  # a sentence that is a reject (a wrong tag checksum) has no time to give
+    p = p.with_columns(
+        recv_ns=pl.coalesce(own_ns, "log_time_ns"),
+        time_source=pl.coalesce(own_src, pl.lit(fallback)),
+    )
+    out = None
+    if p.height:
+        last = p.filter(pl.col("_grp") == pl.col("_grp").max()).select(
+            "_stamp", "_first_cnt", "_rank").tail(1).row(0)
+        stamp, first, rank = last
+        if stamp is not None and (first is None or (rank or 0) < first):
+            out = (int(stamp), int(rank or 0), int(first or 0))
+    else:
+        out = pending
+    return p.drop("_grp", "_ais", "_rank", "_first_cnt", "_stamp", "_pghp_ns"), out
+
+
+def _lone_tag_blocks(garbage: pl.DataFrame) -> tuple[pl.DataFrame, int]:
+    """Lines holding only a tag block with a right checksum (the Danish Maritime
+    Authority's logs write ``\\si:AISW*2C\\`` on a line of its own): valid, not
+    stored; returns the other garbage and their count."""
+    if not garbage.height:
+        return garbage, 0
+    tag = pl.col("text").str.strip_chars().str.extract(r"^\\([^\\]*)\\$", 1)
+    g = garbage.with_columns(_tag=tag).with_columns(
+        _text=pl.col("_tag").str.extract(_TAG_CK_RE, 1),
+        _hex=pl.col("_tag").str.extract(_TAG_CK_RE, 2),
+    )
+    lone = g["_hex"].is_not_null().to_numpy() & _checksum_ok(g["_text"], g["_hex"])
+    if not lone.any():
+        return garbage, 0
+    return garbage.filter(pl.Series(~lone)), int(lone.sum())
 
 
 def _nav_decoders() -> dict:
@@ -444,19 +538,22 @@ def _not_stored(pieces: pl.DataFrame) -> dict[str, int]:
 class _AisOut:
     reports: pa.Table
     static: pa.Table
+    other: pa.Table
     rejects: pa.Table
     not_stored: dict[int, int]
-    carry: tuple[tuple[bytes, int, int], ...]
+    carry: tuple[tuple[bytes, int, int, str], ...]
 
 
-def _decode_ais(pieces: pl.DataFrame, carry: NmeaCarry, final: bool, ctx: _Ctx) -> _AisOut:
+def _decode_ais(pieces: pl.DataFrame, carry: NmeaCarry, final: bool, ctx: _Ctx,
+                refine_gap_s: float | None) -> _AisOut:
     from pipeline.decode.ais import decode_ais
 
     # the sentence with its tag block, without receiver fields after the checksum
     sent = [c[0] for c in carry.ais] + [t.encode("latin-1") for t in pieces["sentence"].to_list()]
     if not sent:
         e = empty
-        return _AisOut(e("ais_reports"), e("ais_static"), e("rejects"), {}, ())
+        return _AisOut(e("ais_reports"), e("ais_static"), e("ais_other_messages"),
+                       e("rejects"), {}, ())
     log = np.concatenate(
         [
             np.asarray([c[1] for c in carry.ais], np.int64),
@@ -469,12 +566,15 @@ def _decode_ais(pieces: pl.DataFrame, carry: NmeaCarry, final: bool, ctx: _Ctx) 
             pieces["recv_ns"].to_numpy().astype(np.int64),
         ]
     )
+    source = [c[3] for c in carry.ais] + pieces["time_source"].to_list()
     out = decode_ais(
-        sent, log, source_file=ctx.source_file, topic=ctx.topic, final=final, time_ns=recv
+        sent, log, source_file=ctx.source_file, topic=ctx.topic, final=final, time_ns=recv,
+        time_source=source, refine_gap_s=refine_gap_s,
     )
     k = len(sent) - out.carry
-    kept = tuple(zip(sent[k:], log[k:].tolist(), recv[k:].tolist(), strict=True))
-    return _AisOut(out.reports, out.static, out.rejects, dict(Counter(out.not_stored)), kept)
+    kept = tuple(zip(sent[k:], log[k:].tolist(), recv[k:].tolist(), source[k:], strict=True))
+    return _AisOut(out.reports, out.static, out.other, out.rejects,
+                   dict(Counter(out.not_stored)), kept)
 
 
 # -- navigation --------------------------------------------------------------------------
@@ -610,9 +710,12 @@ class NmeaChannelDecoder:
     metadata ``platform_id``, else the topic.
     """
 
-    def __init__(self, source_file: str, topic: str, platform_id: str, limits: NmeaLimits):
+    def __init__(self, source_file: str, topic: str, platform_id: str, limits: NmeaLimits,
+                 metadata: Mapping[str, str] | None = None):
         self.ctx = _Ctx(source_file, topic, platform_id)
         self.limits = limits
+        self.fallback_time_source = ts.fallback_label(metadata)
+        self.refine_gap_s = ts.refinement_gap_s(metadata)
         self.carry = NmeaCarry()
         self.not_stored: Counter = Counter()
         self._lines: list[bytes] = []
@@ -621,7 +724,8 @@ class NmeaChannelDecoder:
     @classmethod
     def for_channel(cls, batch: Any, source_file: str) -> NmeaChannelDecoder:
         meta = getattr(batch, "metadata", None) or {}
-        return cls(source_file, batch.topic, meta.get("platform_id") or batch.topic, NmeaLimits())
+        return cls(source_file, batch.topic, meta.get("platform_id") or batch.topic, NmeaLimits(),
+                   meta)
 
     def feed(self, batch: Any) -> dict[str, pa.Table]:
         self._lines.extend(batch.payloads)
@@ -642,6 +746,8 @@ class NmeaChannelDecoder:
             carry=self.carry,
             final=final,
             limits=self.limits,
+            fallback_time_source=self.fallback_time_source,
+            refine_gap_s=self.refine_gap_s,
         )
         self._lines, self._times = [], []
         self.carry = out.carry

@@ -82,7 +82,7 @@ from pipeline.io.mcap_read import ChannelBatch
 from pipeline.tables import ConstantStrings, conform, empty, invalid_rows
 
 RAW_TABLES = (
-    "radar_tracks", "ais_reports", "ais_static", "truth", "rejects",
+    "radar_tracks", "ais_reports", "ais_static", "ais_other_messages", "truth", "rejects",
     "airfield_obs", "asterix_service", "nav_gnss", "nav_heading",
     "nav_speed_log", "arpa_targets", "arpa_own_ship", "airfield_truth",
     "nav_gyro_signals", "ownship_truth", "fault_truth",

@@ -26,6 +26,7 @@ class IngestSummary:
     window: tuple[int, int] | None = None
     committed_files: list[str] = field(default_factory=list)
     overlaps: list[str] = field(default_factory=list)  # "file topic other [a, b)" warnings
+    time_warnings: list[str] = field(default_factory=list)  # files with synthetic times
 
     @property
     def rejected(self) -> int:
@@ -79,6 +80,10 @@ class IngestSummary:
             lines.append("  (recorded in source_overlaps: both files are of one site, so "
                          "their rows mix; give each source its own site (MCAP metadata "
                          "`site` or ingest --site) or remove the duplicate file)")
+        for text in self.time_warnings[:10]:
+            lines.append(f"WARNING: synthetic times: {text}")
+        if len(self.time_warnings) > 10:
+            lines.append(f"... and {len(self.time_warnings) - 10} more files with synthetic times")
         for path, err in self.failed[:10]:
             lines.append(f"FAILED {path}: {err}")
         if len(self.failed) > 10:

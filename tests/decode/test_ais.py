@@ -154,9 +154,11 @@ def test_type19_and_type24_go_to_static():
     assert b["callsign"] == "PB123" and b["to_bow_m"] == 4 and b["ship_type"] == 36
 
 
-def test_not_stored_types_are_counted_not_rejected():
+def test_other_types_go_to_their_own_table_not_rejected():
     out = run([*enc(msg_type=4, mmsi=2110000), AIS_TYPE1])
-    assert out.not_stored == {4: 1} and out.rejects.num_rows == 0 and out.reports.num_rows == 1
+    assert out.not_stored == {} and out.rejects.num_rows == 0 and out.reports.num_rows == 1
+    (row,) = out.other.to_pylist()
+    assert (row["mmsi"], row["msg_type"], row["ais_class"]) == (2110000, 4, "base_station")
 
 
 def _reject(sentences):
@@ -273,9 +275,11 @@ def test_pyais_sample_file_exact_counts(real_ais_sample):
         "truncated_multipart": 20,
         "no_position": 4,  # type 1 with lat 91 / lon 181
     }
-    assert out.not_stored == {4: 6, 15: 7, 20: 1}
-    n_out = out.reports.num_rows + out.static.num_rows + out.rejects.num_rows
-    assert n_out + sum(out.not_stored.values()) == 898  # every sentence accounted for
+    assert out.not_stored == {}
+    assert Counter(out.other.column("msg_type").to_pylist()) == {4: 6, 15: 7, 20: 1}
+    n_out = (out.reports.num_rows + out.static.num_rows + out.rejects.num_rows
+             + out.other.num_rows)
+    assert n_out == 898  # every sentence accounted for
 
 
 @pytest.fixture()

@@ -447,7 +447,8 @@ def test_wrap_raw_derives_times_and_crosses_midnight(tmp_path):
     assert msgs[-1][0] == "/import/rejects" and tail["topic"] == "/asterix/raw"
     assert base64.b64decode(tail["raw_base64"]) == b"\x0a\x00\x50\x00"
     assert f"at octet {len(data) - 4}" in tail["reason"]
-    assert msgs[0][3] == {"log_time_source": "asterix_time_of_day", "log_date": "2026-03-01"}
+    assert msgs[0][3] == {"log_time_source": "asterix_time_of_day", "log_date": "2026-03-01",
+                          "log_date_source": "given"}
     payloads = [m[2] for m in msgs[:-1]]
     res = decode_asterix(payloads, np.array([m[1] for m in msgs[:-1]]), source_file="x",
                          topic="/asterix/raw")  # fmt: skip

@@ -42,7 +42,8 @@ def _docs(path: Path) -> list[tuple[int, dict]]:
 def _ingest(tmp_path: Path, mcap: Path) -> dict[str, list[dict]]:
     s = run_ingest([mcap], load_config(), tmp_path / "wh", executor="serial")
     out = {n: read_table(tmp_path / "wh", n).to_pylist()
-           for n in ("ais_reports", "ais_static", "rejects", "ingest_ledger")}  # fmt: skip
+           for n in ("ais_reports", "ais_static", "ais_other_messages", "rejects",
+                     "ingest_ledger")}  # fmt: skip
     assert s.exit_code == (1 if out["rejects"] else 0), s.render()  # issue 18: rejects -> 1
     return out
 
@@ -69,11 +70,16 @@ def test_wide_message_level_export_with_quoted_cells_and_compact_times(tmp_path)
     out = _ingest(tmp_path, Path(res.output))
     assert [r["mmsi"] for r in out["ais_reports"]] == [244660000, 244000001]
     assert [r["msg_type"] for r in out["ais_reports"]] == [1, 18]
+    assert [r["ais_class"] for r in out["ais_reports"]] == ["A", "B"]  # 18: class B (issue 36)
+    assert {r["time_source"] for r in out["ais_reports"]} == {"csv:timestamp"}
     (static,) = out["ais_static"]  # the type 5 row: static data, no reject
     assert static["callsign"] == "PD1234" and static["imo"] == 9123456
     assert out["rejects"] == []
+    (base,) = out["ais_other_messages"]  # a base station: its own table
+    assert (base["mmsi"], base["msg_type"], base["ais_class"]) == (2442000, 4, "base_station")
+    assert (base["lat_deg"], base["lon_deg"]) == (52.0, 4.0)
     (ledger,) = out["ingest_ledger"]
-    assert json.loads(ledger["not_stored_json"]) == {"ais_type_4": 1}  # a base station
+    assert json.loads(ledger["not_stored_json"] or "{}") == {}
 
 
 @pytest.mark.parametrize(
@@ -187,7 +193,8 @@ def test_exactearth_aisdb_message_level_csv(tmp_path):
     assert (static["shipname"], static["callsign"], static["imo"]) == ("SHIP ONE", "VCAB2",
                                                                       9123456)  # fmt: skip
     assert out["rejects"] == []
-    assert json.loads(out["ingest_ledger"][0]["not_stored_json"]) == {"ais_type_4": 1}
+    assert [(r["msg_type"], r["ais_class"]) for r in out["ais_other_messages"]] == [
+        (4, "base_station")]
 
 
 def test_a_bare_type_column_of_ship_type_codes_is_the_ship_type(tmp_path):

@@ -139,7 +139,7 @@ def test_time_of_day_without_any_date(tmp_path):
     t0 = 1_437_350_400 * NS + 86_399 * NS
     assert times == [t0, t0 + NS, t0 + 2 * NS]  # rolled over to the next day
     meta = channel_meta(Path(res.output))[NAV_TOPIC]
-    assert meta["log_time_source"] == "nmea_time_of_day:undated"
+    assert meta["log_time_source"] == "nmea_time_of_day:base_time"
     assert meta["log_date"] == "2015-07-20"
 
 

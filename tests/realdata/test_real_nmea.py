@@ -36,7 +36,7 @@ NAV = {  # formatter -> (table, measurement field indices: all empty means "no_d
     "OSD": ("arpa_own_ship", (0, 2, 4, 6, 7)),
 }  # fmt: skip
 TABLES = ("nav_gnss", "nav_heading", "nav_speed_log", "arpa_targets", "arpa_own_ship",
-          "ais_reports", "ais_static")  # fmt: skip
+          "ais_reports", "ais_static", "ais_other_messages")  # fmt: skip
 
 
 def _real() -> Path:
@@ -159,8 +159,9 @@ def _ais_unit(bits: str) -> tuple[set[str], str | None, int | None]:
             if int(bits[38:40], 2) < 2
             else (set(), "undecodable", None)
         )
-    if t not in POS:
-        return set(), None, t
+    if t not in POS:  # every other message: its own table (its MMSI is bits 8-37)
+        return ({"ais_other_messages"}, None, None) if len(bits) >= 38 else (
+            set(), "undecodable", None)
     lon_at, lon_n, lat_at, lat_n, scale = POS[t]
     lon, lat = _signed(bits[lon_at : lon_at + lon_n]), _signed(bits[lat_at : lat_at + lat_n])
     static = {"ais_static"} if t == 19 else set()
@@ -241,6 +242,7 @@ def expected_csv(path: Path) -> Counter:
     for r in rows[1:]:
         d = dict(zip(head, (c.strip() for c in r), strict=True))
         if d.get("type of mobile") in ("Base Station", "AtoN", "SAR Airborne"):
+            want["ais_other_messages"] += 1
             continue
         lat = d.get("latitude_degrees") or d.get("lat") or d.get("latitude")
         lon = d.get("longitude_degrees") or d.get("lon") or d.get("longitude")
