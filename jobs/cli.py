@@ -224,6 +224,10 @@ _SITE_BATCH = _site_option("that site only: its rows are read and replaced, othe
                            "each batched alone)")
 _SITE_CAL = _site_option("that site only (default: every site with data in the window, "
                           "each fitted against its own rows and stored with its site)")
+_IGNORE_PLACE = click.option(
+    "--ignore-place", is_flag=True,
+    help="batch even when most of a site's positions lie outside the config's region "
+         "(default: exit 2 naming the distance; write a config for the place instead)")
 _WAIT = click.option("--wait", is_flag=True,
                      help="wait for another job holding the warehouse (default: exit 2 "
                           "naming it)")
@@ -338,9 +342,10 @@ def ingest(st: _State, paths, from_, to, force, site, executor, wait) -> None:
 @_TO_REQUIRED
 @_SITE_BATCH
 @_EXECUTOR
+@_IGNORE_PLACE
 @_WAIT
 @click.pass_obj
-def batch(st: _State, from_, to, site, executor, wait) -> None:
+def batch(st: _State, from_, to, site, executor, ignore_place, wait) -> None:
     """Run every sensor family's batch over one window; commit it atomically."""
     from jobs.batch import run_batch
     from jobs.progress import terminal_progress
@@ -351,7 +356,8 @@ def batch(st: _State, from_, to, site, executor, wait) -> None:
     progress = terminal_progress()
     with _locked(st, wait), progress or contextlib.nullcontext():
         summary = run_batch(st.cfg, warehouse, start_ns=start, end_ns=end,
-                            executor_kind=executor, progress=progress, site=site)
+                            executor_kind=executor, progress=progress, site=site,
+                            ignore_place=ignore_place)
     click.echo(summary.render())
     sys.exit(summary.exit_code)
 
@@ -361,9 +367,10 @@ def batch(st: _State, from_, to, site, executor, wait) -> None:
 @_TO_REQUIRED
 @_SITE_BATCH
 @_EXECUTOR
+@_IGNORE_PLACE
 @_WAIT
 @click.pass_obj
-def reprocess(st: _State, from_, to, site, executor, wait) -> None:
+def reprocess(st: _State, from_, to, site, executor, ignore_place, wait) -> None:
     """Re-ingest the archived files overlapping a window and re-run its batch."""
     from jobs.progress import terminal_progress
     from jobs.reprocess import run_reprocess
@@ -374,7 +381,8 @@ def reprocess(st: _State, from_, to, site, executor, wait) -> None:
     progress = terminal_progress()
     with _locked(st, wait), progress or contextlib.nullcontext():
         summary = run_reprocess(st.cfg, warehouse, start_ns=start, end_ns=end,
-                                executor_kind=executor, progress=progress, site=site)
+                                executor_kind=executor, progress=progress, site=site,
+                                ignore_place=ignore_place)
     click.echo(summary.render())
     sys.exit(summary.exit_code)
 

@@ -28,6 +28,7 @@ from pipeline.batch.continuation import (
     promise_continuation,
     units_after,
 )
+from pipeline.batch.place import check_places
 from pipeline.batch.plan import (
     family_waves,
     granted,
@@ -62,6 +63,7 @@ def run_batch(
     progress: Any = None,
     site: str | None = None,
     resume: bool = True,
+    ignore_place: bool = False,
 ) -> SitesSummary:
     """Run the batch for [start_ns, end_ns), site by site, and commit each site's window
     atomically per table.
@@ -72,10 +74,15 @@ def run_batch(
     run (default: every registered family); ``progress``: the CLI's
     :class:`~jobs.progress.TerminalProgress` (or None). ``resume``: first run the chains
     killed jobs left (:func:`resume_continuations`); False for a caller that just did
-    (``surveil run``: a chain that failed there is not tried again in the same job)."""
+    (``surveil run``: a chain that failed there is not tried again in the same job).
+    Before any work, every site's positions are checked against the config's region
+    (:func:`~pipeline.batch.place.check_places`: :class:`PlaceError`, exit 2, when most
+    lie outside it), unless ``ignore_place``."""
     if end_ns <= start_ns:
         raise ValueError("--to must be after --from")
     sites = [site] if site is not None else sites_in(warehouse, start_ns, end_ns)
+    if not ignore_place:
+        check_places(warehouse, cfg, sites, start_ns, end_ns)
     out = SitesSummary({}, start_ns, end_ns)
     for name in sites:
         if resume:  # a killed job's chain first

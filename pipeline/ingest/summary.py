@@ -26,6 +26,9 @@ class IngestSummary:
     window: tuple[int, int] | None = None
     committed_files: list[str] = field(default_factory=list)
     overlaps: list[str] = field(default_factory=list)  # "file topic other [a, b)" warnings
+    file_sites: dict[str, str] = field(default_factory=dict)  # committed file -> its site
+    # the place check (pipeline.batch.place): sites whose positions lie outside the region
+    place_warnings: list[str] = field(default_factory=list)
 
     @property
     def rejected(self) -> int:
@@ -79,6 +82,8 @@ class IngestSummary:
             lines.append("  (recorded in source_overlaps: both files are of one site, so "
                          "their rows mix; give each source its own site (MCAP metadata "
                          "`site` or ingest --site) or remove the duplicate file)")
+        for text in self.place_warnings:
+            lines.append(f"WARNING: {text}")
         for path, err in self.failed[:10]:
             lines.append(f"FAILED {path}: {err}")
         if len(self.failed) > 10:
