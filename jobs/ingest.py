@@ -163,6 +163,9 @@ def _handle(
     if m.skipped:
         summary.add(m)
         return False
+    if m.changed_while_read:  # still being written: nothing of it committed
+        summary.changed.append(m.source_file)
+        return False
     staged = m.staged
     if start_ns is None and m.sha256 and m.status in ("ok", "partial"):
         twin = seen.get(m.sha256) or same_content(warehouse, m.sha256, m.source_file)

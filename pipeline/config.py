@@ -131,6 +131,9 @@ class Config:
     # folder); empty: `surveil run FOLDER...` names them
     archive_folders: tuple[str, ...] = setting([], key=("archive", "folders"),
                                                check=_folder_names)
+    # a file `surveil run` finds still being written (an MCAP without its footer, a raw
+    # recording just modified) is read once it has not changed for this long, s
+    archive_settle_s: float = setting(300.0, key=("archive", "settle_s"), ge=0.0)
     execution: ExecutionConfig = setting({}, factory=ExecutionConfig)
     source: str = ""
     # The whole parsed TOML (raw), and each sensor family's section parsed into its own

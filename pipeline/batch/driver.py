@@ -203,6 +203,23 @@ def run_site(
     return summary
 
 
+def retire_window(cfg: Config, warehouse: Path, *, site: str, start_ns: int, end_ns: int
+                  ) -> BatchSummary:
+    """Remove ``site``'s rows of every derived table, its batch rejects and its units
+    (``batch_units``) in ``[start_ns, end_ns)`` widened to the committed units it
+    overlaps: a site left without data there (its files now name another site: a
+    half-written file read before its site metadata was) owns no rows there. One commit
+    per table, as a batch's (:func:`~pipeline.batch.commit.commit_batch` of no unit)."""
+    start_ns, end_ns, _ = owned_window(warehouse, start_ns, end_ns, site,
+                                       unit_is_live(warehouse, cfg, site))
+    summary = BatchSummary(start_ns=start_ns, end_ns=end_ns, site=site)
+    with deferred_interrupts():
+        commit_batch(warehouse, [], summary, FAMILIES, [])
+    with deferred_interrupts():
+        rebuild_views_file(warehouse)
+    return summary
+
+
 def _run_units(executor, units: list[BatchUnit], fams: tuple[Family, ...],
                summary: BatchSummary, progress: Any = None,
                warehouse: Path | None = None) -> list[UnitManifest]:

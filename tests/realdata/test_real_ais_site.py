@@ -19,7 +19,6 @@ from pathlib import Path
 
 import polars as pl
 import pytest
-from site_configs import centroid, expected_km, local_config
 
 from jobs.ingest import run_ingest
 from pipeline.batch import run_batch
@@ -29,6 +28,7 @@ from pipeline.families import load_config
 from pipeline.units import NS
 from pipeline.warehouse.delta import read_table
 from tests.conftest import real_data_dir
+from tests.site_configs import centroid, expected_km, local_config
 
 pytestmark = pytest.mark.realdata
 SITE = "solent"
