@@ -102,6 +102,11 @@ class Place:
         )
 
     def advice(self) -> str:
+        if self.distance_m <= self.radius_m:  # centred on the region, spread far beyond it
+            return ("the positions spread far beyond the region (a feed of several places, "
+                    "a satellite receiver?): declare the area they cover ([region] "
+                    "radius_m, sectors) or give each place its own site and config "
+                    "(surveil config init), or pass --ignore-place to batch anyway")
         return ("the config describes another place: write one for this site's place "
                 "(surveil config init <recordings> --out site.toml, then --config "
                 "site.toml), or pass --ignore-place to batch anyway")

@@ -11,7 +11,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from site_configs import expected_km, moved_config, moved_raw, write_config
 
 from jobs.ingest import run_ingest
 from jobs.simulate import run_simulate
@@ -20,6 +19,7 @@ from pipeline.batch.place import PlaceError, measure, site_place
 from pipeline.families import load_config
 from pipeline.units import NS
 from pipeline.warehouse.delta import read_table
+from tests.site_configs import expected_km, moved_config, moved_raw, write_config
 
 START_NS = 1_768_435_200 * NS  # 2026-01-15T00:00:00Z
 DURATION_S = 600.0
@@ -62,6 +62,12 @@ def test_positions_of_the_region_are_inside_and_far_ones_outside(far):
     s = cfg.radar_sites[0]
     beyond = measure(np.array([s.lat_deg + 0.1]), np.array([s.lon_deg]), cfg)
     assert beyond.outside == 0
+    # a feed of many places centred on the region (a satellite receiver): refused, with
+    # what to declare instead
+    wide = measure(cfg.region.origin_lat_deg + rng.uniform(-10, 10, 500),
+                   cfg.region.origin_lon_deg + rng.uniform(-10, 10, 500), cfg)
+    assert wide.refused and wide.distance_m < cfg.region.radius_m
+    assert "spread far beyond the region" in wide.advice()
 
 
 def test_batch_of_another_place_exits_2_before_any_work_and_ingest_warns(tmp_path, archive,
