@@ -29,6 +29,7 @@ class AuditResult:
         lines += [f"  FAIL {x.requirement} [{x.scope}]: {x.value} {x.unit}, required "
                   f"{x.comparison} {x.limit:g} {x.unit} ({x.samples} samples)"
                   for x in v if x.status == FAIL]
+        lines += [f"WARNING: {w}" for w in self.data.provenance_warnings]
         if self.pdf:
             lines.append(f"pdf: {self.pdf}")
         if self.pdf_skipped:

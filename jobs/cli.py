@@ -224,6 +224,10 @@ _SITE_BATCH = _site_option("that site only: its rows are read and replaced, othe
                            "each batched alone)")
 _SITE_CAL = _site_option("that site only (default: every site with data in the window, "
                           "each fitted against its own rows and stored with its site)")
+_IGNORE_PLACE = click.option(
+    "--ignore-place", is_flag=True,
+    help="batch even when most of a site's positions lie outside the config's region "
+         "(default: exit 2 naming the distance; write a config for the place instead)")
 _WAIT = click.option("--wait", is_flag=True,
                      help="wait for another job holding the warehouse (default: exit 2 "
                           "naming it)")
@@ -339,9 +343,10 @@ def ingest(st: _State, paths, from_, to, force, site, executor, wait) -> None:
 @_TO_REQUIRED
 @_SITE_BATCH
 @_EXECUTOR
+@_IGNORE_PLACE
 @_WAIT
 @click.pass_obj
-def batch(st: _State, from_, to, site, executor, wait) -> None:
+def batch(st: _State, from_, to, site, executor, ignore_place, wait) -> None:
     """Run every sensor family's batch over one window; commit it atomically."""
     from jobs.batch import run_batch
     from jobs.progress import terminal_progress
@@ -352,7 +357,8 @@ def batch(st: _State, from_, to, site, executor, wait) -> None:
     progress = terminal_progress()
     with _locked(st, wait), progress or contextlib.nullcontext():
         summary = run_batch(st.cfg, warehouse, start_ns=start, end_ns=end,
-                            executor_kind=executor, progress=progress, site=site)
+                            executor_kind=executor, progress=progress, site=site,
+                            ignore_place=ignore_place)
     click.echo(summary.render())
     sys.exit(summary.exit_code)
 
@@ -362,9 +368,10 @@ def batch(st: _State, from_, to, site, executor, wait) -> None:
 @_TO_REQUIRED
 @_SITE_BATCH
 @_EXECUTOR
+@_IGNORE_PLACE
 @_WAIT
 @click.pass_obj
-def reprocess(st: _State, from_, to, site, executor, wait) -> None:
+def reprocess(st: _State, from_, to, site, executor, ignore_place, wait) -> None:
     """Re-ingest the archived files overlapping a window and re-run its batch."""
     from jobs.progress import terminal_progress
     from jobs.reprocess import run_reprocess
@@ -375,22 +382,29 @@ def reprocess(st: _State, from_, to, site, executor, wait) -> None:
     progress = terminal_progress()
     with _locked(st, wait), progress or contextlib.nullcontext():
         summary = run_reprocess(st.cfg, warehouse, start_ns=start, end_ns=end,
-                                executor_kind=executor, progress=progress, site=site)
+                                executor_kind=executor, progress=progress, site=site,
+                                ignore_place=ignore_place)
     click.echo(summary.render())
     sys.exit(summary.exit_code)
 
 
 @cli.command("run")
 @click.argument("folders", nargs=-1, type=click.Path())
-@_site_option("the site of files whose MCAP metadata names none, and the only site "
-              "batched (default: such files are 'default'; every site is batched)")
+@_site_option("the site of files whose metadata names none (raw recordings are imported "
+              "with it), and the only site batched (default: such files are 'default'; "
+              "every site is batched)")
 @_EXECUTOR
+@_IGNORE_PLACE
 @_WAIT
 @click.pass_obj
-def run_command(st: _State, folders, site, executor, wait) -> None:
-    """The nightly job: scan the archive folders (FOLDERS, default [archive] folders),
-    ingest new and changed MCAP files, batch the windows they touch (and any a failed
-    run left), record the run in the `runs` table. Nothing new: does nothing, says so."""
+def run_command(st: _State, folders, site, executor, ignore_place, wait) -> None:
+    """The nightly job: scan the archive folders (FOLDERS, default [archive] folders)
+    for MCAP files and raw recordings `surveil import` reads (imported into the
+    warehouse's imported/ folder), ingest the new and changed ones (files still being
+    written wait for [archive] settle_s), batch the windows they touch, any a failed run
+    left and any batched with another config, record the run in the `runs` table.
+    Nothing new: does nothing, says so. Exit codes as ingest's; 2 when a site's
+    positions lie outside the config's region."""
     from jobs.progress import terminal_progress
     from jobs.run import run_nightly
 
@@ -398,6 +412,7 @@ def run_command(st: _State, folders, site, executor, wait) -> None:
     with _locked(st, wait), progress or contextlib.nullcontext():
         summary = run_nightly(st.cfg, st.warehouse, folders=list(folders),
                               executor_kind=executor, progress=progress, site=site,
+                              ignore_place=ignore_place,
                               command=" ".join(["surveil", *sys.argv[1:]]))
     click.echo(summary.render())
     sys.exit(summary.exit_code)
@@ -491,6 +506,24 @@ def report(st: _State, name, from_, to, sector, fmt, params, list_, site) -> Non
         click.echo(f"{name}: no rows. {why}", err=True)
     if fmt != "csv":
         click.echo(format_report(table, fmt, title=name), nl=fmt != "table")
+    _provenance(st, load_report(name, dirs).source_tables(), start, end, site)
+
+
+def _provenance(st: _State, tables: list[str], start: int | None, end: int | None,
+                site: str | None) -> None:
+    """On stderr: the config digests behind the rows of ``tables`` in the window, and a
+    warning when a family's rows there come from several configs (or another config than
+    the current one): pipeline.batch.provenance."""
+    from pipeline.batch.provenance import rows_provenance
+    from pipeline.reports import ALL_TIME
+
+    lines, warnings = rows_provenance(st.existing_warehouse, st.cfg, tables,
+                                      ALL_TIME[0] if start is None else start,
+                                      ALL_TIME[1] if end is None else end, site)
+    for line in lines:
+        click.echo(line, err=True)
+    for line in warnings:
+        click.echo(f"WARNING: {line}", err=True)
 
 
 def _list_reports(dirs: tuple[Path, ...]) -> None:

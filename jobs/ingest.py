@@ -28,6 +28,7 @@ from pipeline.executors import Executor, UnitResult, make_executor
 from pipeline.ingest import FileManifest, IngestContext, IngestSummary, commit_file, ingest_file
 from pipeline.ingest.plan import IngestUsageError, check_sites, expand_paths, plan_units
 from pipeline.signals import deferred_interrupts
+from pipeline.tables import default_site
 from pipeline.warehouse.ledger import same_content
 from pipeline.warehouse.overlaps import record_overlaps, synthetic_time_channels
 from pipeline.warehouse.views import rebuild_views_file
@@ -91,6 +92,7 @@ def run_ingest(
             if start_ns is None:  # whole files: their mcap_index rows are new
                 _warn_overlaps(warehouse, summary)
                 _warn_synthetic(warehouse, summary)
+            _warn_place(warehouse, cfg, summary)
             with deferred_interrupts():
                 rebuild_views_file(warehouse, ctx.views)
     return summary
@@ -116,6 +118,25 @@ def _warn_synthetic(warehouse: Path, summary: IngestSummary) -> None:
                 "start or date>` and ingest that file")
         summary.time_warnings.append(text)
         log.warning("synthetic times: %s", text)
+
+
+def _warn_place(warehouse: Path, cfg: Config, summary: IngestSummary) -> None:
+    """Warn when most positions this ingest brought to a site lie outside the config's
+    region (the batch will refuse them, :mod:`pipeline.batch.place`); nothing is lost."""
+    if not summary.rows.get("ais_reports"):
+        return  # no position this check measures (pipeline.batch.place.POSITION_TABLES)
+    from pipeline.batch.place import files_place  # (the batch engine: imported when used)
+
+    by_site: dict[str, list[str]] = {}
+    for path, site in summary.file_sites.items():
+        by_site.setdefault(site, []).append(path)
+    for site, files in sorted(by_site.items()):
+        place = files_place(warehouse, cfg, site, files)
+        if place.refused:
+            text = (f"{place.describe()}: batch will refuse them; {place.advice()} "
+                    "(the rows are kept)")
+            summary.place_warnings.append(text)
+            log.warning("place check: %s", text)
 
 
 def _executor(executor: Executor | str | None, cfg: Config, n_units: int) -> Executor:
@@ -155,6 +176,9 @@ def _handle(
     if m.skipped:
         summary.add(m)
         return False
+    if m.changed_while_read:  # still being written: nothing of it committed
+        summary.changed.append(m.source_file)
+        return False
     staged = m.staged
     if start_ns is None and m.sha256 and m.status in ("ok", "partial"):
         twin = seen.get(m.sha256) or same_content(warehouse, m.sha256, m.source_file)
@@ -173,4 +197,5 @@ def _handle(
                 os.remove(sf.path)  # still there only when the commit did not take it
     summary.add(m)
     summary.committed_files.append(m.source_file)
+    summary.file_sites[m.source_file] = m.site or default_site()
     return True

@@ -12,7 +12,8 @@ from typing import Any
 
 from jobs.common import UsageError
 from jobs.ingest import IngestSummary, run_ingest
-from pipeline.batch import SitesSummary, run_batch
+from pipeline.batch import SitesSummary, run_batch, sites_in
+from pipeline.batch.place import check_places
 from pipeline.config import Config
 from pipeline.warehouse.ledger import files_overlapping
 
@@ -39,13 +40,18 @@ class ReprocessSummary:
 
 def run_reprocess(
     cfg: Config, warehouse: Path, *, start_ns: int, end_ns: int, executor_kind: str | None = None,
-    progress: Any = None, site: str | None = None,
+    progress: Any = None, site: str | None = None, ignore_place: bool = False,
 ) -> ReprocessSummary:
     """Re-ingest the files overlapping the window, then batch it. ``site``: that site's
     files and rows only (default: every site, each batched alone). ``progress``: the
-    CLI's :class:`~jobs.progress.TerminalProgress` (or None)."""
+    CLI's :class:`~jobs.progress.TerminalProgress` (or None). The place check
+    (:mod:`pipeline.batch.place`) runs first, before the re-ingest, unless
+    ``ignore_place``."""
     if end_ns <= start_ns:
         raise UsageError("--to must be after --from")
+    if not ignore_place:
+        sites = [site] if site is not None else sites_in(warehouse, start_ns, end_ns)
+        check_places(warehouse, cfg, sites, start_ns, end_ns)
     files = files_overlapping(warehouse, start_ns, end_ns, site)
     present = [f for f in files if Path(f).is_file()]
     missing = [f for f in files if not Path(f).is_file()]
@@ -59,5 +65,6 @@ def run_reprocess(
             on_result=progress.ingest_result if progress is not None else None,
         )
     batch = run_batch(cfg, warehouse, start_ns=start_ns, end_ns=end_ns,
-                      executor_kind=executor_kind, progress=progress, site=site)
+                      executor_kind=executor_kind, progress=progress, site=site,
+                      ignore_place=True)  # checked above
     return ReprocessSummary(ingest=ingest, batch=batch, missing_files=missing)

@@ -35,10 +35,19 @@ __all__ = ["Config", "ConfigError", "load_config"]
 
 @dataclass(frozen=True)
 class RegionConfig:
+    """The site's place: its name and the origin of the regional frame (local ENU).
+    ``radius_m``: positions farther than this from the origin and in none of the site's
+    declared areas (sectors, water, radar coverage) lie outside the region; batch
+    refuses a site whose positions are more than ``max_outside_share`` outside
+    (``pipeline.batch.place``): the config then describes another place (the tangent
+    plane's north deviates from true north by about 0.9 deg at 100 km east at 46 N)."""
+
     name: str = text()
     origin_lat_deg: float = latitude()
     origin_lon_deg: float = longitude()
     origin_height_m: float = height(0.0)
+    radius_m: float = positive(100_000.0)
+    max_outside_share: float = setting(0.5, ge=0.0, le=1.0)
 
 
 @dataclass(frozen=True)
@@ -122,6 +131,9 @@ class Config:
     # folder); empty: `surveil run FOLDER...` names them
     archive_folders: tuple[str, ...] = setting([], key=("archive", "folders"),
                                                check=_folder_names)
+    # a file `surveil run` finds still being written (an MCAP without its footer, a raw
+    # recording just modified) is read once it has not changed for this long, s
+    archive_settle_s: float = setting(300.0, key=("archive", "settle_s"), ge=0.0)
     execution: ExecutionConfig = setting({}, factory=ExecutionConfig)
     source: str = ""
     # The whole parsed TOML (raw), and each sensor family's section parsed into its own

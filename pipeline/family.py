@@ -39,6 +39,10 @@ A family (``pipeline.maritime``, ``pipeline.airfield``, ``pipeline.nav``,
   ``seam_columns``: the columns ``unit_seam`` reads of each table ({table: columns};
   a table not named: every column): those committed rows are read with these only (the
   maritime seam reads 4 of the 19 columns of 10 minutes of associations: ~6x less work).
+- ``config_fields``: the fields of the core :class:`~pipeline.config.Config` its stage
+  reads (besides its own sections): with them, the digest each committed unit records
+  (``pipeline.batch.provenance``), so a config change re-batches exactly the families
+  whose config changed.
 
 Nothing here reads files: the job reads the inputs, runs the stage in a worker and
 commits what it returns.
@@ -122,3 +126,4 @@ class Family:
     join_units: Callable[[Sequence[Any]], list[Relabel | None]] | None = None
     stitch_lookback_s: float = 0.0
     seam_columns: Mapping[str, tuple[str, ...]] | None = None
+    config_fields: tuple[str, ...] = ("region", "radar_sites", "ais", "fairway_legs", "sectors")

@@ -113,6 +113,7 @@ FAMILY = Family(
     outputs=OUTPUTS,
     stage=stage,
     unit_s=UNIT_S,
+    config_fields=(),  # what its stage reads of the core config
 )
 
 

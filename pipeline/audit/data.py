@@ -15,6 +15,7 @@ from typing import Any
 import duckdb
 import pyarrow as pa
 
+from pipeline.batch.provenance import rows_provenance
 from pipeline.catalog import explain_empty_report
 from pipeline.config import Config
 from pipeline.reports import load_report, run_report, site_geometry
@@ -43,6 +44,10 @@ class AuditData:
     empty_reasons: Mapping[str, str]
     verdicts: tuple[Verdict, ...]
     params: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
+    # the config digests behind the rows (pipeline.batch.provenance) and the warnings
+    # when one family's rows in the window come from several configs
+    provenance: tuple[str, ...] = ()
+    provenance_warnings: tuple[str, ...] = ()
 
     def table(self, name: str) -> pa.Table:
         return self.reports[name]
@@ -82,6 +87,9 @@ def collect(con: duckdb.DuckDBPyConnection, cfg: Config, warehouse: Path, *, sta
         legs=[leg.leg_id for leg in cfg.fairway_legs],
         airfield=airfield and sector is None,
     )
+    derived = [t for name in AUDIT_REPORTS for t in load_report(name).source_tables()]
+    lines, warnings = rows_provenance(warehouse, cfg, derived, start_ns, end_ns, site)
     return AuditData(cfg=cfg, warehouse=warehouse, start_ns=start_ns, end_ns=end_ns,
                      sector=sector, reports=reports, empty_reasons=reasons,
-                     verdicts=tuple(verdicts), params=params)
+                     verdicts=tuple(verdicts), params=params, provenance=tuple(lines),
+                     provenance_warnings=tuple(warnings))

@@ -229,6 +229,9 @@ def render(data: AuditData, *, title: str = "") -> str:
         f"config <code>{html.escape(data.cfg.source or '(built in)')}</code> · warehouse "
         f"<code>{html.escape(str(data.warehouse))}</code> · surveil {pkg_version} · written "
         f"{datetime.now(UTC):%Y-%m-%d %H:%M} UTC</p>",
+        *(f'<p class="meta provenance">{html.escape(line)}</p>' for line in data.provenance),
+        *(f'<div class="empty provenance-warning">Warning: {html.escape(line)}</div>'
+          for line in data.provenance_warnings),
         "<nav>" + "".join(f'<a href="#{s.anchor}">{html.escape(s.title)}</a>' for s in secs)
         + "</nav>",
         "<h2 id='verdicts'>Requirements</h2>",

@@ -20,6 +20,13 @@ print. Each guarantee is kept in one module:
   the commit so a killed job's chain is finished by the next batch;
 - :mod:`~pipeline.batch.commit`: **one window, one commit**: one Delta transaction per
   derived table, by the driver alone, between a pending marker and its removal;
+- :mod:`~pipeline.batch.place`: **the config describes the recordings' place**: each
+  site's positions against the region, refused (exit 2) before any work when most lie
+  outside it;
+- :mod:`~pipeline.batch.provenance`: **which config computed the rows**: each committed
+  unit's config digest, the windows of another config, what reports name;
+- :mod:`~pipeline.batch.pending`: what a nightly run must batch (files no unit covers,
+  units of another config);
 - :mod:`~pipeline.batch.driver`: the order of it all, site by site
   (:func:`run_batch`);
 - :mod:`~pipeline.batch.summary`: what a batch did (:class:`BatchSummary`,

@@ -18,9 +18,10 @@ from pathlib import Path
 import polars as pl
 
 from pipeline import tables
+from pipeline.batch.provenance import family_digest
 from pipeline.batch.summary import BatchSummary
 from pipeline.batch.worker import BatchUnit, UnitManifest
-from pipeline.families import FAMILIES
+from pipeline.families import FAMILIES, family
 from pipeline.family import Family
 from pipeline.warehouse import pending
 from pipeline.warehouse.crashpoints import crash_point
@@ -74,12 +75,17 @@ def commit_batch(warehouse: Path, manifests: list[UnitManifest], summary: BatchS
 
 
 def _record_units(warehouse: Path, units: list[BatchUnit], summary: BatchSummary) -> None:
-    """The window's units replace those of ``batch_units`` inside it (one commit)."""
+    """The window's units replace those of ``batch_units`` inside it (one commit), each
+    with the digest of the config its family ran with (``config_digest``)."""
     now = time.time_ns()
+    # each unit's config digest (pipeline.batch.provenance): the config it ran with
+    digests = {(u.family, id(u.cfg)): family_digest(u.cfg, family(u.family)) for u in units}
     rows = pl.DataFrame(
         {"start_ns": [u.start_ns for u in units], "end_ns": [u.end_ns for u in units],
-         "family": [u.family for u in units]},
-        schema={"start_ns": pl.Int64, "end_ns": pl.Int64, "family": pl.String},
+         "family": [u.family for u in units],
+         "config_digest": [digests[(u.family, id(u.cfg))] for u in units]},
+        schema={"start_ns": pl.Int64, "end_ns": pl.Int64, "family": pl.String,
+                "config_digest": pl.String},
     ).with_columns(window_start_ns=pl.lit(summary.start_ns, pl.Int64),
                    window_end_ns=pl.lit(summary.end_ns, pl.Int64),
                    committed_at_ns=pl.lit(now, pl.Int64))

@@ -28,6 +28,7 @@ from pipeline.batch.continuation import (
     promise_continuation,
     units_after,
 )
+from pipeline.batch.place import check_places
 from pipeline.batch.plan import (
     family_waves,
     granted,
@@ -62,6 +63,7 @@ def run_batch(
     progress: Any = None,
     site: str | None = None,
     resume: bool = True,
+    ignore_place: bool = False,
 ) -> SitesSummary:
     """Run the batch for [start_ns, end_ns), site by site, and commit each site's window
     atomically per table.
@@ -72,10 +74,15 @@ def run_batch(
     run (default: every registered family); ``progress``: the CLI's
     :class:`~jobs.progress.TerminalProgress` (or None). ``resume``: first run the chains
     killed jobs left (:func:`resume_continuations`); False for a caller that just did
-    (``surveil run``: a chain that failed there is not tried again in the same job)."""
+    (``surveil run``: a chain that failed there is not tried again in the same job).
+    Before any work, every site's positions are checked against the config's region
+    (:func:`~pipeline.batch.place.check_places`: :class:`PlaceError`, exit 2, when most
+    lie outside it), unless ``ignore_place``."""
     if end_ns <= start_ns:
         raise ValueError("--to must be after --from")
     sites = [site] if site is not None else sites_in(warehouse, start_ns, end_ns)
+    if not ignore_place:
+        check_places(warehouse, cfg, sites, start_ns, end_ns)
     out = SitesSummary({}, start_ns, end_ns)
     for name in sites:
         if resume:  # a killed job's chain first
@@ -193,6 +200,23 @@ def run_site(
     shutil.rmtree(staging, ignore_errors=True)
     with contextlib.suppress(OSError):  # only when empty: another job may be staging
         (warehouse / "_staging").rmdir()
+    return summary
+
+
+def retire_window(cfg: Config, warehouse: Path, *, site: str, start_ns: int, end_ns: int
+                  ) -> BatchSummary:
+    """Remove ``site``'s rows of every derived table, its batch rejects and its units
+    (``batch_units``) in ``[start_ns, end_ns)`` widened to the committed units it
+    overlaps: a site left without data there (its files now name another site: a
+    half-written file read before its site metadata was) owns no rows there. One commit
+    per table, as a batch's (:func:`~pipeline.batch.commit.commit_batch` of no unit)."""
+    start_ns, end_ns, _ = owned_window(warehouse, start_ns, end_ns, site,
+                                       unit_is_live(warehouse, cfg, site))
+    summary = BatchSummary(start_ns=start_ns, end_ns=end_ns, site=site)
+    with deferred_interrupts():
+        commit_batch(warehouse, [], summary, FAMILIES, [])
+    with deferred_interrupts():
+        rebuild_views_file(warehouse)
     return summary
 
 

@@ -58,6 +58,9 @@ class GapsConfig:
     constraint_mode: str = setting("redraw", choices=("redraw", "weight"))
     redraw_tries: int = setting(10, ge=0)
     batch_gaps: int = count(32)
+    # a vessel whose last position before a gap lies farther than this outside the
+    # admissible area gets no forecast (its particles would start outside the water)
+    water_margin_m: float = setting(1000.0, ge=0.0)
     admissible: tuple[NamedPolygon, ...] = setting([])
     islands: tuple[NamedPolygon, ...] = setting([])
     zones: tuple[NamedPolygon, ...] = setting([])

@@ -181,10 +181,11 @@ def forecast_gaps(
     obs = gap_messages(ais_reports, system_tracks, ais=cfg.ais, gaps=g, region=cfg.region,
                        data_end_ns=data_end)
     gaps = detect_gaps(obs, threshold_s=g.gap_threshold_s, data_end_ns=data_end)
+    geometry = build_geometry(g, cfg.region)
+    gaps = in_water(gaps, obs, geometry, g.water_margin_m)
     plan = plan_forecasts(gaps, g, start_ns=start_ns, end_ns=end_ns).with_row_index("plan_row")
     if plan.height == 0:
         return empty_forecasts()
-    geometry = build_geometry(g, cfg.region)
     refs = references(plan, obs, truth)
     rx, ry = frames.geodetic_to_enu(
         refs["true_lat_deg"].fill_null(np.nan).to_numpy(),
@@ -213,6 +214,25 @@ def forecast_gaps(
         records = [run(b, s) for b, s in zip(batches, streams, strict=True)]
     stats = {k: np.concatenate([r[k] for r in records]) for k in records[0]}
     return _assemble(plan, gaps, leads, refs, ref, stats, g, geometry, cfg)
+
+
+def in_water(gaps: pl.DataFrame, obs: pl.DataFrame, geometry: GapsGeometry,
+             margin_m: float) -> pl.DataFrame:
+    """The gaps of vessels inside the configured water: the last message before the gap
+    lies in the admissible area, or at most ``margin_m`` outside it (a port at the
+    water's edge). A vessel elsewhere (another sea: AIS of a place the config does not
+    describe, a receiver hearing ships far inland) has no admissible start for its
+    particles: its forecasts would all be ``infeasible`` (18,543 of a real AIS day's
+    with the demo config, 204 of its 219 s of batch). Every gap without a constraint."""
+    if geometry.water is None or gaps.height == 0:
+        return gaps
+    last = obs.select("mmsi", pl.col("time_ns").alias("gap_start_ns"), "x_enu_m",
+                      "y_enu_m").unique(["mmsi", "gap_start_ns"], keep="first",
+                                        maintain_order=True)
+    at = gaps.join(last, on=["mmsi", "gap_start_ns"], how="left", maintain_order="left")
+    keep = geometry.near(at["x_enu_m"].fill_null(np.nan).to_numpy(),
+                         at["y_enu_m"].fill_null(np.nan).to_numpy(), margin_m)
+    return gaps.filter(pl.Series(keep))
 
 
 def _last_message_ns(ais_reports: pl.DataFrame, system_tracks: pl.DataFrame | None) -> int | None:

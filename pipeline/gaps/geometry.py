@@ -33,6 +33,17 @@ class GapsGeometry:
             return np.ones(np.shape(x), bool)
         return shapely.contains_xy(self.water, x, y)
 
+    def near(self, x: np.ndarray, y: np.ndarray, margin_m: float) -> np.ndarray:
+        """The points (1-d) lie in the admissible area or at most ``margin_m`` outside it
+        (every point when there is no constraint)."""
+        if self.water is None:
+            return np.ones(np.shape(x), bool)
+        inside = shapely.contains_xy(self.water, x, y)
+        out = np.flatnonzero(~inside)
+        if out.size:
+            inside[out] = shapely.dwithin(self.water, shapely.points(x[out], y[out]), margin_m)
+        return inside
+
     def zone_index(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """Index of the first zone containing each point, ``len(zones)`` when none."""
         idx = np.full(np.shape(x), len(self.zones))

@@ -83,4 +83,5 @@ FAMILY = Family(
     # hourly units: each reads its own lookback and horizon (inputs), so a day is not
     # one worker holding a day of fused tracks (~2.6 GB for a 1,000-ship region day)
     unit_s=3600,
+    config_fields=("region", "ais", "sectors"),  # what its stage reads of the core config
 )

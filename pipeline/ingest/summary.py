@@ -27,6 +27,10 @@ class IngestSummary:
     committed_files: list[str] = field(default_factory=list)
     overlaps: list[str] = field(default_factory=list)  # "file topic other [a, b)" warnings
     time_warnings: list[str] = field(default_factory=list)  # files with synthetic times
+    file_sites: dict[str, str] = field(default_factory=dict)  # committed file -> its site
+    # the place check (pipeline.batch.place): sites whose positions lie outside the region
+    place_warnings: list[str] = field(default_factory=list)
+    changed: list[str] = field(default_factory=list)  # changed while read: not committed
 
     @property
     def rejected(self) -> int:
@@ -36,8 +40,10 @@ class IngestSummary:
     @property
     def exit_code(self) -> int:
         """0: everything read was used (all files ok or skipped, no rejects row); 1: some
-        row was rejected, some file partial/quarantined, or a unit failed."""
-        bad = self.files_partial or self.files_quarantined or self.failed or self.rejected
+        row was rejected, some file partial/quarantined or changed while it was read, or
+        a unit failed."""
+        bad = (self.files_partial or self.files_quarantined or self.failed or self.rejected
+               or self.changed)
         return 1 if bad else 0
 
     def add(self, m: FileManifest) -> None:
@@ -84,6 +90,11 @@ class IngestSummary:
             lines.append(f"WARNING: synthetic times: {text}")
         if len(self.time_warnings) > 10:
             lines.append(f"... and {len(self.time_warnings) - 10} more files with synthetic times")
+        for path in self.changed[:10]:
+            lines.append(f"NOT INGESTED {path}: changed while being read (still being "
+                         "written?); read again when the recorder has finished it")
+        for text in self.place_warnings:
+            lines.append(f"WARNING: {text}")
         for path, err in self.failed[:10]:
             lines.append(f"FAILED {path}: {err}")
         if len(self.failed) > 10:

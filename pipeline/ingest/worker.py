@@ -96,6 +96,9 @@ class FileManifest:
     bytes_read: int = 0
     chunks_decompressed: int = 0
     site: str = ""  # the site stamped on every row of the file
+    # the file's size or mtime changed while it was read (still being written): nothing
+    # of it is committed; a later run reads it again (issue 40)
+    changed_while_read: bool = False
 
 
 def file_site(unit: IngestUnit) -> str:
@@ -109,7 +112,8 @@ def ingest_file(unit: IngestUnit, ctx: IngestContext) -> FileManifest:
     """Decode one file and stage its rows (runs in a worker; commits nothing). ``ctx``:
     the worker process's context (entered), whose buffers and threads it uses."""
     path = Path(unit.path)
-    size = path.stat().st_size
+    before = path.stat()
+    size = before.st_size
     sha: str | Future[str] = ""
     if not unit.windowed:  # a windowed run never uses the hash: do not read the whole file
         prior = None if unit.force else lookup(unit.warehouse, unit.path)
@@ -125,10 +129,20 @@ def ingest_file(unit: IngestUnit, ctx: IngestContext) -> FileManifest:
         else:  # hash while decoding (hashlib releases the GIL)
             sha = ctx.hasher.submit(lambda: file_fingerprint(path)[1])  # type: ignore[union-attr]
     try:
-        return _decode_and_stage(unit, ctx, path, size, sha)
+        m = _decode_and_stage(unit, ctx, path, size, sha)
     finally:
         if isinstance(sha, Future) and not sha.cancel():
             wait([sha])  # the file is not read any more once the unit returns
+    after = path.stat()
+    if (after.st_size, after.st_mtime_ns) != (before.st_size, before.st_mtime_ns):
+        # still being written: what was read is a moment of it (its site may be unread,
+        # its end cut off); the driver commits none of it
+        for sf in (sf for files in m.staged.values() for sf in files):
+            Path(sf.path).unlink(missing_ok=True)
+        return FileManifest(unit.path, after.st_size, "", status=m.status,
+                            error="changed while being read (still being written?)",
+                            changed_while_read=True, site=m.site)
+    return m
 
 
 def _decode_and_stage(

@@ -12,6 +12,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from mcap.reader import make_reader
+from mcap.records import DataEnd, Footer, Metadata
+from mcap.stream_reader import StreamReader
 
 METADATA_KEY = "site"
 RECORD_PREFIX = "surveil"
@@ -22,18 +24,41 @@ class SiteConflictError(ValueError):
 
 
 def declared_site(path: Path | str) -> str | None:
-    """The site ``path``'s metadata names, or None (none named, or no readable summary:
-    a damaged file's problems are the ingest reader's to report)."""
+    """The site ``path``'s metadata names, or None (none named, or nothing readable: a
+    damaged file's problems are the ingest reader's to report). Read from the summary's
+    metadata index; a file without a summary (still being written, or cut off) is
+    scanned for its metadata records instead (:func:`_scanned_metadata`: a writer puts
+    them ahead of the messages, so a half-written file names its site too)."""
     names: set[str] = set()
     try:
         with open(path, "rb") as f:
-            for record in make_reader(f).iter_metadata():
-                if record.name == RECORD_PREFIX or record.name.startswith(RECORD_PREFIX + "."):
-                    value = record.metadata.get(METADATA_KEY)
-                    if value:
-                        names.add(value)
+            records = list(make_reader(f).iter_metadata())
     except Exception:  # untrusted bytes: the ingest reader reports the damage, not us
-        return None
+        records = []
+    if not records:
+        records = _scanned_metadata(Path(path))
+    for record in records:
+        if record.name == RECORD_PREFIX or record.name.startswith(RECORD_PREFIX + "."):
+            value = record.metadata.get(METADATA_KEY)
+            if value:
+                names.add(value)
     if len(names) > 1:
         raise SiteConflictError(f"{path}: its metadata names sites {sorted(names)}")
     return names.pop() if names else None
+
+
+def _scanned_metadata(path: Path) -> list[Metadata]:
+    """The metadata records of a file's data section, read record by record without
+    decompressing a chunk (a file without a summary: the metadata index is in the
+    summary); as many as are readable before any damage or the cut-off end."""
+    found: list[Metadata] = []
+    try:
+        with open(path, "rb") as f:
+            for record in StreamReader(f, skip_magic=False, emit_chunks=True).records:
+                if isinstance(record, Metadata):
+                    found.append(record)
+                elif isinstance(record, DataEnd | Footer):
+                    break
+    except Exception:  # the cut-off end of a file being written, or damage: stop there
+        pass
+    return found

@@ -193,6 +193,13 @@ class ChannelIntegrityConfig:
       not detected by it, for more than ``coverage_miss_share`` of them;
     - ``scan_gap_factor``: a site whose last scan ended more than this many scan periods
       ago is in outage (missing scans);
+    - ``witness_s``: a radar takes part in the AIS checks of a sector (is a witness that a
+      transponder there has a radar track, or none) only while it publishes scans and has
+      detected ``coverage_min_targets`` ships (distinct tracks, each in ``readmit_run``
+      epochs) in that sector within this long: a declared radar without data, or a
+      sector it does not see, is out of service there, not evidence against every
+      transponder in its range (issue 35). At most the unit's lead-in (``unit_settle_s +
+      identity_window_s``) for results that do not depend on where units are cut;
     - ``unit_settle_s``: how long a batch work unit tracks before its window (besides the
       identity vote's window) so that the pairings, the exclusions and the AIS reference
       tracks enter the window as they would in one pass: the batch's results then do not
@@ -219,6 +226,7 @@ class ChannelIntegrityConfig:
     coverage_min_targets: int = count(2)
     coverage_miss_share: float = probability(0.5)
     scan_gap_factor: float = setting(1.5, gt=1.0)
+    witness_s: float = positive(300.0)
     unit_settle_s: float = setting(300.0, ge=0.0, le=3600.0)
 
 

@@ -54,4 +54,5 @@ FAMILY = Family(
     outputs=OUTPUTS,
     stage=stage,
     unit_s=None,
+    config_fields=("region", "sectors"),  # what its stage reads of the core config
 )
