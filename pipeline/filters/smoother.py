@@ -27,7 +27,9 @@ et al. 2001 §11.6) of two such models, ``q_low`` (steady course and speed) and
 ``q_high`` (turning, accelerating), with sojourn times ``sojourn_*_s`` (Markov switching
 P(stay) = exp(−h/τ)), gives each report's probability of the manoeuvre model; the same
 IMM run backwards in time (a CV model is time-reversible: t → −t, v → −v) gives it from
-the future, since a forward IMM notices a manoeuvre only after it began. The
+the future, since a forward IMM notices a manoeuvre only after it began
+(:func:`manoeuvre_probability`; the cheaper stand-in :func:`lookahead_max` moves the
+forward probability back over the few reports the forward filter needs). The
 manoeuvre probability of an interval is the larger of the two at its ends, and the final
 smoother is the RTS smoother of the linear model whose interval k → k+1 has
 q_k = q_low + μ_k (q_high − q_low). We smooth this linear model rather than

@@ -11,10 +11,13 @@ same system track and epoch (source = site_id):
   reference for that system track's radar points at that epoch. reference_id = vessel_id,
   reference_mmsi = the vessel's MMSI (null: no AIS aboard);
 - otherwise reference ``reconstructed`` (issue 37, :mod:`pipeline.maritime.reference`):
-  each AIS vessel's smoothed trajectory with its own covariance. A system track takes a
-  vessel for its points when within the gate most of the time both exist
-  (:func:`pipeline.maritime.reference.match_points`), so a ship without AIS passing one
-  with AIS is not scored against it; its radar points take the fused point's reference.
+  each AIS vessel's smoothed trajectory with its own covariance. Each radar's local
+  track takes a vessel when within the gate most of the time both exist
+  (:func:`pipeline.maritime.reference.match_points`): a radar's tracker follows one
+  ship, a system track may stray from one ship to another. A fused point takes the
+  vessel of its radar members (:func:`pipeline.maritime.reference.match_by_members`),
+  so a ship without AIS passing one with AIS, or a system track straying onto it, is
+  not scored against it; the radar points take the fused point's reference.
   reference_id = reference_mmsi = MMSI; ``reference_p95_m`` is the reference's own 95 %
   horizontal error at the point, ``reference_var_m2`` the trace of its covariance;
 - (without truth and without a reconstructed reference, the older ``ais`` reference:
@@ -48,7 +51,7 @@ from pipeline.frames import geodetic_to_enu
 from pipeline.geometry import assign_sectors, position_covariance
 from pipeline.maritime.config import ReferenceConfig
 from pipeline.maritime.identity import ais_at_epochs
-from pipeline.maritime.reference import Reference, match_points
+from pipeline.maritime.reference import Reference, match_by_members, match_points
 from pipeline.maritime.sync import NS, expand_ranges
 
 MIN_DECOMPOSITION_SPEED_MPS = 0.5
@@ -186,14 +189,19 @@ def _reconstructed_errors(fused: pl.DataFrame, radar: pl.DataFrame, ref: Referen
     ft = fused["time_ns"].to_numpy()
     fs = fused["system_track_id"].to_numpy()
     at = ref.at_epochs(np.unique(ft))
-    P_xx, P_yy, P_xy = position_covariance(fused)
-    ref_row = match_points(
-        ft, fused["x_enu_m"].to_numpy(), fused["y_enu_m"].to_numpy(), fs, P_xx, P_yy, P_xy,
-        at, max_distance_m=rcfg.max_distance_m,
-        gate_d2=float(chi2_ppf(rcfg.match_gate_probability, 2)), min_share=rcfg.min_match_share)
     rt = radar["time_ns"].to_numpy()
     rs = radar["system_track_id"].to_numpy()
     f_of_r = _row_of(ft, fs, rt, rs)
+    # each radar's local track takes a target, the fused point its members' target
+    r_xx, r_yy, r_xy = position_covariance(radar)
+    track_key = (radar["site_id"].rank("dense").cast(pl.Int64) * 10**12
+                 + radar["local_track_id"]).to_numpy()
+    owner = match_points(
+        rt, radar["x_enu_m"].to_numpy(), radar["y_enu_m"].to_numpy(), track_key, r_xx, r_yy,
+        r_xy, at, max_distance_m=rcfg.max_distance_m,
+        gate_d2=float(chi2_ppf(rcfg.match_gate_probability, 2)), min_share=rcfg.min_match_share)
+    ref_row = match_by_members(f_of_r, owner, fused.height, ft, fused["x_enu_m"].to_numpy(),
+                               fused["y_enu_m"].to_numpy(), at)
     cols = {k: at[k].to_numpy() for k in ("x", "y", "vx", "vy", "var_x", "var_y", "p95_m")}
     parts = []
     for pts, f_rows, source in (
