@@ -54,6 +54,7 @@ class McUnit:
     duration_s: float
     clean: bool = False
     start_ns: int = DEFAULT_START_NS
+    scenes: tuple[str, ...] = ("maritime", "airfield")
 
 
 def _con(frames: dict[str, pl.DataFrame]) -> duckdb.DuckDBPyConnection:
@@ -163,13 +164,16 @@ def _row(scenario: str, seed: int, metric: str, scope: str, source: str, truth: 
 
 def run_seed(unit: McUnit) -> pl.DataFrame:
     """Every figure of one seed, truth-based beside reference-based."""
-    return pl.DataFrame(_maritime(unit) + _airfield(unit), infer_schema_length=None)
+    rows = (_maritime(unit) if "maritime" in unit.scenes else []) + (
+        _airfield(unit) if "airfield" in unit.scenes else [])
+    return pl.DataFrame(rows, infer_schema_length=None)
 
 
 def run_montecarlo(cfg: Config, *, seeds: range | list[int], duration_s: float = 3600.0,
-                   clean: bool = False, executor: str = "process") -> pl.DataFrame:
+                   clean: bool = False, executor: str = "process",
+                   scenes: tuple[str, ...] = ("maritime", "airfield")) -> pl.DataFrame:
     """Every seed's figures, concatenated; raises if a seed fails."""
-    units = [McUnit(cfg, int(s), duration_s, clean) for s in seeds]
+    units = [McUnit(cfg, int(s), duration_s, clean, scenes=scenes) for s in seeds]
     ex = make_executor(executor, min(cfg.execution.max_workers, len(units)),
                        cfg.execution.threads_per_worker)
     parts = []

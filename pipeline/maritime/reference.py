@@ -190,6 +190,8 @@ def _segments(key: np.ndarray, t_ns: np.ndarray, max_gap_s: float,
               extra_breaks: np.ndarray | None = None) -> np.ndarray:
     """Segment code of rows sorted by (key, time): a new one at each key change, gap >
     max_gap_s or extra break."""
+    if key.size == 0:
+        return np.zeros(0, np.int64)
     brk = np.r_[True, (key[1:] != key[:-1]) | (np.diff(t_ns) > max_gap_s * NS)]
     if extra_breaks is not None:
         brk |= extra_breaks
