@@ -19,8 +19,11 @@ referenced target while it lies within the radar's range:
   updates less than T / 2 apart are one scan.
 - every update and every missed scan is placed in the cell (range bin, azimuth bin of
   the radar, sector) of the reference at its time: updates at their sweep time, missed
-  scans evenly inside their gap. Summing the cells per radar gives PD per sector
-  (``detection_by_sector``), per cell the coverage map (``radar_coverage``).
+  scans evenly inside their gap. (Positions here are the reference's knots interpolated
+  linearly, :meth:`~pipeline.maritime.reference.Reference.position`: metres are enough
+  for kilometre cells and a 500 m gate, at a fraction of the exact smoother's cost.)
+  Summing the cells per radar gives PD per sector (``detection_by_sector``), per cell
+  the coverage map (``radar_coverage``).
 
 Counting on update intervals rather than on a fixed scan grid keeps a real radar's
 slowly drifting rotation period from turning one late sweep into a miss and an extra
@@ -119,8 +122,8 @@ def radar_detection(
     n_slots = (last[pair_row] - first[pair_row]) // T_ns + 1
     pid, k = expand_ranges(np.zeros(pair_site.size, np.int64), n_slots)
     g_t = first[pair_row[pid]] + k * T_ns[pid]
-    g = reference.at(pair_row[pid], g_t)
-    g_in = np.hypot(g["x"] - sx[pair_site[pid]], g["y"] - sy[pair_site[pid]]) \
+    gx, gy = reference.position(pair_row[pid], g_t)
+    g_in = np.hypot(gx - sx[pair_site[pid]], gy - sy[pair_site[pid]]) \
         <= max_range[pair_site[pid]]
     # runs of in-range slots per pair: run id per slot (-1 out of range)
     brk = np.r_[True, (pid[1:] != pid[:-1]) | (g_in[1:] != g_in[:-1])]
@@ -163,13 +166,13 @@ def radar_detection(
         return empty_detection()
     p_all = run_pair[r_all]
     s_all, row_all = pair_site[p_all], pair_row[p_all]
-    pos = reference.at(row_all, t_all)
-    dx, dy = pos["x"] - sx[s_all], pos["y"] - sy[s_all]
+    px, py = reference.position(row_all, t_all)
+    dx, dy = px - sx[s_all], py - sy[s_all]
     rng = np.hypot(dx, dy)
     az = np.degrees(np.arctan2(dx, dy)) % 360.0
     cells = pl.DataFrame({
         "site_id": np.array(site_ids, dtype=object)[s_all],
-        "x_enu_m": pos["x"], "y_enu_m": pos["y"],
+        "x_enu_m": px, "y_enu_m": py,
         "range_bin_m": np.floor(rng / range_bin_m) * range_bin_m,
         "azimuth_bin_deg": np.floor(az / azimuth_bin_deg) * azimuth_bin_deg,
         "reference_id": reference.target[row_all], "detected": det,
@@ -223,8 +226,8 @@ def _updates(rep: pl.DataFrame, reference: Reference, site_ids: list[str],
     ok = (row >= 0) & (site >= 0)
     t, row, site = t[ok], row[ok], site[ok]
     x, y = rep["x_enu_m"].to_numpy()[ok], rep["y_enu_m"].to_numpy()[ok]
-    pos = reference.at(row, t)
-    near = np.hypot(x - pos["x"], y - pos["y"]) <= max_distance_m
+    px, py = reference.position(row, t)
+    near = np.hypot(x - px, y - py) <= max_distance_m
     t, row, site = t[near], row[near], site[near]
     # pair index of (site, row): pairs are sorted by (site, row)
     key = pair_site * (reference.rows + 1) + pair_row

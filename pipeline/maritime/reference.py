@@ -122,6 +122,33 @@ class Reference:
         return {"x": p[:, 0], "y": p[:, 1], "vx": v[:, 0], "vy": v[:, 1],
                 "var_x": a[:, 0], "var_y": a[:, 1], "p95_m": sm.radial_p95(a[:, 0], a[:, 1])}
 
+    def position(self, row: np.ndarray, t_ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The reference position (x, y, m) of rows ``row`` at ``t_ns`` interpolated
+        linearly between its smoothed knots (moved on with the knot velocity outside the
+        span): the cheap form of :meth:`at` for what needs metres, not centimetres (the
+        cells of a coverage map, a 500 m gate); no covariance."""
+        row = np.asarray(row, np.int64)
+        tq = (np.asarray(t_ns, np.int64) - self.t0_ns) / NS
+        if row.size == 0:
+            return np.empty(0), np.empty(0)
+        f, n = self.fit, self.pk.lengths
+        col = _last_at_or_before(f.t, n, row, tq)
+        # flat gathers (1-D) rather than (row, col) fancy indexing of the padded grids
+        cells = n[:, None] > np.arange(f.t.shape[1])[None, :]
+        t_k, x_k, y_k = f.t[cells], f.ps[..., 0][cells], f.ps[..., 1][cells]
+        vx_k, vy_k = f.vs[..., 0][cells], f.vs[..., 1][cells]
+        start = np.cumsum(n) - n
+        k = start[row] + np.clip(col, 0, None)
+        last = start[row] + n[row] - 1
+        k1 = np.minimum(k + 1, last)
+        inside = (col >= 0) & (k1 > k)
+        t0 = t_k[k]
+        w = np.where(inside, (tq - t0) / np.where(inside, t_k[k1] - t0, 1.0), 0.0)
+        dt = np.where(inside, 0.0, tq - t0)
+        x = np.where(inside, x_k[k] + w * (x_k[k1] - x_k[k]), x_k[k] + dt * vx_k[k])
+        y = np.where(inside, y_k[k] + w * (y_k[k1] - y_k[k]), y_k[k] + dt * vy_k[k])
+        return x, y
+
     def at_epochs(self, epochs_ns: np.ndarray) -> pl.DataFrame:
         """Every row at every epoch inside its span (± ``extrapolate_s``) whose own 95 %
         error is within ``max_p95_m``: time_ns, row, target, mmsi, x, y, vx, vy, var_x,
