@@ -11,8 +11,9 @@ referenced target while it lies within the radar's range:
   the reference of the system track it was fused into), and a report counts when it
   lies within ``max_distance_m`` of the target's reference at its time (a tracker that
   swapped targets does not update the first one);
-- the target's **in-range runs**: its reference sampled every scan period T of the
-  radar over the reference's span, kept where within the site's ``max_range_m``;
+- the target's **in-range runs**: the stretches of consecutive smoothed knots of its
+  reference within the site's ``max_range_m`` (to one knot interval at their edges:
+  seconds, where a ship needs minutes to cross a range ring);
 - in a run, a gap of Δ between consecutive updates holds round(Δ / T) − 1 missed scans
   (the "miss tolerance" of half a period: a late sweep is not a miss), the run's start
   and end floor(Δ / T) each; a run without any update misses all of its scans. Two
@@ -113,75 +114,78 @@ def radar_detection(
     period = np.array([s.scan_period_s for s in sites])
     max_range = np.array([s.max_range_m for s in sites])
     # candidate (site, reference row) pairs: some knot within reach of the site
-    first, last = reference.span_ns()
     pair_site, pair_row = _pairs_in_range(reference, sx, sy, max_range)
     if pair_site.size == 0:
         return empty_detection()
-    # the scan grid of each pair over its row's span
     T_ns = np.rint(period[pair_site] * NS).astype(np.int64)
-    n_slots = (last[pair_row] - first[pair_row]) // T_ns + 1
-    pid, k = expand_ranges(np.zeros(pair_site.size, np.int64), n_slots)
-    g_t = first[pair_row[pid]] + k * T_ns[pid]
-    gx, gy = reference.position(pair_row[pid], g_t)
-    g_in = np.hypot(gx - sx[pair_site[pid]], gy - sy[pair_site[pid]]) \
+    # each pair's knots in range of its site or not; runs of in-range knots
+    kt, kx, ky, kstart, klen = reference.knots()
+    pid, j = expand_ranges(np.zeros(pair_site.size, np.int64), klen[pair_row])
+    idx = kstart[pair_row[pid]] + j
+    g_t = kt[idx]
+    g_in = np.hypot(kx[idx] - sx[pair_site[pid]], ky[idx] - sy[pair_site[pid]]) \
         <= max_range[pair_site[pid]]
-    # runs of in-range slots per pair: run id per slot (-1 out of range)
     brk = np.r_[True, (pid[1:] != pid[:-1]) | (g_in[1:] != g_in[:-1])]
     run_all = np.cumsum(brk) - 1
-    run = np.where(g_in, run_all, -1)
-    run_start = np.full(run_all.max() + 1, np.iinfo(np.int64).max)
-    run_end = np.full(run_all.max() + 1, np.iinfo(np.int64).min)
-    np.minimum.at(run_start, run_all, g_t)
-    np.maximum.at(run_end, run_all, g_t + T_ns[pid])
-    run_pair = np.zeros(run_all.max() + 1, np.int64)
-    run_pair[run_all] = pid
-    in_run = np.unique(run[run >= 0])
-    # updates: the reports of the pair's site and target inside one of its runs
-    upd = _updates(rep, reference, site_ids, pair_site, pair_row, sx, sy, max_distance_m)
-    u_pair, u_t = upd
-    # the slot of each update -> its run
-    slot0 = np.searchsorted(pid, u_pair, "left")  # first slot of the pair
-    u_k = (u_t - first[pair_row[u_pair]]) // T_ns[u_pair]
-    ok = (u_k >= 0) & (u_k < n_slots[u_pair])
-    u_pair, u_t, u_k, slot0 = u_pair[ok], u_t[ok], u_k[ok], slot0[ok]
-    u_run = run[slot0 + u_k]
-    keep = u_run >= 0
-    u_run, u_t = u_run[keep], u_t[keep]
+    first_of = np.flatnonzero(brk)
+    last_of = np.r_[first_of[1:] - 1, run_all.size - 1]
+    run_in = g_in[first_of]
+    run_pair = pid[first_of]
+    run_start, run_end = g_t[first_of], g_t[last_of]
+    in_run = np.flatnonzero(run_in)
+    # updates: the reports of the pair's site and target inside one of its in-range runs
+    u_pair, u_t, u_x, u_y = _updates(rep, reference, site_ids, pair_site, pair_row, sx, sy,
+                                     max_distance_m)
+    t_all_ = np.r_[g_t, u_t]
+    t_base = int(t_all_.min())
+    span = int(t_all_.max() - t_base) + 1
+    if span >= 1 << 44:
+        raise ValueError("radar_detection: a unit spans more than 4.8 h")
+    run_key = run_pair * (1 << 44) + (run_start - t_base)
+    c = np.searchsorted(run_key, u_pair * (1 << 44) + (u_t - t_base), "right") - 1
+    c = np.maximum(c, 0)
+    ok = (run_pair[c] == u_pair) & run_in[c] & (u_t <= run_end[c] + T_ns[u_pair] // 2)
+    u_run, u_t, u_x, u_y = c[ok], u_t[ok], u_x[ok], u_y[ok]
     order = np.lexsort((u_t, u_run))
-    u_run, u_t = u_run[order], u_t[order]
+    u_run, u_t, u_x, u_y = u_run[order], u_t[order], u_x[order], u_y[order]
     # one update per scan: drop an update within T/2 of the previous one of its run
     T_run = T_ns[run_pair]
+    run_end = run_end + T_run  # a run covers its last knot's scan
     dup = np.r_[False, (u_run[1:] == u_run[:-1])
                 & (np.diff(u_t) < T_run[u_run[1:]] // 2)]
-    u_run, u_t = u_run[~dup], u_t[~dup]
+    u_run, u_t, u_x, u_y = u_run[~dup], u_t[~dup], u_x[~dup], u_y[~dup]
     # missed scans: interior gaps, heads, tails, runs without updates
     miss_run, miss_t = _misses(u_run, u_t, in_run, run_start, run_end, T_run)
-    # everything in cells
+    # everything in cells: updates where the reference was at their sweep, missed scans
+    # where it was then (one more interpolation, for the misses only)
+    mx, my = reference.position(pair_row[run_pair[miss_run]], miss_t)
     t_all = np.r_[u_t, miss_t]
     r_all = np.r_[u_run, miss_run]
+    px, py = np.r_[u_x, mx], np.r_[u_y, my]
     det = np.r_[np.ones(u_t.size, bool), np.zeros(miss_t.size, bool)]
     inside = (t_all >= start_ns) & (t_all < end_ns)
-    t_all, r_all, det = t_all[inside], r_all[inside], det[inside]
+    t_all, r_all, det, px, py = t_all[inside], r_all[inside], det[inside], px[inside], \
+        py[inside]
     if t_all.size == 0:
         return empty_detection()
     p_all = run_pair[r_all]
     s_all, row_all = pair_site[p_all], pair_row[p_all]
-    px, py = reference.position(row_all, t_all)
     dx, dy = px - sx[s_all], py - sy[s_all]
     rng = np.hypot(dx, dy)
     az = np.degrees(np.arctan2(dx, dy)) % 360.0
     cells = pl.DataFrame({
-        "site_id": np.array(site_ids, dtype=object)[s_all],
-        "x_enu_m": px, "y_enu_m": py,
+        "site": s_all, "x_enu_m": px, "y_enu_m": py,
         "range_bin_m": np.floor(rng / range_bin_m) * range_bin_m,
         "azimuth_bin_deg": np.floor(az / azimuth_bin_deg) * azimuth_bin_deg,
         "reference_id": reference.target[row_all], "detected": det,
-    }, schema_overrides={"site_id": pl.String, "reference_id": pl.Int64})
+    }, schema_overrides={"reference_id": pl.Int64})
     cells = assign_sectors(cells, sectors, region)
-    out = cells.group_by("site_id", "sector", "range_bin_m", "azimuth_bin_deg",
+    out = cells.group_by("site", "sector", "range_bin_m", "azimuth_bin_deg",
                          "reference_id").agg(
         pl.len().cast(pl.Int64).alias("expected_scans"),
         pl.col("detected").sum().cast(pl.Int64).alias("detected_scans"))
+    out = out.with_columns(pl.col("site").replace_strict(
+        list(range(len(site_ids))), site_ids, return_dtype=pl.String).alias("site_id"))
     if classes is not None and classes.height:
         out = out.join(classes.select("reference_id", "target_class").unique("reference_id"),
                        on="reference_id", how="left")
@@ -214,10 +218,11 @@ def _pairs_in_range(reference: Reference, sx: np.ndarray, sy: np.ndarray,
 
 def _updates(rep: pl.DataFrame, reference: Reference, site_ids: list[str],
              pair_site: np.ndarray, pair_row: np.ndarray, sx: np.ndarray, sy: np.ndarray,
-             max_distance_m: float) -> tuple[np.ndarray, np.ndarray]:
-    """(pair index, sweep time) of each report that updates its local track's target."""
+             max_distance_m: float) -> tuple[np.ndarray, ...]:
+    """(pair index, sweep time, reference x, y there) of each report that updates its local
+    track's target."""
     if rep.height == 0:
-        return np.empty(0, np.int64), np.empty(0, np.int64)
+        return np.empty(0, np.int64), np.empty(0, np.int64), np.empty(0), np.empty(0)
     t = rep["time_ns"].to_numpy()
     target = rep["reference_id"].to_numpy()
     row = ref_rows_of(reference, target, t)
@@ -228,13 +233,13 @@ def _updates(rep: pl.DataFrame, reference: Reference, site_ids: list[str],
     x, y = rep["x_enu_m"].to_numpy()[ok], rep["y_enu_m"].to_numpy()[ok]
     px, py = reference.position(row, t)
     near = np.hypot(x - px, y - py) <= max_distance_m
-    t, row, site = t[near], row[near], site[near]
+    t, row, site, px, py = t[near], row[near], site[near], px[near], py[near]
     # pair index of (site, row): pairs are sorted by (site, row)
     key = pair_site * (reference.rows + 1) + pair_row
     q = site * (reference.rows + 1) + row
     pos_i = np.searchsorted(key, q)
     found = (pos_i < key.size) & (key[np.minimum(pos_i, key.size - 1)] == q)
-    return pos_i[found], t[found]
+    return pos_i[found], t[found], px[found], py[found]
 
 
 def _misses(u_run: np.ndarray, u_t: np.ndarray, runs: np.ndarray, run_start: np.ndarray,

@@ -122,6 +122,14 @@ class Reference:
         return {"x": p[:, 0], "y": p[:, 1], "vx": v[:, 0], "vy": v[:, 1],
                 "var_x": a[:, 0], "var_y": a[:, 1], "p95_m": sm.radial_p95(a[:, 0], a[:, 1])}
 
+    def knots(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The smoothed knots flat, row after row: time (ns), x, y (m), and each row's
+        first knot and count."""
+        f, n = self.fit, self.pk.lengths
+        cells = n[:, None] > np.arange(f.t.shape[1])[None, :]
+        t = np.rint(f.t[cells] * NS).astype(np.int64) + self.t0_ns
+        return t, f.ps[..., 0][cells], f.ps[..., 1][cells], np.cumsum(n) - n, n
+
     def position(self, row: np.ndarray, t_ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The reference position (x, y, m) of rows ``row`` at ``t_ns`` interpolated
         linearly between its smoothed knots (moved on with the knot velocity outside the
