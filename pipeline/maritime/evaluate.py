@@ -152,7 +152,7 @@ def radar_detection(
     T_run = T_ns[run_pair]
     run_end = run_end + T_run  # a run covers its last knot's scan
     dup = np.r_[False, (u_run[1:] == u_run[:-1])
-                & (np.diff(u_t) < T_run[u_run[1:]] // 2)]
+                & (np.diff(u_t) < T_run[u_run[1:]] // 2)][:u_run.size]
     u_run, u_t, u_x, u_y = u_run[~dup], u_t[~dup], u_x[~dup], u_y[~dup]
     # missed scans: interior gaps, heads, tails, runs without updates
     miss_run, miss_t = _misses(u_run, u_t, in_run, run_start, run_end, T_run)

@@ -193,6 +193,13 @@ def test_detection_counts_missed_scans_from_update_intervals(cfg):
     assert detected == keep.sum()
     assert expected - detected == 7
     assert abs(expected - n_scans) <= 1
+    # a radar that never reports the target in its range misses every scan
+    none = radar_detection(aligned.clear(), assoc.clear(), errors.clear(), ref,
+                           sites=cfg.radar_sites[:1], sectors=cfg.sectors, region=cfg.region,
+                           classes=None, start_ns=T0_NS, end_ns=T0_NS + 600 * NS,
+                           max_distance_m=500.0, range_bin_m=1000.0, azimuth_bin_deg=10.0)
+    assert none["detected_scans"].sum() == 0
+    assert abs(int(none["expected_scans"].sum()) - n_scans) <= 1
 
 
 # --- latency, swaps, dubious and false tracks ----------------------------------------------
