@@ -124,9 +124,20 @@ CHILD = textwrap.dedent(
             fam.stage(read_inputs(fam, wh, cfg, w), w, cfg)
             t1, c1 = clock()
             stage.append((t1 - t0, c1 - c0))
+        # the reconstruction of the reference (issue 37) alone, on the unit's AIS
+        from pipeline.maritime.config import maritime_config
+        from pipeline.maritime.reference import reconstruct
+        ais = read_inputs(fam, wh, cfg, w)["ais_reports"]
+        rec = []
+        for _ in range(a["repeat"]):
+            t0, c0 = clock()
+            reconstruct(ais, cfg.region, cfg.ais, maritime_config(cfg).reference)
+            t1, c1 = clock()
+            rec.append(c1 - c0)
         out.update(reports=n, wall_s=[r[0] for r in runs], cpu_s=[r[1] for r in runs],
                    stage_wall_s=statistics.median(r[0] for r in stage),
-                   stage_cpu_s=statistics.median(r[1] for r in stage), rows=dict(s.rows))
+                   stage_cpu_s=statistics.median(r[1] for r in stage), rows=dict(s.rows),
+                   reference_cpu_s=statistics.median(rec), ais_reports=ais.height)
         fused = pl.from_arrow(read_table(wh, "system_tracks", start_ns=w.start_ns,
                                          end_ns=w.end_ns))
         out["estimates"] = {"time_ns": fused["time_ns"].to_list(),
@@ -306,7 +317,7 @@ def main() -> None:
     print(f"\ncost against density: ours, {a.density_slice} from 15:00 UTC, serial, one thread")
     print(f"{'ships':>7}{'targets':>9}{'reports':>11}{'CPU s':>8}{'wall s':>8}"
           f"{'us/report CPU':>15}{'us/report wall':>16}{'stage us/report':>17}"
-          f"{'peak RSS MB':>13}")
+          f"{'peak RSS MB':>13}{'reference us/report':>21}{'of the stage':>14}")
     for ships in (int(x) for x in a.densities.split(",") if x):
         d = prepare(work, ships, a.radars, a.seed, dens_s)
         cfg = str(d / "archive" / "region.toml")
@@ -319,11 +330,16 @@ def main() -> None:
                "cpu_s": cpu, "wall_s": wall, "us_per_report_cpu": cpu / r["reports"] * 1e6,
                "us_per_report_wall": wall / r["reports"] * 1e6,
                "stage_us_per_report_cpu": r["stage_cpu_s"] / r["reports"] * 1e6,
-               "peak_rss_mb": r["batch_peak_rss_mb"]}
+               "peak_rss_mb": r["batch_peak_rss_mb"],
+               "reference_us_per_report_cpu": r["reference_cpu_s"] / r["reports"] * 1e6,
+               "reference_share_of_stage": r["reference_cpu_s"] / r["stage_cpu_s"],
+               "ais_reports": r["ais_reports"]}
         rows.append(row)
         print(f"{ships:>7}{targets:>9}{r['reports']:>11,}{cpu:>8.2f}{wall:>8.2f}"
               f"{row['us_per_report_cpu']:>15.2f}{row['us_per_report_wall']:>16.2f}"
-              f"{row['stage_us_per_report_cpu']:>17.2f}{row['peak_rss_mb']:>13.0f}")
+              f"{row['stage_us_per_report_cpu']:>17.2f}{row['peak_rss_mb']:>13.0f}"
+              f"{row['reference_us_per_report_cpu']:>21.2f}"
+              f"{row['reference_share_of_stage']:>14.1%}")
     if rows:
         per = [r["us_per_report_cpu"] for r in rows]
         stage = [r["stage_us_per_report_cpu"] for r in rows]

@@ -812,6 +812,33 @@ def ownship(st: _State, runs, first_seed, duration, per_seed, executor, fmt) -> 
     click.echo(format_report(out.to_arrow(), fmt, title="ownship Monte Carlo"))
 
 
+@experiment.command()
+@click.option("--runs", type=click.IntRange(1, 1000), default=10, show_default=True,
+              help="seeded runs (seeds first-seed .. first-seed + runs - 1)")
+@click.option("--first-seed", type=int, default=1, show_default=True)
+@click.option("--duration", default="1h", show_default=True,
+              help="length of each scene (maritime and airfield)")
+@click.option("--clean", is_flag=True, help="without the config's fault schedules")
+@click.option("--per-seed", is_flag=True, help="every figure of every seed instead of the summary")
+@_EXECUTOR
+@click.option("--format", "fmt", type=click.Choice(["table", "csv", "json"]), default="table",
+              show_default=True)
+@click.pass_obj
+def reference(st: _State, runs, first_seed, duration, clean, per_seed, executor, fmt) -> None:
+    """Is the reconstructed reference honest (issue 37)? The channel and airfield scenes
+    through the batch stages with the truth and with the truth withheld: every accuracy
+    figure (RMS, p95 per sector / area and source) and PD per radar / channel of the
+    reports, truth-based beside reference-based (tolerance 10 % and 0.01)."""
+    from jobs.report import format_report
+    from pipeline.experiments.reference_montecarlo import run_montecarlo, summarise
+
+    figures = run_montecarlo(st.cfg, seeds=range(first_seed, first_seed + runs),
+                             duration_s=_duration_s(duration), clean=clean,
+                             executor=executor or st.cfg.execution.executor)
+    out = figures if per_seed else summarise(figures)
+    click.echo(format_report(out.to_arrow(), fmt, title="reference Monte Carlo"))
+
+
 @cli.command("gaps-montecarlo")
 @click.option("--runs", type=click.IntRange(1, 1000), default=20, show_default=True,
               help="simulated runs (seeds first-seed .. first-seed + runs - 1)")

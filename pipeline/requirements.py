@@ -18,6 +18,23 @@ them; IALA V-128 / G1111's tables were not obtainable): fused position error 95%
 sector, share of fused track time with the right MMSI for ships with AIS, the fused
 60-s RMS cross-track error per fairway leg, SIAP completeness.
 
+Presets of issue 37 (evaluation without truth), each with its source; the figures as
+transcribed in ``../shared/research/anchors-tracking.md`` §4 (the standards themselves
+are paywalled):
+
+- ``[requirements.vts]``, radar tracking of a VTS: IMO MSC.192(79) (shipborne radar
+  performance standards, target tracking): measured range within 50 m or 1 % of the
+  range and bearing within 2 deg, both at 95 %; a target is tracked when seen on 5 of 10
+  consecutive scans (probability of detection per scan >= 0.5); IALA Guideline 1111
+  §2.5.4.1: targets tracked individually "without track swap" (0 swaps);
+- ``[requirements.ed87_report_probability]``, ``[requirements.ed87_gap_3_5s]``,
+  ``[requirements.ed87_gap_over_5s]``, ``[requirements.ed87_update_period_s]``: EUROCAE
+  ED-87 Table 3-1 as encoded in OpenATS COMPASS (``conf/default/eval.json``): probability
+  of a target report per update interval 0.99 / 0.90 / 0.95 (manoeuvring area, apron
+  taxiways, stands), update interval 1 / 1 / 5 s, probability of a 3-5 s gap <= 1e-3 /
+  1e-3 / (none), of a gap > 5 s <= 1e-6 / 1e-5 / 1e-3. (An open ED-116/117 tool uses
+  update periods 1 s runway, 2 s taxiway and apron lane, 5 s stand.)
+
 A verdict needs samples: fewer than ``min_samples`` scored samples gives "not enough
 samples". For a probability requirement P >= p the default minimum is the rule of
 three: with no failure in n trials the one-sided 95% upper bound of 1 - P is ~3/n, so
@@ -71,6 +88,57 @@ class Ed87Limits:
 
 
 @dataclass(frozen=True)
+class Ed87ReportProbability:
+    """``[requirements.ed87_report_probability]``: probability of a target report per
+    update interval, per ED-87 area class (COMPASS's ED-87D/E row)."""
+
+    manoeuvring: float = _share(0.99)
+    apron_taxiway: float = _share(0.90)
+    stand: float = _share(0.95)
+
+
+@dataclass(frozen=True)
+class Ed87UpdatePeriod:
+    """``[requirements.ed87_update_period_s]``: the update interval of each area class, s."""
+
+    manoeuvring: float = positive(1.0)
+    apron_taxiway: float = positive(1.0)
+    stand: float = positive(5.0)
+
+
+@dataclass(frozen=True)
+class Ed87Gap35:
+    """``[requirements.ed87_gap_3_5s]``: largest probability of a 3-5 s gap (1: none)."""
+
+    manoeuvring: float = _share(1e-3)
+    apron_taxiway: float = _share(1e-3)
+    stand: float = _share(1.0)
+
+
+@dataclass(frozen=True)
+class Ed87GapOver5:
+    """``[requirements.ed87_gap_over_5s]``: largest probability of a gap over 5 s."""
+
+    manoeuvring: float = _share(1e-6)
+    apron_taxiway: float = _share(1e-5)
+    stand: float = _share(1e-3)
+
+
+@dataclass(frozen=True)
+class VtsRequirements:
+    """``[requirements.vts]``: IMO MSC.192(79) radar tracking and IALA G1111 (module
+    docstring): range error 95% within ``radar_range_p95_m`` or ``radar_range_p95_share``
+    of the range (the larger), bearing error 95% within ``radar_bearing_p95_deg``, PD per
+    scan >= ``radar_detection`` (5 of 10 scans), at most ``max_track_swaps`` swaps."""
+
+    radar_range_p95_m: float = positive(50.0)
+    radar_range_p95_share: float = setting(0.01, gt=0.0, lt=1.0)
+    radar_bearing_p95_deg: float = positive(2.0)
+    radar_detection: float = _share(0.5)
+    max_track_swaps: int = setting(0, ge=0)
+
+
+@dataclass(frozen=True)
 class AirfieldRequirements:
     """``[requirements.airfield]``: sensor level (ED-116/117), m; P(ID) (ED-87) and the
     samples it needs (0 or absent: the rule of three, 3 / (1 - P))."""
@@ -99,6 +167,12 @@ class RequirementsConfig:
     ed87: Ed87Limits = setting({}, key="ed87_position_p95_m", factory=Ed87Limits)
     airfield: AirfieldRequirements = setting({}, factory=AirfieldRequirements)
     maritime: MaritimeRequirements = setting({}, factory=MaritimeRequirements)
+    vts: VtsRequirements = setting({}, factory=VtsRequirements)
+    ed87_report_probability: Ed87ReportProbability = setting(
+        {}, factory=Ed87ReportProbability)
+    ed87_update_period_s: Ed87UpdatePeriod = setting({}, factory=Ed87UpdatePeriod)
+    ed87_gap_3_5s: Ed87Gap35 = setting({}, factory=Ed87Gap35)
+    ed87_gap_over_5s: Ed87GapOver5 = setting({}, factory=Ed87GapOver5)
 
     @property
     def ed87_position_p95_m(self) -> dict[str, float]:
@@ -139,6 +213,15 @@ class RequirementsConfig:
         out = {f"ed87_{area}_p95_m": v for area, v in self.ed87_position_p95_m.items()}
         out["sensor_p95_m"] = float(self.sensor_position_p95_m)
         out["p_identification_min"] = float(self.p_identification)
+        for area in AREAS:
+            out[f"ed87_{area}_report_p"] = float(getattr(self.ed87_report_probability, area))
+            out[f"ed87_{area}_update_s"] = float(getattr(self.ed87_update_period_s, area))
+            out[f"ed87_{area}_gap_3_5s_p"] = float(getattr(self.ed87_gap_3_5s, area))
+            out[f"ed87_{area}_gap_over_5s_p"] = float(getattr(self.ed87_gap_over_5s, area))
+        out["vts_range_p95_m"] = float(self.vts.radar_range_p95_m)
+        out["vts_range_p95_share"] = float(self.vts.radar_range_p95_share)
+        out["vts_bearing_p95_deg"] = float(self.vts.radar_bearing_p95_deg)
+        out["vts_min_detection"] = float(self.vts.radar_detection)
         return out
 
 
@@ -279,6 +362,65 @@ def evaluate(
                            _num(r.get("p95_rms_60s_m")), "<=",
                            req.maritime_cross_track_rms_60s_p95_m, "m",
                            int(r.get("samples") or 0), n_min))
+    return out + evaluate_reference_presets(reports, req)
+
+
+def evaluate_reference_presets(reports: Mapping[str, pa.Table], req: RequirementsConfig
+                               ) -> list[Verdict]:
+    """The verdicts of the issue-37 presets (module docstring) on the rows present:
+    per radar and sector PD (IMO 5 of 10 scans), range accuracy (share within 50 m or 1 %
+    of range, >= 0.95) and bearing accuracy (95 % within 2 deg); per sector the swaps
+    (IALA G1111); per ED-87 area the fused report probability and the 3-5 s and > 5 s
+    gap probabilities."""
+    out: list[Verdict] = []
+    n_min = req.min_samples
+    vts = req.vts
+    pd_min = rule_of_three_samples(vts.radar_detection)
+    for r in _rows(reports.get("detection_by_sector")):
+        if r["target_class"] != "(all classes)":
+            continue
+        out.append(Verdict("IMO MSC.192(79) detection, 5 of 10 scans",
+                           f"{r['sector']}, radar {r['radar']} (vs {r['reference']})",
+                           "detection_by_sector", "pd", _num(r.get("pd")), ">=",
+                           vts.radar_detection, "", int(r.get("expected_scans") or 0),
+                           max(n_min, pd_min)))
+    for r in _rows(reports.get("error_decomposition")):
+        if r["source"] == "fused" or r.get("range_within_vts_share") is None:
+            continue
+        scope = f"{r['sector']}, radar {r['source']} (vs {r['reference']})"
+        out.append(Verdict("IMO MSC.192(79) range within 50 m or 1% of range, 95%", scope,
+                           "error_decomposition", "range_within_vts_share",
+                           _num(r.get("range_within_vts_share")), ">=", 0.95, "",
+                           int(r.get("samples") or 0), n_min))
+        out.append(Verdict("IMO MSC.192(79) bearing accuracy 95%", scope,
+                           "error_decomposition", "azimuth_p95_deg",
+                           _num(r.get("azimuth_p95_deg")), "<=", vts.radar_bearing_p95_deg,
+                           "deg", int(r.get("samples") or 0), n_min))
+    for r in _rows(reports.get("track_continuity")):
+        out.append(Verdict("IALA G1111 no track swaps", f"{r['sector']} (vs {r['reference']})",
+                           "track_continuity", "track_swaps", _num(r.get("track_swaps")), "<=",
+                           float(vts.max_track_swaps), "", int(r.get("target_epochs") or 0),
+                           n_min))
+    for r in _rows(reports.get("surface_detection_by_area")):
+        if r["source"] != "fused" or r["area"] not in AREAS:
+            continue
+        p = float(getattr(req.ed87_report_probability, r["area"]))
+        out.append(Verdict("ED-87 probability of target report per update interval",
+                           f"{r['area']}, fused", "surface_detection_by_area", "pd",
+                           _num(r.get("pd")), ">=", p, "", int(r.get("expected_intervals") or 0),
+                           max(n_min, rule_of_three_samples(p))))
+    for r in _rows(reports.get("surface_accuracy_by_area")):
+        if r["source"] != "fused" or r["area"] not in AREAS:
+            continue
+        for metric, limits, label in (
+                ("gap_3_5s_share", req.ed87_gap_3_5s, "ED-87 continuity: gaps of 3-5 s"),
+                ("gap_over_5s_share", req.ed87_gap_over_5s, "ED-87 continuity: gaps > 5 s")):
+            lim = float(getattr(limits, r["area"]))
+            if lim >= 1.0:
+                continue
+            out.append(Verdict(label, f"{r['area']}, fused", "surface_accuracy_by_area", metric,
+                               _num(r.get(metric)), "<=", lim, "", int(r.get("updates") or 0),
+                               max(n_min, rule_of_three_samples(1.0 - lim))))
     return out
 
 

@@ -2,9 +2,13 @@
 -- description: share of fused-track time with the correct MMSI, a wrong MMSI or no MMSI,
 --   per sector. With truth, "correct" means the MMSI of the simulated vessel the fused
 --   point belongs to; ships without AIS count as correct when they carry no MMSI. Without
---   truth (real logs), "correct" means consistent: the track's majority MMSI in the window.
+--   truth, against the reconstructed reference (issue 37: the AIS vessel the fused point
+--   was scored against), "correct" means that vessel's MMSI and "wrong" another one: the
+--   probabilities of correct and of false identification (ships without AIS have no
+--   reference then and are not counted). Rows of older batches (reference ais):
+--   "correct" means consistent, the track's majority MMSI in the window.
 --   Fused points come at uniform synchronised epochs, so shares of points are shares of time.
--- grain: one row per (site, sector, vessel_class)
+-- grain: one row per (site, sector, vessel_class, reference)
 -- params: $start_ns (BIGINT, inclusive), $end_ns (BIGINT, exclusive),
 --         $sector (VARCHAR, NULL = every sector), $site (VARCHAR, NULL = every site)
 -- source tables: system_tracks, track_errors (written by `surveil batch`)
@@ -48,9 +52,11 @@ judged AS (
                 THEN CASE WHEN f.mmsi IS NULL THEN 'correct' ELSE 'wrong' END
             WHEN f.mmsi IS NULL THEN 'none'
             WHEN f.reference = 'truth' AND f.mmsi = f.reference_mmsi THEN 'correct'
+            WHEN f.reference = 'reconstructed' AND f.mmsi = f.reference_mmsi THEN 'correct'
             WHEN f.reference = 'ais' AND f.mmsi = m.majority_mmsi THEN 'correct'
             ELSE 'wrong'
-        END AS verdict
+        END AS verdict,
+        f.reference
     FROM fused AS f
     LEFT JOIN majority AS m USING (site, system_track_id)
 )
@@ -58,10 +64,11 @@ SELECT
     site::VARCHAR                                                     AS site,
     sector::VARCHAR                                                   AS sector,
     vessel_class::VARCHAR                                             AS vessel_class,
+    reference::VARCHAR                                                AS reference,     -- truth | reconstructed | ais
     count(*)::BIGINT                                                  AS samples,       -- fused points
     round(avg(CASE WHEN verdict = 'correct' THEN 1 ELSE 0 END), 4)::DOUBLE AS correct_share,
     round(avg(CASE WHEN verdict = 'wrong' THEN 1 ELSE 0 END), 4)::DOUBLE   AS wrong_share,
     round(avg(CASE WHEN verdict = 'none' THEN 1 ELSE 0 END), 4)::DOUBLE    AS none_share
 FROM judged
-GROUP BY site, sector, vessel_class
-ORDER BY site, sector, vessel_class;
+GROUP BY site, sector, vessel_class, reference
+ORDER BY site, sector, vessel_class, reference;

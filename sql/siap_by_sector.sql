@@ -4,13 +4,15 @@
 --   number change, track swaps, longest track segment, ID completeness / correctness /
 --   ambiguity (MMSI, ships carrying AIS). Sums of the batch work units that start in the
 --   window are added before dividing, so any window and the '(all sectors)' row are exact.
---   Empty for logs without truth.
--- grain: one row per (site, sector), plus one '(all sectors)' row per site
+--   Without truth the truths are the reconstructed references of the vessels carrying AIS
+--   (issue 37; column reference): a track of a ship without AIS is then spurious.
+-- grain: one row per (site, reference, sector), plus one '(all sectors)' row per (site, reference)
 -- params: $start_ns (BIGINT, inclusive), $end_ns (BIGINT, exclusive),
 --         $sector (VARCHAR, NULL = every sector), $site (VARCHAR, NULL = every site)
 -- source table: siap_by_sector (written by `surveil batch`)
 WITH rows_in AS (
-    SELECT *, coalesce(sector, '(outside sectors)') AS sector_name
+    SELECT * REPLACE (coalesce(reference, 'truth') AS reference),
+           coalesce(sector, '(outside sectors)') AS sector_name
     FROM siap_by_sector
     WHERE time_ns >= $start_ns
       AND time_ns < $end_ns
@@ -20,6 +22,7 @@ WITH rows_in AS (
 sums AS (
     SELECT
         site,
+        reference,
         coalesce(sector_name, '(all sectors)')     AS sector,
         sum(truth_epochs)                          AS j,
         sum(tracked_truth_epochs)                  AS jt,
@@ -38,11 +41,12 @@ sums AS (
         sum(id_correct_epochs)                     AS id_jc,
         sum(id_ambiguous_epochs)                   AS id_ja
     FROM rows_in
-    GROUP BY GROUPING SETS ((site, sector_name), (site))
+    GROUP BY GROUPING SETS ((site, reference, sector_name), (site, reference))
 )
 SELECT
     site::VARCHAR                                                AS site,
     sector::VARCHAR                                              AS sector,
+    reference::VARCHAR                                           AS reference,          -- truth | reconstructed
     j::BIGINT                                                    AS truth_epochs,       -- sum of J
     round(jt / nullif(j, 0), 4)::DOUBLE                          AS completeness,       -- target 1
     round(na / nullif(jt, 0), 4)::DOUBLE                         AS ambiguity,          -- target 1
@@ -58,4 +62,4 @@ SELECT
     round(id_ja / nullif(id_jt, 0), 4)::DOUBLE                   AS id_ambiguity        -- target 0
 FROM sums
 WHERE j IS NOT NULL
-ORDER BY site, (sector = '(all sectors)'), sector;
+ORDER BY site, reference, (sector = '(all sectors)'), sector;

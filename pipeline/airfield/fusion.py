@@ -125,10 +125,18 @@ class _Out:
     eta: np.ndarray  # (C, K, N) int8, -1 = no decision
     excluded: np.ndarray  # (C, K, N)
     innov: np.ndarray  # (C, K, N) |r|, m
+    # recorded for the smoother (``record``): the full state after the updates (K, N, d),
+    # its prediction from k-1 (K, N, d; nan at a birth), and the full posterior
+    # covariance of the targets alive at each epoch ({k: (targets, (n, d, d) float32)})
+    x_full: np.ndarray | None = None
+    x_prior: np.ndarray | None = None
+    P_full: dict[int, tuple[np.ndarray, np.ndarray]] | None = None
 
 
-def run_filter(g: Grids, model: kf.FilterModel, cfg: AirfieldConfig, vasn_c: int | None) -> _Out:
-    """The epoch loop (module doc, steps 1–5)."""
+def run_filter(g: Grids, model: kf.FilterModel, cfg: AirfieldConfig, vasn_c: int | None,
+               *, record: bool = False) -> _Out:
+    """The epoch loop (module doc, steps 1–5); ``record``: keep what the fixed-interval
+    smoother of the reference needs (:mod:`pipeline.airfield.reference`)."""
     C, K, N = g.has.shape
     icfg, fcfg = cfg.integrity, cfg.filter
     d1, d2 = chi2_thresholds(icfg.q, 2)
@@ -146,6 +154,10 @@ def run_filter(g: Grids, model: kf.FilterModel, cfg: AirfieldConfig, vasn_c: int
         np.zeros((C, K, N), bool),
         np.full((C, K, N), np.nan),
     )
+    if record:
+        out.x_full = np.full((K, N, d), np.nan)
+        out.x_prior = np.full((K, N, d), np.nan)
+        out.P_full = {}
     x = np.zeros((N, d))
     P = np.repeat(np.eye(d)[None], N, axis=0)
     excluded = np.zeros((C, N), bool)
@@ -162,6 +174,8 @@ def run_filter(g: Grids, model: kf.FilterModel, cfg: AirfieldConfig, vasn_c: int
             mode, Wk, Wk1 = _modes(g, k, excluded, outage, last_vasn, vasn_c, t_stat)
             x[ip], P[ip] = kf.predict(model, x[ip], P[ip], mode[ip], Wk[ip], Wk1[ip])
             out.mode[k, ip] = mode[ip]
+            if record:
+                out.x_prior[k, ip] = x[ip]
         if np.any(born):
             drop = birth_outliers(g, k, born, model, d2)
             if not icfg.exclusion:
@@ -211,6 +225,10 @@ def run_filter(g: Grids, model: kf.FilterModel, cfg: AirfieldConfig, vasn_c: int
             last_vasn = np.where(g.has[vasn_c, k] & alive, k, last_vasn)
         out.x[k, alive] = x[alive]
         out.P[k, alive] = P[alive][:, 0:2, 0:2]
+        if record:
+            ia = np.flatnonzero(alive)
+            out.x_full[k, ia] = x[ia]
+            out.P_full[k] = (ia, P[ia].astype(np.float32))
     return out
 
 
@@ -342,13 +360,39 @@ def fuse_airfield(
     common frame (:func:`pipeline.airfield.frames.to_common_frame`), which may start
     earlier (the filter's lead-in). Returns (airfield_tracks rows, channel_health rows)
     without the truth-scored columns (see :mod:`pipeline.airfield.score`)."""
+    tracks, health, _ = fuse_airfield_run(obs, cfg, models, start_ns=start_ns, end_ns=end_ns)
+    return tracks, health
+
+
+@dataclass(frozen=True, eq=False)
+class FilterRun:
+    """What the smoother needs of one run of the filter: the grid, the recorded loop
+    outputs, the model and the epoch step (ns)."""
+
+    grids: Grids
+    out: _Out
+    model: kf.FilterModel
+    step_ns: int
+
+
+def fuse_airfield_run(
+    obs: pl.DataFrame,
+    cfg: AirfieldConfig,
+    models: ChannelModels,
+    *,
+    start_ns: int,
+    end_ns: int,
+    record: bool = False,
+) -> tuple[pl.DataFrame, pl.DataFrame, FilterRun | None]:
+    """:func:`fuse_airfield`, and with ``record`` the :class:`FilterRun` the reference's
+    smoother runs backwards over (None without reports)."""
     fcfg = cfg.filter
     step_ns = round(fcfg.epoch_s * NS)
     obs = obs.filter(pl.col("time_ns") < end_ns).with_columns(
         ((pl.col("time_ns") + step_ns // 2) // step_ns).alias("epoch")
     )
     if obs.height == 0:
-        return pl.DataFrame(), pl.DataFrame()
+        return pl.DataFrame(), pl.DataFrame(), None
     timeout = round(fcfg.track_timeout_s / fcfg.epoch_s)
     labelled, targets = associate(
         obs,
@@ -375,11 +419,12 @@ def fuse_airfield(
     )
     g = build_grids(labelled, sensor_ids, vasn_id)
     vasn_c = sensor_ids.index(vasn_id) if vasn_id else None
-    out = run_filter(g, model, cfg, vasn_c)
+    out = run_filter(g, model, cfg, vasn_c, record=record)
     tracks = _track_rows(g, out, targets, cfg, step_ns)
     health = _health_rows(g, out, cfg, sensor_ids, step_ns, tracks)
     keep = (pl.col("time_ns") >= start_ns) & (pl.col("time_ns") < end_ns)
-    return tracks.filter(keep), health.filter(keep)
+    run = FilterRun(g, out, model, step_ns) if record else None
+    return tracks.filter(keep), health.filter(keep), run
 
 
 def _track_rows(

@@ -19,7 +19,8 @@ import polars as pl
 from pipeline.airfield.calibrate import calibrate, stored_models
 from pipeline.airfield.config import AirfieldConfig, parse_airfield
 from pipeline.airfield.frames import config_sensor_id, sensor_rows, to_common_frame
-from pipeline.airfield.fusion import fuse_airfield
+from pipeline.airfield.fusion import fuse_airfield_run
+from pipeline.airfield.reference import empty_reference, smooth
 from pipeline.airfield.score import score
 from pipeline.config import Config
 from pipeline.family import Family, Inputs, Outputs, TableInput, Window
@@ -28,7 +29,7 @@ log = logging.getLogger(__name__)
 
 LEAD_IN_S = 120
 UNIT_S = 3600
-OUTPUTS = ("airfield_tracks", "channel_health")
+OUTPUTS = ("airfield_tracks", "channel_health", "airfield_reference")
 
 
 def target_reports(obs: pl.DataFrame) -> pl.DataFrame:
@@ -62,6 +63,7 @@ class StageOutput:
     health: pl.DataFrame
     rejects: pl.DataFrame
     model_source: dict[str, str]
+    reference: pl.DataFrame
 
 
 def airfield_stage(obs: pl.DataFrame, truth: pl.DataFrame | None, model_rows: pl.DataFrame,
@@ -72,10 +74,15 @@ def airfield_stage(obs: pl.DataFrame, truth: pl.DataFrame | None, model_rows: pl
     rejects = unknown_sensor_rejects(reports, cfg, start_ns, end_ns)
     common = to_common_frame(sensor_rows(reports, cfg), cfg)
     models = stored_models(model_rows, cfg, end_ns)
-    tracks, health = fuse_airfield(common, cfg, models, start_ns=start_ns, end_ns=end_ns)
+    tracks, health, run = fuse_airfield_run(common, cfg, models, start_ns=start_ns,
+                                            end_ns=end_ns, record=True)
+    # the reconstructed reference: the fused filter smoothed (issue 37)
+    reference = empty_reference() if run is None else smooth(run).filter(
+        pl.col("time_ns").is_between(start_ns, end_ns, closed="left")
+    ).sort("time_ns", "track_id")
     if tracks.height:
-        tracks, health = score(tracks, health, truth, cfg)
-    return StageOutput(tracks, health, rejects, dict(models.source))
+        tracks, health = score(tracks, health, truth, cfg, reference)
+    return StageOutput(tracks, health, rejects, dict(models.source), reference)
 
 
 def inputs(cfg: Config) -> tuple[TableInput, ...]:
@@ -99,7 +106,8 @@ def stage(tables: Inputs, window: Window, cfg: Config) -> Outputs:
                          tables["sensor_error_models"], acfg,
                          start_ns=window.start_ns, end_ns=window.end_ns)
     log.info("airfield unit %s: models %s", window.start_ns, out.model_source)
-    result = {"airfield_tracks": out.tracks, "channel_health": out.health}
+    result = {"airfield_tracks": out.tracks, "channel_health": out.health,
+              "airfield_reference": out.reference}
     if out.rejects.height:
         result["rejects"] = out.rejects
     return {k: v for k, v in result.items() if v.height}

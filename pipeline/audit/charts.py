@@ -160,7 +160,9 @@ def siap_bars(rows: list[dict[str, Any]], req: RequirementsConfig) -> go.Figure 
                                   "swaps %{customdata[2]}<extra>" + r["sector"] + "</extra>")
     _limit_line(fig, req.maritime_siap_completeness,
                 f"target completeness ≥ {req.maritime_siap_completeness:g}")
-    return _layout(fig, "SIAP measures of the fused picture (against truth)", barmode="group",
+    refs = sorted({str(r.get("reference") or "truth") for r in rows})
+    return _layout(fig, f"SIAP measures of the fused picture (against {' / '.join(refs)})",
+                   barmode="group",
                    yaxis_title="measure")
 
 

@@ -27,6 +27,10 @@ AUDIT_REPORTS = (
     "surface_accuracy_by_area", "channel_faults_by_sector", "fault_timeline", "nav_quality",
     "nav_heading_error", "gap_forecasts", "gap_forecast_calibration", "map_tracks",
     "channel_fault_episodes", "ais_traffic", "ais_quality",
+    # evaluation without truth (issue 37)
+    "detection_by_sector", "radar_coverage", "track_continuity", "latency_by_sensor",
+    "error_decomposition", "false_tracks", "dubious_tracks", "reference_quality",
+    "target_drilldown", "target_points", "surface_detection_by_area",
 )
 MAP_POINTS_PER_TRACK_HOUR = 180  # map_tracks thinning: one point per track every 20 s per hour
 
@@ -71,7 +75,8 @@ def collect(con: duckdb.DuckDBPyConnection, cfg: Config, warehouse: Path, *, sta
     params: dict[str, dict[str, Any]] = {}
     for name in AUDIT_REPORTS:
         report = load_report(name)
-        extra = {"step_s": map_step_s(start_ns, end_ns)} if name == "map_tracks" else {}
+        extra = {"step_s": map_step_s(start_ns, end_ns)} if name in (
+            "map_tracks", "target_points") else {}
         params[name] = extra
         table = run_report(con, report, start_ns=start_ns, end_ns=end_ns, sector=sector,
                            requirements=req, params=extra, site=site,

@@ -20,6 +20,7 @@ from plotly.offline import get_plotlyjs
 
 from pipeline.audit import ais as ais_audit
 from pipeline.audit import charts
+from pipeline.audit import evaluation_charts as ev
 from pipeline.audit.data import AuditData
 from pipeline.requirements import FAIL, NOT_ENOUGH, PASS, Verdict, requirements_config
 
@@ -67,7 +68,8 @@ def sections(data: AuditData) -> list[Section]:
         else None)
     add("accuracy", "Position accuracy per sector",
         "95th percentile of the horizontal error against the reference (simulated truth, "
-        "else the ship's own AIS), per sector, fused and per radar.",
+        "else the reconstructed reference: each AIS vessel's smoothed trajectory; hover for "
+        "the reference's own 95% error), per sector, fused and per radar.",
         ("accuracy_by_sector",), charts.accuracy_bars(rows("accuracy_by_sector"), req))
     add("error-time", "Error over time", "95th percentile of the error per minute.",
         ("accuracy_over_time",), charts.error_over_time(rows("accuracy_over_time"), req))
@@ -77,13 +79,44 @@ def sections(data: AuditData) -> list[Section]:
         charts.identification_bars(rows("identification_by_sector"), req))
     _ais_sections(add, rows)
     add("siap", "SIAP", "Single Integrated Air Picture measures of the fused tracks against "
-        "truth (simulated logs), per sector and for all sectors.", ("siap_by_sector",),
+        "truth (simulated logs), else against the reconstructed references of the vessels "
+        "carrying AIS, per sector and for all sectors.", ("siap_by_sector",),
         charts.siap_bars(rows("siap_by_sector"), req))
     add("cross-track", "Cross-track error along the fairway",
         "Multi-radar paper, figures 1-2: the 60-s RMS error of the cross-track deviation along "
         "each leg, each radar's own (partial) track against the fused one.",
         ("cross_track_along_leg", "cross_track_by_leg"),
         charts.cross_track_along(rows("cross_track_along_leg"), req))
+    add("coverage", "Detection and coverage map per radar",
+        "Probability of detection from update intervals (OpenATS COMPASS's definition): scans "
+        "expected while a referenced target was in the radar's range, and those with an update; "
+        "per radar and sector, and per range/azimuth cell (blind sectors and range holes are "
+        "the red cells). Against simulated truth, else the reconstructed references of the "
+        "vessels carrying AIS.", ("detection_by_sector", "radar_coverage"),
+        ev.detection_bars(rows("detection_by_sector"), req),
+        ev.coverage_maps(rows("radar_coverage"), req))
+    add("continuity", "Track continuity",
+        "Gaps in each referenced target's fused track, track number changes (breaks) per hour, "
+        "extra tracks on one target, swaps of two targets' tracks (IALA G1111: none); "
+        "tracks without any reference (false, or ships without AIS) and reference-free "
+        "dubious tracks are in the reports false_tracks and dubious_tracks.",
+        ("track_continuity", "false_tracks", "dubious_tracks"),
+        ev.continuity_bars(rows("track_continuity"), req))
+    add("latency", "Latency",
+        "How late each radar's (and the fused) positions are: −along-track error ÷ speed "
+        "(a clock offset, a late time stamp or a slow tracker), with 95% intervals.",
+        ("latency_by_sensor",), ev.latency_bars(rows("latency_by_sensor")))
+    add("decomposition", "Error decomposition",
+        "Position error along and across the reference's course, and each radar's range and "
+        "azimuth error from its site, beside the IMO MSC.192(79) figures (95% of ranges "
+        "within 50 m or 1% of range, bearings within 2°).", ("error_decomposition",),
+        ev.decomposition_bars(rows("error_decomposition"), req))
+    add("drilldown", "Per-target drill-down",
+        "The referenced targets that cost the accuracy and detection verdicts most, worst "
+        "first (target_drilldown), and the worst five on the map: reference track and fused "
+        "points coloured by their error.", ("target_drilldown", "target_points"),
+        ev.drilldown_map(rows("target_points")), table=ev.drilldown_table(
+            rows("target_drilldown")))
     add("bias", "Radar registration bias",
         "Range, azimuth and time bias of each site estimated from AIS, with 95% intervals.",
         ("radar_bias_by_site",), charts.radar_bias(rows("radar_bias_by_site")))

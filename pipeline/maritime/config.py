@@ -25,6 +25,7 @@ from pipeline.configspec import (
 
 SECTIONS = (
     "sync", "association", "siap", "radar_bias", "fairway", "channel_integrity", "channel_faults",
+    "reference",
 )
 
 
@@ -231,6 +232,40 @@ class ChannelIntegrityConfig:
 
 
 @dataclass(frozen=True)
+class ReferenceConfig:
+    """``[reference]``: the reconstructed reference of vessels carrying AIS
+    (``pipeline.maritime.reference``, issue 37): the two motion models of the IMM (white
+    acceleration PSD, m^2/s^3, and mean sojourn, s), the outlier gate (chi-square
+    probability, 2 dof) and the rejections in a row after which the target restarts, the
+    longest gap between reports a segment bridges (s), how far beyond a segment's ends
+    it extrapolates (s), the largest own 95 % error of a usable reference (m), the COG
+    sigma of the velocity reports (deg), and the matching of tracks to references: a
+    track takes a reference when within the chi-square gate ``match_gate_probability``
+    at least ``min_match_share`` of the epochs both exist, and a point is scored when
+    within ``max_distance_m``. Detection (``pipeline.maritime.evaluate``): a radar report
+    updates its local track's target when within ``detection_max_distance_m`` of its
+    reference; the coverage map's cells are ``coverage_range_bin_m`` by
+    ``coverage_azimuth_bin_deg``."""
+
+    q_low_m2ps3: float = positive(1e-4)
+    q_high_m2ps3: float = positive(0.1)
+    sojourn_low_s: float = positive(600.0)
+    sojourn_high_s: float = positive(60.0)
+    gate_probability: float = probability(0.9999)
+    max_rejections: int = count(3)
+    max_gap_s: float = positive(200.0)
+    extrapolate_s: float = setting(10.0, ge=0.0)
+    max_p95_m: float = positive(20.0)
+    sigma_cog_deg: float = positive(2.0)
+    match_gate_probability: float = probability(0.999)
+    min_match_share: float = probability(0.5)
+    max_distance_m: float = positive(2000.0)
+    detection_max_distance_m: float = positive(500.0)
+    coverage_range_bin_m: float = positive(1000.0)
+    coverage_azimuth_bin_deg: float = setting(10.0, gt=0.0, le=90.0)
+
+
+@dataclass(frozen=True)
 class MaritimeConfig:
     """Everything the maritime stage reads beyond the core config (one field per
     section; ``max_cross_track_m`` from ``[fairway]``)."""
@@ -243,6 +278,7 @@ class MaritimeConfig:
     integrity: ChannelIntegrityConfig = setting({}, key="channel_integrity",
                                                 factory=ChannelIntegrityConfig)
     faults: tuple[ChannelFault, ...] = setting([], key="channel_faults")
+    reference: ReferenceConfig = setting({}, factory=ReferenceConfig)
 
 
 def maritime_config(cfg: Config) -> MaritimeConfig:

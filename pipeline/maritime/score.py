@@ -10,10 +10,26 @@ same system track and epoch (source = site_id):
   farther points are false tracks and are not scored here), and the same vessel is the
   reference for that system track's radar points at that epoch. reference_id = vessel_id,
   reference_mmsi = the vessel's MMSI (null: no AIS aboard);
-- otherwise reference ``ais``: the AIS report of the system track's identified MMSI
-  (``mmsi`` column of system_tracks), the latest one at most ``max_ais_age_s`` old,
-  extrapolated to the epoch (as in identification); points without identity are
-  skipped. reference_id = reference_mmsi = MMSI.
+- otherwise reference ``reconstructed`` (issue 37, :mod:`pipeline.maritime.reference`):
+  each AIS vessel's smoothed trajectory with its own covariance. Each radar's local
+  track takes a vessel when within the gate most of the time both exist
+  (:func:`pipeline.maritime.reference.match_points`): a radar's tracker follows one
+  ship, a system track may stray from one ship to another. A fused point takes the
+  vessel of its radar members (:func:`pipeline.maritime.reference.match_by_members`),
+  so a ship without AIS passing one with AIS, or a system track straying onto it, is
+  not scored against it; the radar points take the fused point's reference.
+  reference_id = reference_mmsi = MMSI; ``reference_p95_m`` is the reference's own 95 %
+  horizontal error at the point, ``reference_var_m2`` the trace of its covariance;
+- (without truth and without a reconstructed reference, the older ``ais`` reference:
+  the identified MMSI's latest AIS report extrapolated to the epoch; kept for callers
+  that pass none.)
+
+Error decomposition (every reference): along and across the reference's course
+(``along_track_error_m`` > 0: ahead of it; ``across_track_error_m`` > 0: to its
+starboard; null below ``MIN_DECOMPOSITION_SPEED_MPS``), and for a radar's point its
+range error and azimuth error (clockwise) seen from its site. A clock that runs late by
+dt puts a radar's points dt x speed behind: latency = -along / speed (the report
+``latency_by_sensor``).
 
 error = estimate - reference (east, north, m); error_m = its norm; NEES =
 e^T P^-1 e with the point's own position covariance (m^2), chi-square with 2 degrees
@@ -29,11 +45,17 @@ import numpy as np
 import polars as pl
 from scipy.spatial import cKDTree
 
-from pipeline.config import AisConfig, RegionConfig, Sector
+from pipeline.config import AisConfig, RadarSite, RegionConfig, Sector
+from pipeline.filters.quantiles import chi2_ppf
 from pipeline.frames import geodetic_to_enu
 from pipeline.geometry import assign_sectors, position_covariance
+from pipeline.maritime.config import ReferenceConfig
 from pipeline.maritime.identity import ais_at_epochs
+from pipeline.maritime.reference import Reference, match_by_members, match_points
 from pipeline.maritime.sync import NS, expand_ranges
+
+MIN_DECOMPOSITION_SPEED_MPS = 0.5
+"""Below this reference speed the course is noise: no along/across-track error."""
 
 ERROR_COLUMNS = (
     "time_ns",
@@ -47,7 +69,16 @@ ERROR_COLUMNS = (
     "error_north_m",
     "error_m",
     "nees",
+    "reference_p95_m",
+    "reference_var_m2",
+    "reference_speed_mps",
+    "along_track_error_m",
+    "across_track_error_m",
+    "reference_range_m",
+    "range_error_m",
+    "azimuth_error_rad",
 )
+_DECOMPOSITION = ERROR_COLUMNS[-8:]
 _ERROR_SCHEMA = {
     "time_ns": pl.Int64,
     "system_track_id": pl.Int64,
@@ -60,6 +91,7 @@ _ERROR_SCHEMA = {
     "error_north_m": pl.Float64,
     "error_m": pl.Float64,
     "nees": pl.Float64,
+    **{c: pl.Float64 for c in _DECOMPOSITION},
 }
 
 
@@ -74,19 +106,28 @@ def score_tracks(
     max_reference_distance_m: float = 2000.0,
     max_ais_age_s: float = 30.0,
     truth_extrapolation_s: float = 10.0,
+    reference: Reference | None = None,
+    reference_cfg: ReferenceConfig | None = None,
+    sites: Sequence[RadarSite] = (),
 ) -> pl.DataFrame:
-    """Errors of fused and radar points against truth (else AIS), track_errors columns.
+    """Errors of fused and radar points against truth (else the reconstructed
+    ``reference``, else AIS), track_errors columns.
 
     Consumes system_tracks: time_ns, system_track_id, x_enu_m, y_enu_m, sigma_x_m,
     sigma_y_m, cov_xy_m2, optional sector, mmsi (AIS reference only); associations:
     time_ns, system_track_id, site_id, x_enu_m, y_enu_m, P_xx/P_yy/P_xy (or the sigma
-    form), optional sector; truth: time_ns, vessel_id, mmsi, lat_deg, lon_deg.
+    form), optional sector; truth: time_ns, vessel_id, mmsi, lat_deg, lon_deg. ``sites``:
+    the radar sites (range/azimuth errors of their points).
     """
     fused = _with_sector(system_tracks, sectors, region)
     radar = _with_sector(associations, sectors, region)
     if truth is not None and truth.height:
-        return _truth_errors(fused, radar, truth, region, max_reference_distance_m,
-                             truth_extrapolation_s)
+        out = _truth_errors(fused, radar, truth, region, max_reference_distance_m,
+                            truth_extrapolation_s)
+        return _decompose(out, sites, region)
+    if reference is not None:
+        rcfg = reference_cfg or ReferenceConfig()
+        return _decompose(_reconstructed_errors(fused, radar, reference, rcfg), sites, region)
     fused = fused.with_columns(pl.lit("fused").alias("source"))
     radar = radar.rename({"site_id": "source"})
     ref = _ais_reference(fused, ais_reports, region, max_ais_age_s)
@@ -95,6 +136,117 @@ def score_tracks(
     if not parts:
         return pl.DataFrame(schema=_ERROR_SCHEMA)
     return pl.concat(parts).sort("time_ns", "system_track_id", "source")
+
+
+def _decompose(out: pl.DataFrame, sites: Sequence[RadarSite], region: RegionConfig
+               ) -> pl.DataFrame:
+    """Fill the decomposition columns from the helper columns (reference position,
+    velocity and covariance trace) and drop those (module docstring)."""
+    if out.height == 0 or "_ref_x" not in out.columns:
+        return out.select(ERROR_COLUMNS).cast(_ERROR_SCHEMA)
+    ex, ey = out["error_east_m"].to_numpy(), out["error_north_m"].to_numpy()
+    vx, vy = out["_ref_vx"].to_numpy(), out["_ref_vy"].to_numpy()
+    speed = np.hypot(vx, vy)
+    moving = speed >= MIN_DECOMPOSITION_SPEED_MPS
+    ux, uy = np.where(moving, vx / np.where(moving, speed, 1.0), np.nan), \
+        np.where(moving, vy / np.where(moving, speed, 1.0), np.nan)
+    along, across = ex * ux + ey * uy, ex * uy - ey * ux
+    names = [s.site_id for s in sites]
+    sx, sy = np.full(len(names) + 1, np.nan), np.full(len(names) + 1, np.nan)
+    if names:
+        e, n = geodetic_to_enu(np.array([s.lat_deg for s in sites]),
+                               np.array([s.lon_deg for s in sites]),
+                               region.origin_lat_deg, region.origin_lon_deg)
+        sx[:-1], sy[:-1] = np.atleast_1d(e), np.atleast_1d(n)
+    site = out["source"].replace_strict(names, list(range(len(names))), default=len(names),
+                                        return_dtype=pl.Int64).to_numpy()
+    rx = out["_ref_x"].to_numpy() - sx[site]
+    ry = out["_ref_y"].to_numpy() - sy[site]
+    rng = np.hypot(rx, ry)
+    rng_err = (ex * rx + ey * ry) / rng
+    az_err = (ex * ry - ey * rx) / rng**2  # along d/d(azimuth) = (ry, -rx) / range
+    p95 = out["reference_p95_m"] if "reference_p95_m" in out.columns else None
+    return out.with_columns(
+        (p95 if p95 is not None else pl.lit(0.0)).alias("reference_p95_m"),
+        pl.col("_ref_var").alias("reference_var_m2"),
+        pl.Series("reference_speed_mps", speed),
+        pl.Series("along_track_error_m", along).fill_nan(None),
+        pl.Series("across_track_error_m", across).fill_nan(None),
+        pl.Series("reference_range_m", rng).fill_nan(None),
+        pl.Series("range_error_m", rng_err).fill_nan(None),
+        pl.Series("azimuth_error_rad", az_err).fill_nan(None),
+    ).select(ERROR_COLUMNS).cast(_ERROR_SCHEMA)
+
+
+def _reconstructed_errors(fused: pl.DataFrame, radar: pl.DataFrame, ref: Reference,
+                          rcfg: ReferenceConfig) -> pl.DataFrame:
+    """track_errors rows against the reconstructed reference (module docstring): every
+    fused point matched to a reference vessel (:func:`match_points`), the radar points of
+    its (epoch, system track) scored against the same one."""
+    if fused.height == 0 or ref.rows == 0:
+        return pl.DataFrame(schema=_ERROR_SCHEMA)
+    fused = fused.sort("time_ns", "system_track_id")
+    ft = fused["time_ns"].to_numpy()
+    fs = fused["system_track_id"].to_numpy()
+    at = ref.at_epochs(np.unique(ft))
+    rt = radar["time_ns"].to_numpy()
+    rs = radar["system_track_id"].to_numpy()
+    f_of_r = _row_of(ft, fs, rt, rs)
+    # each radar's local track takes a target, the fused point its members' target
+    r_xx, r_yy, r_xy = position_covariance(radar)
+    track_key = (radar["site_id"].rank("dense").cast(pl.Int64) * 10**12
+                 + radar["local_track_id"]).to_numpy()
+    owner = match_points(
+        rt, radar["x_enu_m"].to_numpy(), radar["y_enu_m"].to_numpy(), track_key, r_xx, r_yy,
+        r_xy, at, max_distance_m=rcfg.max_distance_m,
+        gate_d2=float(chi2_ppf(rcfg.match_gate_probability, 2)), min_share=rcfg.min_match_share)
+    ref_row = match_by_members(f_of_r, owner, fused.height, ft, fused["x_enu_m"].to_numpy(),
+                               fused["y_enu_m"].to_numpy(), at)
+    cols = {k: at[k].to_numpy() for k in ("x", "y", "vx", "vy", "var_x", "var_y", "p95_m")}
+    parts = []
+    for pts, f_rows, source in (
+        (fused, np.arange(fused.height), pl.lit("fused")),
+        (radar, f_of_r, pl.col("site_id")),
+    ):
+        if pts.height == 0:
+            continue
+        k = np.where(f_rows >= 0, ref_row[np.maximum(f_rows, 0)], -1)
+        sel = np.flatnonzero(k >= 0)
+        k = k[sel]
+        pxx, pyy, pxy = (p[sel] for p in position_covariance(pts))
+        ex = pts["x_enu_m"].to_numpy()[sel] - cols["x"][k]
+        ey = pts["y_enu_m"].to_numpy()[sel] - cols["y"][k]
+        nees = (pyy * ex * ex - 2.0 * pxy * ex * ey + pxx * ey * ey) / (pxx * pyy - pxy**2)
+        rows = pts.select("time_ns", "system_track_id", source.alias("source"), "sector")[sel]
+        mmsi = at["mmsi"].gather(k)
+        parts.append(rows.with_columns(
+            pl.lit("reconstructed").alias("reference"),
+            mmsi.alias("reference_id"),
+            mmsi.alias("reference_mmsi"),
+            pl.Series("error_east_m", ex),
+            pl.Series("error_north_m", ey),
+            pl.Series("error_m", np.hypot(ex, ey)),
+            pl.Series("nees", nees),
+            pl.Series("reference_p95_m", cols["p95_m"][k]),
+            pl.Series("_ref_x", cols["x"][k]),
+            pl.Series("_ref_y", cols["y"][k]),
+            pl.Series("_ref_vx", cols["vx"][k]),
+            pl.Series("_ref_vy", cols["vy"][k]),
+            pl.Series("_ref_var", cols["var_x"][k] + cols["var_y"][k]),
+        ))
+    if not parts:
+        return pl.DataFrame(schema=_ERROR_SCHEMA)
+    return _in_key_order(pl.concat(parts))
+
+
+def _in_key_order(out: pl.DataFrame) -> pl.DataFrame:
+    """(time, track) order is shared; within it sources sort as strings."""
+    sources = out["source"]
+    names = sorted(sources.unique().to_list())
+    rank = sources.replace_strict(names, list(range(len(names))), return_dtype=pl.Int32)
+    order = np.lexsort((rank.to_numpy(), out["system_track_id"].to_numpy(),
+                        out["time_ns"].to_numpy()))
+    return out[order]
 
 
 def _truth_errors(
@@ -115,10 +267,12 @@ def _truth_errors(
     fused = fused.sort("time_ns", "system_track_id")
     ft = fused["time_ns"].to_numpy()
     fs = fused["system_track_id"].to_numpy()
-    at = truth_at_epochs(truth, np.unique(ft), region, extrapolate_s=extrapolate_s)
+    at = truth_at_epochs(truth, np.unique(ft), region, extrapolate_s=extrapolate_s,
+                         velocity=True)
     ref_row = nearest_truth(ft, fused["x_enu_m"].to_numpy(), fused["y_enu_m"].to_numpy(),
                             at, max_dist_m)
     ref_x, ref_y = at["ref_x_m"].to_numpy(), at["ref_y_m"].to_numpy()
+    ref_vx, ref_vy = at["ref_vx_mps"].to_numpy(), at["ref_vy_mps"].to_numpy()
     ref_id, ref_mmsi = at["vessel_id"], at["mmsi"]
     # radar rows -> their fused row
     rt = radar["time_ns"].to_numpy()
@@ -148,17 +302,15 @@ def _truth_errors(
             pl.Series("error_north_m", ey),
             pl.Series("error_m", np.hypot(ex, ey)),
             pl.Series("nees", nees),
+            pl.Series("_ref_x", ref_x[k]),
+            pl.Series("_ref_y", ref_y[k]),
+            pl.Series("_ref_vx", ref_vx[k]),
+            pl.Series("_ref_vy", ref_vy[k]),
+            pl.lit(0.0).alias("_ref_var"),
         ))
     if not parts:
         return pl.DataFrame(schema=_ERROR_SCHEMA)
-    out = pl.concat(parts).cast(_ERROR_SCHEMA)
-    # (time, track) order is shared; within it sources sort as strings
-    sources = out["source"]
-    names = sorted(sources.unique().to_list())
-    rank = sources.replace_strict(names, list(range(len(names))), return_dtype=pl.Int32)
-    order = np.lexsort((rank.to_numpy(), out["system_track_id"].to_numpy(),
-                        out["time_ns"].to_numpy()))
-    return out[order].select(ERROR_COLUMNS)
+    return _in_key_order(pl.concat(parts))
 
 
 def _row_of(t: np.ndarray, s: np.ndarray, qt: np.ndarray, qs: np.ndarray) -> np.ndarray:
@@ -230,13 +382,16 @@ def truth_at_epochs(
     region: RegionConfig,
     *,
     extrapolate_s: float = 0.0,
+    velocity: bool = False,
 ) -> pl.DataFrame:
     """Truth interpolated linearly to each epoch inside each vessel's sampled span, and
     extrapolated linearly (velocity of its last two samples) up to ``extrapolate_s``
     past its last sample: a radar report made just before a vessel left the scene is
     synchronised up to two scans later, when the simulator no longer logs its truth.
 
-    Returns time_ns (epoch), vessel_id, mmsi, ref_x_m, ref_y_m (regional ENU, m).
+    Returns time_ns (epoch), vessel_id, mmsi, ref_x_m, ref_y_m (regional ENU, m), and
+    with ``velocity`` ref_vx_mps, ref_vy_mps: that of the segment interpolated (0 for a
+    vessel with one sample).
     """
     epochs = np.unique(np.asarray(epochs_ns, np.int64))
     tr = (
@@ -264,17 +419,20 @@ def truth_at_epochs(
     hi = np.where(last, np.searchsorted(epochs, end, "right"), np.searchsorted(epochs, end, "left"))
     row, idx = expand_ranges(lo, hi)
     e, a, b = epochs[idx], seg0[row], seg1[row]
-    f = (e - t[a]) / np.where(b == a, 1, t[b] - t[a])
+    dt = np.where(b == a, 1, t[b] - t[a])
+    f = (e - t[a]) / dt
+    cols = {
+        "time_ns": e,
+        "vessel_id": vessel[row],
+        "mmsi": tr["mmsi"].gather(row),
+        "ref_x_m": x[a] + f * (x[b] - x[a]),
+        "ref_y_m": y[a] + f * (y[b] - y[a]),
+    }
+    if velocity:
+        cols["ref_vx_mps"] = (x[b] - x[a]) / dt * NS
+        cols["ref_vy_mps"] = (y[b] - y[a]) / dt * NS
     return pl.DataFrame(
-        {
-            "time_ns": e,
-            "vessel_id": vessel[row],
-            "mmsi": tr["mmsi"].gather(row),
-            "ref_x_m": x[a] + f * (x[b] - x[a]),
-            "ref_y_m": y[a] + f * (y[b] - y[a]),
-        },
-        schema_overrides={"time_ns": pl.Int64, "vessel_id": pl.Int64, "mmsi": pl.Int64},
-    )
+        cols, schema_overrides={"time_ns": pl.Int64, "vessel_id": pl.Int64, "mmsi": pl.Int64})
 
 
 def _truth_reference_reference(
@@ -383,6 +541,7 @@ def _errors(pts: pl.DataFrame) -> pl.DataFrame:
             pl.Series("error_north_m", ey),
             pl.Series("error_m", np.hypot(ex, ey)),
             pl.Series("nees", nees),
+            *(pl.lit(None, pl.Float64).alias(c) for c in _DECOMPOSITION),
         )
         .select(ERROR_COLUMNS)
         .cast(_ERROR_SCHEMA)

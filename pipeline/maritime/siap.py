@@ -65,9 +65,11 @@ import numpy as np
 import polars as pl
 
 from pipeline.config import RegionConfig, Sector
+from pipeline.frames import enu_to_geodetic
 from pipeline.geometry import assign_sectors, position_covariance
 from pipeline.maritime.associate import gate_threshold
 from pipeline.maritime.config import SiapConfig
+from pipeline.maritime.reference import Reference
 from pipeline.maritime.score import truth_at_epochs
 from pipeline.spatial import pairs_within
 from pipeline.units import NS
@@ -108,6 +110,7 @@ SIAP_COLUMNS = (
     "time_ns",
     "end_time_ns",
     "sector",
+    "reference",
     "epoch_period_s",
     *SUM_COLUMNS,
     *MEASURE_COLUMNS,
@@ -131,6 +134,23 @@ def truth_states(truth: pl.DataFrame, epochs_ns: np.ndarray, region: RegionConfi
     return at.sort("time_ns").join_asof(
         vel, on="time_ns", by="vessel_id", strategy="backward", check_sortedness=False
     )
+
+
+def reference_as_truth(reference: Reference, epochs_ns: np.ndarray, region: RegionConfig
+                       ) -> pl.DataFrame:
+    """A reconstructed reference sampled at the epochs in the truth table's columns
+    (time_ns, vessel_id = the target id, mmsi, lat_deg, lon_deg, course_rad, speed_mps),
+    so that the SIAP measures run on real data."""
+    at = reference.at_epochs(epochs_ns)
+    lat, lon = enu_to_geodetic(at["x"].to_numpy(), at["y"].to_numpy(), region.origin_lat_deg,
+                               region.origin_lon_deg)
+    vx, vy = at["vx"].to_numpy(), at["vy"].to_numpy()
+    return pl.DataFrame({
+        "time_ns": at["time_ns"], "vessel_id": at["target"],
+        "mmsi": at["mmsi"].set(at["mmsi"] < 0, None), "lat_deg": np.atleast_1d(lat),
+        "lon_deg": np.atleast_1d(lon), "course_rad": np.arctan2(vx, vy) % (2.0 * np.pi),
+        "speed_mps": np.hypot(vx, vy),
+    }).unique(["vessel_id", "time_ns"], keep="first").sort("time_ns", "vessel_id")
 
 
 def _tracks(system_tracks: pl.DataFrame) -> pl.DataFrame:
@@ -323,13 +343,19 @@ def siap_by_sector(
     cfg: SiapConfig,
     start_ns: int,
     end_ns: int,
+    reference: Reference | None = None,
 ) -> pl.DataFrame:
     """Rows of the ``siap_by_sector`` table for the epochs of the window [start_ns,
-    end_ns) (empty without truth): one row per sector (null: outside every sector), sums
-    and measures. ``epochs_ns`` may reach beyond the window (a work unit's lead-in and
-    look-ahead): the track-to-truth hysteresis runs over all of them, so it enters the
-    window as it would in one pass, and the track changes and swaps seen there count
-    where they happen; every sum is of the window's epochs."""
+    end_ns) (empty without truth and without a reconstructed ``reference``): one row per
+    sector (null: outside every sector), sums and measures. Without truth the
+    reconstructed reference's vessels (those carrying AIS, issue 37) stand in for the
+    truths, column ``reference`` says which. ``epochs_ns`` may reach beyond the window
+    (a work unit's lead-in and look-ahead): the track-to-truth hysteresis runs over all
+    of them, so it enters the window as it would in one pass, and the track changes and
+    swaps seen there count where they happen; every sum is of the window's epochs."""
+    kind = "truth"
+    if (truth is None or truth.height == 0) and reference is not None and len(epochs_ns):
+        truth, kind = reference_as_truth(reference, epochs_ns, region), reference.kind
     if truth is None or truth.height == 0 or len(epochs_ns) == 0:
         return empty_siap()
     truths = assign_sectors(
@@ -350,6 +376,7 @@ def siap_by_sector(
             pl.lit(int(start_ns), pl.Int64).alias("time_ns"),
             pl.lit(int(end_ns), pl.Int64).alias("end_time_ns"),
             pl.lit(float(epoch_period_s)).alias("epoch_period_s"),
+            pl.lit(kind).alias("reference"),
         )
         .pipe(with_measures)
         .select(SIAP_COLUMNS)
@@ -614,5 +641,6 @@ def with_measures(df: pl.DataFrame) -> pl.DataFrame:
 
 def empty_siap() -> pl.DataFrame:
     schema: dict[str, pl.DataType] = {c: pl.Float64() for c in SIAP_COLUMNS}
-    schema.update({"time_ns": pl.Int64(), "end_time_ns": pl.Int64(), "sector": pl.String()})
+    schema.update({"time_ns": pl.Int64(), "end_time_ns": pl.Int64(), "sector": pl.String(),
+                   "reference": pl.String()})
     return pl.DataFrame(schema=schema)

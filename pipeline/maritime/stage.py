@@ -30,9 +30,11 @@ from pipeline.maritime.align import align_reports
 from pipeline.maritime.associate import associate_tracks
 from pipeline.maritime.config import SECTIONS, maritime_config, parse_maritime
 from pipeline.maritime.cross_track import cross_track_by_leg
+from pipeline.maritime.evaluate import radar_detection
 from pipeline.maritime.fuse import fuse
 from pipeline.maritime.identity import identify
 from pipeline.maritime.integrity import check_channels
+from pipeline.maritime.reference import reconstruct, truth_reference
 from pipeline.maritime.score import score_tracks
 from pipeline.maritime.siap import siap_by_sector
 from pipeline.maritime.stitch import (
@@ -49,9 +51,10 @@ UNIT_REPORTS = 300_000
 """Radar reports per work unit at most (about): ~2.5 KB of worker memory per report
 read (docs/scale.md), so a unit stays well under 2 GB at any traffic density."""
 
-DERIVED_TABLES = ("associations", "system_tracks", "identifications", "track_errors")
+DERIVED_TABLES = ("associations", "system_tracks", "identifications", "track_errors",
+                  "reference_tracks")
 # maritime audit tables (docs/maritime.md): SIAP against truth, cross-track error per leg
-AUDIT_TABLES = ("siap_by_sector", "cross_track_by_leg")
+AUDIT_TABLES = ("siap_by_sector", "cross_track_by_leg", "radar_detection")
 # channel integrity (issue 22): every radar per sector and every AIS transponder
 INTEGRITY_TABLES = ("maritime_channel_health",)
 OUTPUTS = DERIVED_TABLES + AUDIT_TABLES + INTEGRITY_TABLES
@@ -117,6 +120,9 @@ def stage(tables: Inputs, window: Window, cfg: Config) -> Outputs:
     fused = cross_track(fused, cfg.fairway_legs, cfg.region, mc.max_cross_track_m)
     ais_used = ais.join(integrity.ais_excluded, on=["mmsi", "time_ns"], how="anti")
     identifications, fused = identify(fused, ais_used, cfg=cfg.ais, region=cfg.region)
+    # the reconstructed reference of the AIS vessels the integrity kept (issue 37), over
+    # the whole tracked span (its smoothing reaches into the margins)
+    reference, knots = reconstruct(ais_used, cfg.region, cfg.ais, mc.reference)
     # the unit's own epochs from here on (the margins only carried state and votes)
     own = pl.col("time_ns").is_between(start_ns, end_ns, closed="left")
     lead = associated.filter(pl.col("time_ns").is_between(
@@ -125,7 +131,8 @@ def stage(tables: Inputs, window: Window, cfg: Config) -> Outputs:
     associated, fused = associated.filter(own), fused.filter(own)
     identifications = identifications.filter(own)
     errors = score_tracks(
-        fused, associated, truth=truth, ais_reports=ais, region=cfg.region, sectors=cfg.sectors
+        fused, associated, truth=truth, ais_reports=ais, region=cfg.region, sectors=cfg.sectors,
+        reference=reference, reference_cfg=mc.reference, sites=cfg.radar_sites,
     )
     associations = associated.with_columns(
         pl.col("P_xx").sqrt().alias("sigma_x_m"),
@@ -135,7 +142,10 @@ def stage(tables: Inputs, window: Window, cfg: Config) -> Outputs:
     siap = siap_by_sector(
         tracked, truth, epochs_ns=epochs, epoch_period_s=mc.sync.epoch_period_s,
         region=cfg.region, sectors=cfg.sectors, cfg=mc.siap, start_ns=start_ns, end_ns=end_ns,
+        reference=reference,
     )
+    detection = _detection(aligned, associations, errors, truth, reference, ais, cfg,
+                           start_ns, end_ns)
     cross = cross_track_by_leg(
         fused, associations, errors, legs=cfg.fairway_legs, region=cfg.region,
         sites=cfg.radar_sites,
@@ -145,13 +155,39 @@ def stage(tables: Inputs, window: Window, cfg: Config) -> Outputs:
         "system_tracks": fused,
         "identifications": identifications,
         "track_errors": errors,
+        "reference_tracks": knots.filter(own),
         "siap_by_sector": siap,
         "cross_track_by_leg": cross,
+        "radar_detection": detection,
         "maritime_channel_health": integrity.health.filter(own),
         "rejects": _unknown_site_rejects(unknown, start_ns, end_ns),
         LEAD_ASSOCIATIONS: lead.select("time_ns", "site_id", "local_track_id",
                                        "system_track_id"),
     }
+
+
+def _detection(aligned: pl.DataFrame, associations: pl.DataFrame, errors: pl.DataFrame,
+               truth: pl.DataFrame | None, reference, ais: pl.DataFrame, cfg: Config,
+               start_ns: int, end_ns: int) -> pl.DataFrame:
+    """``radar_detection`` rows against truth (every vessel) when the log has it, else
+    against the reconstructed reference (issue 37); target class = AIS class A / B, or
+    'none' for a vessel without AIS."""
+    rc = maritime_config(cfg).reference
+    ais_class = ais.select(pl.col("mmsi").alias("reference_id"),
+                           pl.col("ais_class").alias("target_class")).unique("reference_id")
+    if truth is not None:
+        ref = truth_reference(truth, cfg.region)
+        classes = (truth.select(pl.col("vessel_id").cast(pl.Int64).alias("reference_id"),
+                                "mmsi").unique("reference_id")
+                   .join(ais_class.rename({"reference_id": "mmsi"}), on="mmsi", how="left")
+                   .select("reference_id", pl.col("target_class").fill_null("none")))
+    else:
+        ref, classes = reference, ais_class
+    return radar_detection(
+        aligned, associations, errors, ref, sites=cfg.radar_sites, sectors=cfg.sectors,
+        region=cfg.region, classes=classes, start_ns=start_ns, end_ns=end_ns,
+        max_distance_m=rc.detection_max_distance_m, range_bin_m=rc.coverage_range_bin_m,
+        azimuth_bin_deg=rc.coverage_azimuth_bin_deg)
 
 
 def _unknown_site_rejects(unknown: pl.DataFrame, start_ns: int, end_ns: int) -> pl.DataFrame:
