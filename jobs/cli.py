@@ -829,8 +829,8 @@ def reference(st: _State, runs, first_seed, duration, clean, per_seed, executor,
     through the batch stages with the truth and with the truth withheld: every accuracy
     figure (RMS, p95 per sector / area and source) and PD per radar / channel of the
     reports, truth-based beside reference-based (tolerance 10 % and 0.01)."""
-    from jobs.report import format_report
     from pipeline.experiments.reference_montecarlo import run_montecarlo, summarise
+    from pipeline.render import format_report
 
     figures = run_montecarlo(st.cfg, seeds=range(first_seed, first_seed + runs),
                              duration_s=_duration_s(duration), clean=clean,

@@ -15,9 +15,9 @@ import polars as pl
 import pytest
 
 from jobs.batch import run_batch
-from jobs.import_legacy import run_import
 from jobs.ingest import run_ingest
-from jobs.report import run_named_report
+from pipeline.convert.importer import run_import
+from pipeline.reports import run_named_report
 
 pytestmark = pytest.mark.realdata
 
