@@ -66,18 +66,25 @@ class _State:
 
     @property
     def warehouse(self) -> Path:
-        """The warehouse a command writes (``ingest``, ``run``, ``demo`` create it),
-        absolute; exit 2 when Delta cannot use the path, or when it was written before
-        sites (no ``site`` column: rebuild it)."""
-        path = checked_warehouse(Path(self.warehouse_option or self.cfg.warehouse_path))
-        refuse_pre_sites(path)
-        return path
+        """The warehouse a command writes (``ingest``, ``run``, ``demo`` create it): a
+        local folder (absolute) or an object-store prefix (``s3://``, with the config's
+        ``[warehouse] storage_options``); exit 2 when the scheme is unknown, when Delta
+        cannot use the path, or when it was written before sites (no ``site`` column:
+        rebuild it)."""
+        loc = checked_warehouse(self.warehouse_option or self.cfg.warehouse_path,
+                                self.cfg.warehouse_storage_options)
+        if not loc.is_local:
+            raise UsageError(f"warehouse {loc}: object storage is not wired yet")
+        refuse_pre_sites(loc)
+        return loc.path
 
     @property
     def existing_warehouse(self) -> Path:
         """The warehouse a command reads: exit 2 naming it when it does not exist (a
         typo in ``--warehouse`` must not read as an empty warehouse, nor create one)."""
-        return require_warehouse(self.warehouse)
+        where = self.warehouse
+        require_warehouse(where)
+        return where
 
     def sector(self, name: str | None) -> str | None:
         """``--sector``, checked against the config's sectors (maritime and airfield)."""
@@ -135,7 +142,8 @@ def _global_options(cmd: click.Command, validate: bool = True) -> click.Command:
                      help="TOML config (also accepted before the subcommand)."),
         click.Option(["--warehouse"], type=click.Path(file_okay=False), expose_value=False,
                      callback=_set_warehouse,
-                     help="Warehouse directory (also accepted before the subcommand)."),
+                     help="Warehouse: a directory or s3://BUCKET/PREFIX (also accepted "
+                          "before the subcommand)."),
     ]
     return cmd
 
@@ -239,7 +247,8 @@ _EXECUTOR = click.option(
 @click.option("--config", "config_path", type=click.Path(dir_okay=False), default=None,
               help="TOML config (default: the shipped config/surveil.toml).")
 @click.option("--warehouse", type=click.Path(file_okay=False), default=None,
-              help="Warehouse directory (default from config: ./warehouse).")
+              help="Warehouse: a directory or s3://BUCKET/PREFIX (default from config: "
+                   "./warehouse; docs/scale.md for object storage).")
 @click.option("--log-level", type=click.Choice(LOG_LEVELS, case_sensitive=False),
               default="WARNING", show_default=True)
 @click.option("--log-json/--log-text", default=None,
