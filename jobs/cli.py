@@ -73,10 +73,8 @@ class _State:
         rebuild it)."""
         loc = checked_warehouse(self.warehouse_option or self.cfg.warehouse_path,
                                 self.cfg.warehouse_storage_options)
-        if not loc.is_local:
-            raise UsageError(f"warehouse {loc}: object storage is not wired yet")
         refuse_pre_sites(loc)
-        return loc.path
+        return loc.path if loc.is_local else loc  # type: ignore[return-value]
 
     @property
     def existing_warehouse(self) -> Path:

@@ -9,6 +9,7 @@ from pipeline.config import ValidationConfig
 from pipeline.errors import UsageError
 from pipeline.ingest.worker import IngestUnit
 from pipeline.io.mcap_site import SiteConflictError, declared_site
+from pipeline.warehouse.location import Location, as_location
 
 
 class IngestUsageError(UsageError):
@@ -39,8 +40,8 @@ def expand_paths(paths: Iterable[Path | str]) -> list[Path]:
 def plan_units(
     paths: Iterable[Path | str],
     *,
-    warehouse: Path,
-    staging: Path,
+    warehouse: Path | Location,
+    staging: Path | Location,
     validation: ValidationConfig,
     start_ns: int | None = None,
     end_ns: int | None = None,
@@ -55,7 +56,8 @@ def plan_units(
         raise IngestUsageError("give both start and end of the window, or neither")
     if start_ns is not None and end_ns <= start_ns:  # type: ignore[operator]
         raise IngestUsageError(f"empty window [{start_ns}, {end_ns})")
-    wh, stage = str(warehouse), str(staging)
+    wh = as_location(warehouse)
+    stage = wh.at(staging)
     return [
         IngestUnit(str(f), wh, stage, validation, start_ns, end_ns, force, asterix_editions,
                    site)

@@ -46,6 +46,7 @@ from pipeline.io.mcap_read import ReadStatus, read_mcap_batches
 from pipeline.io.mcap_site import declared_site
 from pipeline.tables import conform, default_site, empty, spec
 from pipeline.warehouse.ledger import SKIP_STATUSES, file_fingerprint, lookup
+from pipeline.warehouse.location import Location, as_location
 from pipeline.warehouse.staged import StagedFile, TableStager
 
 WINDOW_READ_MARGIN_NS = 60 * 10**9
@@ -56,11 +57,11 @@ MISSING_DECODER = "decoder not installed"
 
 @dataclass(frozen=True)
 class IngestUnit:
-    """One source file to ingest (picklable; carries paths, not data)."""
+    """One source file to ingest (picklable; carries paths and locations, not data)."""
 
     path: str
-    warehouse: str
-    staging_dir: str
+    warehouse: str | Location
+    staging_dir: str | Location
     validation: ValidationConfig
     start_ns: int | None = None
     end_ns: int | None = None
@@ -199,9 +200,10 @@ def _decode_and_stage(
     )
 
 
-def _stage_folder(unit: IngestUnit) -> Path:
+def _stage_folder(unit: IngestUnit) -> Location:
     """``<staging>/<hash of path>``: deterministic per source file."""
-    return Path(unit.staging_dir) / hashlib.sha256(unit.path.encode()).hexdigest()[:24]
+    folder = as_location(unit.warehouse).at(unit.staging_dir)
+    return folder / hashlib.sha256(unit.path.encode()).hexdigest()[:24]
 
 
 def _read_window(unit: IngestUnit) -> tuple[int | None, int | None]:
