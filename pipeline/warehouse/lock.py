@@ -17,7 +17,8 @@ one of two jobs replaces it); a thread renews it every ``LEASE_S / 4`` with ``If
 on its own ETag, and it is released by a conditional overwrite too. Its guarantee,
 honestly: mutual exclusion holds while the holder renews within ``LEASE_S`` (60 s). A
 holder killed (SIGKILL, a lost node) leaves the lease to expire: the next job waits up to
-``LEASE_S`` and takes it over, then cleans up as above. A holder that could not renew for
+``LEASE_S`` and takes it over, then cleans up as above (at once when the dead holder ran
+on the same host: its pid is gone). A holder that could not renew for
 ``LEASE_S`` (a paused VM, a network partition) has lost it: its next renewal fails, and
 the job is terminated (SIGTERM to itself: exit 143, nothing half committed); by then a
 second job may have taken the lease, and the two may overlap for the commit in flight,
@@ -139,6 +140,20 @@ def warehouse_lock(warehouse: Path | Location, *, command: str, wait: bool = Fal
         os.close(fd)  # releases the lock
 
 
+def _dead_here(doc: dict) -> bool:
+    """The lease's holder ran on this host and its process is gone (killed): no need to
+    wait for the lease to expire. (A pid reused since only makes the next job wait.)"""
+    if doc.get("host") != socket.gethostname() or not isinstance(doc.get("pid"), int):
+        return False
+    try:
+        os.kill(doc["pid"], 0)
+    except ProcessLookupError:
+        return True
+    except OSError:  # alive, another user's
+        return False
+    return False
+
+
 class ObjectLease:
     """The writer lock of a warehouse on object storage: a lease object taken and renewed
     with conditional puts (obstore), its guarantee in the module docstring. ``lease_s``:
@@ -185,7 +200,8 @@ class ObjectLease:
                 continue
             doc = json.loads(bytes(got.bytes()) or b"{}")
             renewed = doc.get("renewed_at_ns", 0) / 1e9
-            if doc.get("released") or time.time() - renewed > doc.get("lease_s", self.lease_s):
+            expired = time.time() - renewed > doc.get("lease_s", self.lease_s)
+            if doc.get("released") or expired or _dead_here(doc):
                 try:  # free or expired: only one of two jobs replaces the ETag it read
                     self._etag = obstore.put(store, key, self._doc(),
                                              mode={"e_tag": got.meta["e_tag"]})["e_tag"]
