@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import importlib.util
 import os
 import shutil
 from collections.abc import Iterable, Mapping
@@ -366,6 +367,10 @@ def parse_location(text: str | os.PathLike | Location,
         bucket = rest.split("/", 1)[0]
         if not bucket:
             raise UsageError(f"warehouse {raw!r} names no bucket: use s3://BUCKET/PREFIX")
+        missing = [m for m in ("obstore", "fsspec") if importlib.util.find_spec(m) is None]
+        if missing:
+            raise UsageError(f"warehouse {raw!r} is on object storage, which needs "
+                             f"{' and '.join(missing)}: pip install 'surveil-pipeline[s3]'")
         return Location(f"s3://{rest.rstrip('/')}", opts)
     raise UsageError(
         f"warehouse {raw!r}: unknown scheme {head!r}; a warehouse is a local folder, "
