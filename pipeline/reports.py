@@ -41,7 +41,7 @@ from pipeline.configspec import Document, setting
 from pipeline.requirements import ConfigSection, RequirementsConfig, requirements_config
 from pipeline.resources import resource_path
 from pipeline.tables import table_specs
-from pipeline.warehouse.location import Location, as_location
+from pipeline.warehouse.location import Location
 from pipeline.warehouse.views import register_tables
 
 _HEADER = re.compile(r"^--\s*(\w[\w ]*?):\s*(.*)$")
@@ -332,17 +332,11 @@ _SPILLS = itertools.count()  # one spill folder per connection (DuckDB names its
 def open_warehouse(warehouse: Path | Location, threads: int = 2,
                    tables: Sequence[str] | None = None) -> duckdb.DuckDBPyConnection:
     """An in-memory DuckDB whose views are the warehouse tables' current snapshots (of
-    ``tables`` only, when given). On object storage DuckDB reads the Parquet files
-    through the warehouse's own pyarrow filesystem, registered with it as an fsspec
-    filesystem (``s3://`` paths; no DuckDB extension is downloaded)."""
+    ``tables`` only, when given). On object storage DuckDB scans each snapshot's pyarrow
+    dataset on the warehouse's own filesystem (no DuckDB extension is downloaded)."""
     spill = Path(tempfile.gettempdir()) / f"surveil-duckdb-{os.getpid()}-{next(_SPILLS)}"
     con = duckdb.connect(config={"threads": threads, "memory_limit": REPORT_MEMORY,
                                  "temp_directory": str(spill)})  # made and removed by DuckDB
-    loc = as_location(warehouse)
-    if not loc.is_local:
-        from fsspec.implementations.arrow import ArrowFSWrapper
-
-        con.register_filesystem(ArrowFSWrapper(loc.fs))
     register_tables(con, warehouse, tables)
     return con
 

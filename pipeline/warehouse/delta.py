@@ -30,6 +30,7 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.dataset as pds
 from deltalake import DeltaTable, WriterProperties, write_deltalake
+from deltalake.exceptions import TableNotFoundError
 
 from pipeline.tables import conform, empty, spec
 from pipeline.units import NS
@@ -152,17 +153,32 @@ def window_filter(name: str, start_ns: int | None, end_ns: int | None) -> pc.Exp
     return expr
 
 
-def _reader_table(warehouse: Path, name: str) -> DeltaTable | None:
+def _reader_table(warehouse: Path | Location, name: str,
+                  pins: dict[str, int] | None = None) -> DeltaTable | None:
     """The table as readers see it: at its pinned version while a job is committing it
-    (``pipeline.warehouse.pending``), else its latest; None when readers see no table."""
-    if not table_exists(warehouse, name):
+    (``pipeline.warehouse.pending``; ``pins``: the pins already read), else its latest;
+    None when readers see no table. On object storage the table is opened without a
+    first existence check (one round trip less)."""
+    where = table_location(warehouse, name)
+    if where.is_local and not table_exists(warehouse, name):
         return None
-    pinned = pinned_versions(warehouse).get(name)
-    if pinned is None:
-        return open_delta(table_location(warehouse, name))
-    if pinned < 0:
+    pinned = (pinned_versions(warehouse) if pins is None else pins).get(name)
+    if pinned is not None and pinned < 0:
         return None
-    return open_delta(table_location(warehouse, name), version=pinned)
+    try:
+        return open_delta(where, version=pinned)
+    except TableNotFoundError:
+        return None
+
+
+def reader_dataset(warehouse: Path | Location, name: str,
+                   pins: dict[str, int] | None = None) -> pds.Dataset | None:
+    """The Parquet files of the snapshot readers see of ``name`` as a pyarrow dataset on
+    the warehouse's filesystem, in the canonical types (``None``: no table yet)."""
+    delta_table = _reader_table(warehouse, name, pins)
+    if delta_table is None:
+        return None
+    return _snapshot_dataset(delta_table, table_location(warehouse, name), spec(name).schema)
 
 
 def read_table(
@@ -249,9 +265,9 @@ def _snapshot_dataset(snapshot: DeltaTable, path: Location, schema: pa.Schema) -
         pds.partitioning(pa.schema([schema.field(p) for p in parts]), flavor="hive")
         if parts else None
     )  # fmt: skip
-    found = pds.dataset(files, format=fmt, partitioning=partitioning, filesystem=fs,
-                        partition_base_dir=base)  # fmt: skip
-    have = set(found.schema.names)
+    # the columns the table has (one written before the canonical schema gained a column
+    # lacks it) from its Delta schema: no file is opened to learn them
+    have = {f.name for f in snapshot.schema().fields} | set(parts)
     keep = pa.schema([f for f in schema if f.name in have])  # canonical types
     return pds.dataset(files, schema=keep, format=fmt, partitioning=partitioning,
                        filesystem=fs, partition_base_dir=base)  # fmt: skip

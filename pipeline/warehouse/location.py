@@ -7,8 +7,8 @@ one (``os.fspath(loc)``, ``Path(loc)``). ``s3://bucket/prefix`` is Amazon S3 or 
 S3-compatible store (MinIO, Ceph, R2, ...): its data files, Delta logs, pending
 markers, staging and records are objects under the prefix, read and written through
 pyarrow's ``S3FileSystem`` (:attr:`Location.fs`), deltalake with
-:attr:`Location.storage_options`, and DuckDB over the same filesystem object
-(``pipeline.reports.open_warehouse``). A local-only call on it (``Path(loc)``) raises
+:attr:`Location.storage_options`, and DuckDB over pyarrow datasets on the same
+filesystem object (``pipeline.warehouse.views.register_tables``). A local-only call on it (``Path(loc)``) raises
 instead of silently making a folder named ``s3:`` in the working directory, and any
 other scheme is refused (:func:`parse_location`, exit 2).
 
@@ -367,10 +367,9 @@ def parse_location(text: str | os.PathLike | Location,
         bucket = rest.split("/", 1)[0]
         if not bucket:
             raise UsageError(f"warehouse {raw!r} names no bucket: use s3://BUCKET/PREFIX")
-        missing = [m for m in ("obstore", "fsspec") if importlib.util.find_spec(m) is None]
-        if missing:
-            raise UsageError(f"warehouse {raw!r} is on object storage, which needs "
-                             f"{' and '.join(missing)}: pip install 'surveil-pipeline[s3]'")
+        if importlib.util.find_spec("obstore") is None:  # the lease lock's conditional puts
+            raise UsageError(f"warehouse {raw!r} is on object storage, which needs obstore: "
+                             "pip install 'surveil-pipeline[s3]'")
         return Location(f"s3://{rest.rstrip('/')}", opts)
     raise UsageError(
         f"warehouse {raw!r}: unknown scheme {head!r}; a warehouse is a local folder, "

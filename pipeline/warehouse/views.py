@@ -39,9 +39,8 @@ built anew.
 
 **Object storage.** A warehouse on object storage (``s3://``) has no views file: DuckDB
 cannot write a database file there, and an analyst reads it with ``surveil sql`` (the
-views of :func:`register_tables`, over the Parquet files through the warehouse's own
-filesystem: ``pipeline.reports.open_warehouse``). :func:`rebuild_views_file` returns None
-there.
+views of :func:`register_tables`, over each snapshot's pyarrow dataset on the
+warehouse's own filesystem). :func:`rebuild_views_file` returns None there.
 """
 
 from __future__ import annotations
@@ -201,14 +200,47 @@ def _docs_digest() -> str:
 
 
 def register_tables(
-    con: duckdb.DuckDBPyConnection, warehouse: Path, names: Iterable[str] | None = None
+    con: duckdb.DuckDBPyConnection, warehouse: Path | Location,
+    names: Iterable[str] | None = None
 ) -> list[str]:
     """Create one view per table (all canonical tables when ``names`` is None) in ``con``
-    over the table's current snapshot; returns the view names."""
+    over the table's current snapshot; returns the view names. On object storage each
+    view reads the snapshot's pyarrow dataset (:func:`_register_datasets`)."""
+    if not as_location(warehouse).is_local:
+        return _register_datasets(con, as_location(warehouse), names)
     statements = view_statements(warehouse, names)
     for sql in statements.values():
         con.execute(sql)
     return list(statements)
+
+
+def _register_datasets(con: duckdb.DuckDBPyConnection, loc: Location,
+                       names: Iterable[str] | None) -> list[str]:
+    """The views of a warehouse on object storage: each table's snapshot as the pyarrow
+    dataset ``read_table`` reads (the warehouse's own ``S3FileSystem``, its native
+    reader; DuckDB pushes the projection and filters into it), registered on ``con`` as
+    ``_surveil_arrow_<table>``, and the view casting it to the canonical types. The
+    tables' Delta logs are read in parallel: on object storage each costs round trips
+    (~10-60 ms each on a store here), locally ~3 ms."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from pipeline.warehouse.delta import reader_dataset
+
+    selected = list(names) if names is not None else list(table_specs())
+    pins = pinned_versions(loc)
+    with ThreadPoolExecutor(max(1, min(8, len(selected)))) as pool:
+        found = list(pool.map(lambda n: reader_dataset(loc, n, pins), selected))
+    for name, dataset in zip(selected, found, strict=True):
+        s = spec(name).schema
+        if dataset is None:
+            con.execute(view_sql(name, []))
+            continue
+        arrow = f"_surveil_arrow_{name}"
+        con.register(arrow, dataset)
+        present = _missing_only(s, set(dataset.schema.names))
+        con.execute(f"CREATE OR REPLACE VIEW {_ident(name)} AS SELECT "
+                    f"{_select_list(s, null=False, present=present)} FROM {_ident(arrow)}")
+    return selected
 
 
 _TEMPLATE = "views_template"  # in-memory database: the documented views of a new file

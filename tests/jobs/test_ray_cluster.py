@@ -9,6 +9,7 @@ from __future__ import annotations
 import dataclasses
 import pickle
 from pathlib import Path
+from typing import ClassVar
 
 import pytest
 
@@ -35,7 +36,7 @@ END_NS = START_NS + 600 * NS  # 15:05: two units, seam at 15:00
 class _Recorded(UnitQueue):
     """The driver's queue of tasks, keeping the bytes of each task as it is sent."""
 
-    sent: list[bytes] = []
+    sent: ClassVar[list[bytes]] = []
 
     def take(self) -> list:
         out = super().take()
