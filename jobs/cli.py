@@ -328,8 +328,8 @@ def ingest(st: _State, paths, from_, to, force, site, executor, wait) -> None:
     progress = terminal_progress()
     with _locked(st, wait), progress or contextlib.nullcontext():
         if progress is not None:
-            progress.ingest_total(expand_paths([Path(p) for p in paths]))
-        summary = run_ingest([Path(p) for p in paths], st.cfg, st.warehouse,
+            progress.ingest_total(expand_paths(list(paths), st.warehouse))
+        summary = run_ingest(list(paths), st.cfg, st.warehouse,
                              start_ns=start, end_ns=end, force=force, executor=executor,
                              on_result=progress.ingest_result if progress else None,
                              site=site)

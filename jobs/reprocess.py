@@ -15,6 +15,7 @@ from jobs.ingest import IngestSummary, run_ingest
 from pipeline.batch import SitesSummary, run_batch
 from pipeline.config import Config
 from pipeline.warehouse.ledger import files_overlapping
+from pipeline.warehouse.location import as_location
 
 
 @dataclass
@@ -47,14 +48,16 @@ def run_reprocess(
     if end_ns <= start_ns:
         raise UsageError("--to must be after --from")
     files = files_overlapping(warehouse, start_ns, end_ns, site)
-    present = [f for f in files if Path(f).is_file()]
-    missing = [f for f in files if not Path(f).is_file()]
+    where = as_location(warehouse)  # an archived file may be an s3:// object
+    present = [f for f in files if (Path(f).is_file() if where.at(f).is_local
+                                    else where.at(f).exists())]
+    missing = [f for f in files if f not in present]
     ingest = None
     if present:
         if progress is not None:
-            progress.ingest_total([Path(f) for f in present])
+            progress.ingest_total(present)
         ingest = run_ingest(
-            [Path(f) for f in present], cfg, warehouse,
+            present, cfg, warehouse,
             start_ns=start_ns, end_ns=end_ns, force=True, executor=executor_kind,
             on_result=progress.ingest_result if progress is not None else None,
         )

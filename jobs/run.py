@@ -90,7 +90,7 @@ def run_nightly(cfg: Config, warehouse: Path, *, folders: list[str] | None = Non
         raise UsageError("no archive folders: set [archive] folders in the config or name "
                          "them: surveil run FOLDER...")
     try:
-        files = expand_paths([Path(f) for f in chosen])
+        files = expand_paths(chosen, warehouse)  # folders, or s3:// prefixes
     except IngestUsageError as exc:
         raise UsageError(str(exc)) from None
     summary = RunSummary(started_at_ns=time.time_ns(), command=command)

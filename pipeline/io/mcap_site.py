@@ -9,7 +9,9 @@ is read. Ingest stamps it on every row of the file (``schemas/tables.toml [site]
 
 from __future__ import annotations
 
+import contextlib
 from pathlib import Path
+from typing import BinaryIO
 
 from mcap.reader import make_reader
 
@@ -21,12 +23,14 @@ class SiteConflictError(ValueError):
     """Two ``surveil`` metadata records of one file name different sites."""
 
 
-def declared_site(path: Path | str) -> str | None:
+def declared_site(path: Path | str | BinaryIO) -> str | None:
     """The site ``path``'s metadata names, or None (none named, or no readable summary:
-    a damaged file's problems are the ingest reader's to report)."""
+    a damaged file's problems are the ingest reader's to report). ``path`` may be an open
+    seekable binary file (an object-store file)."""
     names: set[str] = set()
     try:
-        with open(path, "rb") as f:
+        with (open(path, "rb") if not hasattr(path, "read")
+              else contextlib.nullcontext(path)) as f:
             for record in make_reader(f).iter_metadata():
                 if record.name == RECORD_PREFIX or record.name.startswith(RECORD_PREFIX + "."):
                     value = record.metadata.get(METADATA_KEY)

@@ -146,3 +146,29 @@ def test_a_batch_killed_between_commits_on_s3_leaves_every_table_old(e2e, s3, on
     assert pending.markers(wh) == []
     for name in DERIVED:
         assert _rows(wh, name).equals(_rows(clean, name)), name
+
+
+def test_an_archive_on_s3_ingests_the_rows_of_the_local_files(e2e, s3, on_s3):
+    """`surveil run`'s folders and ingest's paths may be s3:// prefixes: each worker
+    reads its object (a local copy), the ledger names it by its URI; the rows are those
+    of the same files on disk (their source_file aside)."""
+    from jobs.ingest import run_ingest
+
+    bucket, client = on_s3["bucket"], s3.client()
+    for f in e2e.archive:
+        client.upload_file(str(f), bucket, f"archive/site-a/{Path(f).name}")
+    wh = parse_location(f"s3://{bucket}/from-s3")
+    s = run_ingest([f"s3://{bucket}/archive"], e2e.cfg, wh, executor="process")
+    assert s.exit_code == 0 and s.files_ok == len(e2e.archive), s.render()
+    ledger = _rows(wh, "ingest_ledger")
+    assert sorted(ledger["source_file"]) == sorted(
+        f"s3://{bucket}/archive/site-a/{Path(f).name}" for f in e2e.archive)
+    def rows(w, name: str) -> pl.DataFrame:
+        t = pl.from_arrow(read_table(w, name))
+        t = t.drop([c for c in t.columns if c == "source_file" or c.endswith("_at_ns")])
+        return t.sort(t.columns) if t.height else t
+
+    for name in ("radar_tracks", "ais_reports", "truth", "rejects"):
+        assert rows(wh, name).equals(rows(e2e.warehouse, name)), name
+    again = run_ingest([f"s3://{bucket}/archive"], e2e.cfg, wh, executor="serial")
+    assert again.files_skipped == len(e2e.archive)  # unchanged: the ledger skips them
