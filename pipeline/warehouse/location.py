@@ -8,9 +8,9 @@ S3-compatible store (MinIO, Ceph, R2, ...): its data files, Delta logs, pending
 markers, staging and records are objects under the prefix, read and written through
 pyarrow's ``S3FileSystem`` (:attr:`Location.fs`), deltalake with
 :attr:`Location.storage_options`, and DuckDB over pyarrow datasets on the same
-filesystem object (``pipeline.warehouse.views.register_tables``). A local-only call on it (``Path(loc)``) raises
-instead of silently making a folder named ``s3:`` in the working directory, and any
-other scheme is refused (:func:`parse_location`, exit 2).
+filesystem object (``pipeline.warehouse.views.register_tables``). A local-only call on
+it (``Path(loc)``) raises instead of silently making a folder named ``s3:`` in the
+working directory, and any other scheme is refused (:func:`parse_location`, exit 2).
 
 Storage options (credentials, endpoint, region) come from the process's environment
 (``AWS_ACCESS_KEY_ID``, ``AWS_SECRET_ACCESS_KEY``, ``AWS_SESSION_TOKEN``, ``AWS_REGION``
