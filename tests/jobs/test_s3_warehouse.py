@@ -73,7 +73,7 @@ def on_s3(e2e, s3_server, tmp_path_factory):
         batched = {n: _rows(wh, n) for n in table_specs()}
         window = (e2e.start_ns + 300 * NS, e2e.start_ns + 720 * NS)  # across the hour seam
         again = run_reprocess(e2e.cfg, wh, start_ns=window[0], end_ns=window[1],
-                              executor_kind="process")
+                              executor_kind="serial")
         assert again.exit_code == 0, again.render()
         local = root / "local"
         shutil.copytree(e2e.warehouse, local)
