@@ -57,6 +57,7 @@ class _State:
         self.config_path = config_path
         self.warehouse_option = warehouse
         self._cfg: Config | None = None
+        self._warehouse: tuple[Any, Any] | None = None  # (what it was made of, the result)
 
     @property
     def cfg(self) -> Config:
@@ -71,10 +72,15 @@ class _State:
         ``[warehouse] storage_options``); exit 2 when the scheme is unknown, when Delta
         cannot use the path, or when it was written before sites (no ``site`` column:
         rebuild it)."""
+        given = (self.warehouse_option, id(self.cfg))
+        if self._warehouse is not None and self._warehouse[0] == given:
+            return self._warehouse[1]  # (checked once: on object storage each check is I/O)
         loc = checked_warehouse(self.warehouse_option or self.cfg.warehouse_path,
                                 self.cfg.warehouse_storage_options)
         refuse_pre_sites(loc)
-        return loc.path if loc.is_local else loc  # type: ignore[return-value]
+        where = loc.path if loc.is_local else loc
+        self._warehouse = (given, where)
+        return where  # type: ignore[return-value]
 
     @property
     def existing_warehouse(self) -> Path:
