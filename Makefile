@@ -8,11 +8,12 @@ BIN    := $(VENV)/bin
 NATIVE := pipeline/decode/_json_columns.c pipeline/decode/_pow5_128.h pipeline/io/_mcap_records.c \
           pipeline/maritime/_associate.c pipeline/filters/_particle.c
 
-# pip builds the four C extensions (optional: skipped without a C compiler)
+# pip builds the four C extensions (optional: skipped without a C compiler); the cluster
+# extra (Ray, the object-store clients) so that `make test` runs the S3 and Ray tests
 $(BIN)/surveil: pyproject.toml $(NATIVE)
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
-	$(BIN)/pip install --quiet -e '.[dev,asterix]'
+	$(BIN)/pip install --quiet -e '.[dev,asterix,cluster]'
 	touch $(BIN)/surveil
 
 setup: $(BIN)/surveil

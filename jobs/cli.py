@@ -57,6 +57,7 @@ class _State:
         self.config_path = config_path
         self.warehouse_option = warehouse
         self._cfg: Config | None = None
+        self._warehouse: tuple[Any, Any] | None = None  # (what it was made of, the result)
 
     @property
     def cfg(self) -> Config:
@@ -66,18 +67,28 @@ class _State:
 
     @property
     def warehouse(self) -> Path:
-        """The warehouse a command writes (``ingest``, ``run``, ``demo`` create it),
-        absolute; exit 2 when Delta cannot use the path, or when it was written before
-        sites (no ``site`` column: rebuild it)."""
-        path = checked_warehouse(Path(self.warehouse_option or self.cfg.warehouse_path))
-        refuse_pre_sites(path)
-        return path
+        """The warehouse a command writes (``ingest``, ``run``, ``demo`` create it): a
+        local folder (absolute) or an object-store prefix (``s3://``, with the config's
+        ``[warehouse] storage_options``); exit 2 when the scheme is unknown, when Delta
+        cannot use the path, or when it was written before sites (no ``site`` column:
+        rebuild it)."""
+        given = (self.warehouse_option, id(self.cfg))
+        if self._warehouse is not None and self._warehouse[0] == given:
+            return self._warehouse[1]  # (checked once: on object storage each check is I/O)
+        loc = checked_warehouse(self.warehouse_option or self.cfg.warehouse_path,
+                                self.cfg.warehouse_storage_options)
+        refuse_pre_sites(loc)
+        where = loc.path if loc.is_local else loc
+        self._warehouse = (given, where)
+        return where  # type: ignore[return-value]
 
     @property
     def existing_warehouse(self) -> Path:
         """The warehouse a command reads: exit 2 naming it when it does not exist (a
         typo in ``--warehouse`` must not read as an empty warehouse, nor create one)."""
-        return require_warehouse(self.warehouse)
+        where = self.warehouse
+        require_warehouse(where)
+        return where
 
     def sector(self, name: str | None) -> str | None:
         """``--sector``, checked against the config's sectors (maritime and airfield)."""
@@ -135,7 +146,8 @@ def _global_options(cmd: click.Command, validate: bool = True) -> click.Command:
                      help="TOML config (also accepted before the subcommand)."),
         click.Option(["--warehouse"], type=click.Path(file_okay=False), expose_value=False,
                      callback=_set_warehouse,
-                     help="Warehouse directory (also accepted before the subcommand)."),
+                     help="Warehouse: a directory or s3://BUCKET/PREFIX (also accepted "
+                          "before the subcommand)."),
     ]
     return cmd
 
@@ -243,7 +255,8 @@ _EXECUTOR = click.option(
 @click.option("--config", "config_path", type=click.Path(dir_okay=False), default=None,
               help="TOML config (default: the shipped config/surveil.toml).")
 @click.option("--warehouse", type=click.Path(file_okay=False), default=None,
-              help="Warehouse directory (default from config: ./warehouse).")
+              help="Warehouse: a directory or s3://BUCKET/PREFIX (default from config: "
+                   "./warehouse; docs/scale.md for object storage).")
 @click.option("--log-level", type=click.Choice(LOG_LEVELS, case_sensitive=False),
               default="WARNING", show_default=True)
 @click.option("--log-json/--log-text", default=None,
@@ -326,8 +339,8 @@ def ingest(st: _State, paths, from_, to, force, site, executor, wait) -> None:
     progress = terminal_progress()
     with _locked(st, wait), progress or contextlib.nullcontext():
         if progress is not None:
-            progress.ingest_total(expand_paths([Path(p) for p in paths]))
-        summary = run_ingest([Path(p) for p in paths], st.cfg, st.warehouse,
+            progress.ingest_total(expand_paths(list(paths), st.warehouse))
+        summary = run_ingest(list(paths), st.cfg, st.warehouse,
                              start_ns=start, end_ns=end, force=force, executor=executor,
                              on_result=progress.ingest_result if progress else None,
                              site=site)

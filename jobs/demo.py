@@ -6,6 +6,7 @@ accuracy, identification and channel-fault reports."""
 
 from __future__ import annotations
 
+import tempfile
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -17,6 +18,7 @@ from pipeline.batch import SitesSummary, run_batch
 from pipeline.config import Config
 from pipeline.render import format_report
 from pipeline.reports import run_named_report
+from pipeline.warehouse.location import as_location
 
 DEMO_REPORTS = ("accuracy_by_sector", "identification_by_sector", "channel_faults_by_sector")
 DEMO_SCENARIOS = ("channel", "airfield", "ownship")
@@ -43,7 +45,10 @@ def run_demo(
     executor_kind: str | None = None,
     scenarios: Sequence[str] = DEMO_SCENARIOS,
 ) -> DemoResult:
-    archive_dir = warehouse / "demo-archive"
+    local = as_location(warehouse).is_local
+    # the simulator writes files: beside a local warehouse, else in a temporary folder
+    archive_dir = (warehouse / "demo-archive" if local
+                   else Path(tempfile.mkdtemp(prefix="surveil-demo-archive-")))
     echo(f"1/4 simulate: {', '.join(scenarios)} scenario(s), {duration_s:.0f} s, seed {seed} "
          f"-> {archive_dir}")
     files = []
@@ -66,6 +71,7 @@ def run_demo(
         echo(format_report(table, "table", title=name))
     echo(
         f"warehouse: {warehouse} (open {warehouse / 'surveil.duckdb'} in DuckDB for your own SQL)"
+        if local else f"warehouse: {warehouse} (surveil sql for your own SQL)"
     )
     window = f"--from {iso(start_ns)} --to {iso(end_ns)}"
     echo(f"audit page: surveil audit {window} --out audit/   (docs/audit.md)")

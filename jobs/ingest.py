@@ -16,7 +16,6 @@ import contextlib
 import dataclasses
 import logging
 import os
-import shutil
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -30,6 +29,7 @@ from pipeline.ingest.plan import IngestUsageError, check_sites, expand_paths, pl
 from pipeline.signals import deferred_interrupts
 from pipeline.tables import default_site
 from pipeline.warehouse.ledger import same_content
+from pipeline.warehouse.location import Location, as_location
 from pipeline.warehouse.overlaps import record_overlaps, synthetic_time_channels
 from pipeline.warehouse.views import rebuild_views_file
 
@@ -41,7 +41,7 @@ __all__ = ["IngestSummary", "IngestUsageError", "expand_paths", "run_ingest"]
 def run_ingest(
     paths: Sequence[Path | str],
     cfg: Config,
-    warehouse: Path,
+    warehouse: Path | Location,
     *,
     start_ns: int | None = None,
     end_ns: int | None = None,
@@ -59,8 +59,9 @@ def run_ingest(
     metadata names none (default: ``default``). Raises :class:`IngestUsageError` for
     bad paths, a bad window, or a ``site`` a file's metadata contradicts.
     """
-    warehouse = Path(warehouse).resolve()
-    staging = warehouse / "_staging" / f"ingest-{os.getpid()}-{time.time_ns()}"
+    if as_location(warehouse).is_local:
+        warehouse = Path(warehouse).resolve()
+    staging = as_location(warehouse) / "_staging" / f"ingest-{os.getpid()}-{time.time_ns()}"
     units = plan_units(
         paths, warehouse=warehouse, staging=staging, validation=cfg.validation,
         start_ns=start_ns, end_ns=end_ns, force=force,
@@ -85,9 +86,8 @@ def run_ingest(
                     if on_result is not None:
                         on_result(res)
         finally:
-            shutil.rmtree(staging, ignore_errors=True)
-            with contextlib.suppress(OSError):
-                (warehouse / "_staging").rmdir()
+            staging.rmtree()
+            staging.parent.rmdir_if_empty()
         if committed:
             if start_ns is None:  # whole files: their mcap_index rows are new
                 _warn_overlaps(warehouse, summary)
@@ -192,9 +192,9 @@ def _handle(
         summary.failed.append((m.source_file, f"commit failed: {type(exc).__name__}: {exc}"))
         return True
     finally:
+        where = as_location(warehouse)
         for sf in (sf for files in staged.values() for sf in files):
-            with contextlib.suppress(OSError):
-                os.remove(sf.path)  # still there only when the commit did not take it
+            where.at(sf.path).unlink()  # still there only when the commit did not take it
     summary.add(m)
     summary.committed_files.append(m.source_file)
     summary.file_sites[m.source_file] = m.site or default_site()

@@ -42,8 +42,8 @@ class TerminalProgress:
     def __exit__(self, *exc: Any) -> None:
         self._bars.stop()
 
-    def ingest_total(self, paths: list[Path]) -> None:
-        total = sum(os.path.getsize(p) for p in paths)
+    def ingest_total(self, paths: list[Path | str]) -> None:
+        total = sum(_size(p) for p in paths)
         self._ingest = self._bars.add_task(
             "ingest", total=total, done=f"0/{filesize.decimal(total)} in {len(paths)} file(s)")
         self._bytes = DownloadColumn()
@@ -51,7 +51,7 @@ class TerminalProgress:
     def ingest_result(self, res: Any) -> None:
         if self._ingest is None:
             return
-        size = os.path.getsize(res.unit.path) if os.path.exists(res.unit.path) else 0
+        size = _size(res.unit.path)
         self._bars.advance(self._ingest, size)
         task = self._bars.tasks[self._ingest]
         self._bars.update(self._ingest, done=self._bytes.render(task).plain)
@@ -71,3 +71,15 @@ class TerminalProgress:
 def terminal_progress() -> TerminalProgress | None:
     """Bars when stderr is a terminal, else None."""
     return TerminalProgress() if sys.stderr.isatty() else None
+
+
+def _size(path: Path | str) -> int:
+    """A file's size (an object's, on object storage; 0 when it cannot be had)."""
+    if "://" not in str(path):
+        return os.path.getsize(path) if os.path.exists(path) else 0
+    from pipeline.warehouse.location import as_location
+
+    try:
+        return as_location(str(path)).stat()[0]
+    except (OSError, ValueError):
+        return 0

@@ -16,6 +16,7 @@ from pipeline.batch import SitesSummary, run_batch, sites_in
 from pipeline.batch.place import check_places
 from pipeline.config import Config
 from pipeline.warehouse.ledger import files_overlapping
+from pipeline.warehouse.location import as_location
 
 
 @dataclass
@@ -53,14 +54,16 @@ def run_reprocess(
         sites = [site] if site is not None else sites_in(warehouse, start_ns, end_ns)
         check_places(warehouse, cfg, sites, start_ns, end_ns)
     files = files_overlapping(warehouse, start_ns, end_ns, site)
-    present = [f for f in files if Path(f).is_file()]
-    missing = [f for f in files if not Path(f).is_file()]
+    where = as_location(warehouse)  # an archived file may be an s3:// object
+    present = [f for f in files if (Path(f).is_file() if where.at(f).is_local
+                                    else where.at(f).exists())]
+    missing = [f for f in files if f not in present]
     ingest = None
     if present:
         if progress is not None:
-            progress.ingest_total([Path(f) for f in present])
+            progress.ingest_total(present)
         ingest = run_ingest(
-            [Path(f) for f in present], cfg, warehouse,
+            present, cfg, warehouse,
             start_ns=start_ns, end_ns=end_ns, force=True, executor=executor_kind,
             on_result=progress.ingest_result if progress is not None else None,
         )

@@ -44,7 +44,9 @@ from pipeline.config import Config
 from pipeline.executors import UnitResult
 from pipeline.ingest import IngestSummary
 from pipeline.ingest.archive import ImportResult, import_recordings, scan_folders, settled
+from pipeline.ingest.plan import IngestUsageError, expand_paths
 from pipeline.warehouse.delta import read_table
+from pipeline.warehouse.location import as_location
 from pipeline.warehouse.runs import record_run
 
 
@@ -138,16 +140,29 @@ def run_nightly(cfg: Config, warehouse: Path, *, folders: list[str] | None = Non
     if not chosen:
         raise UsageError("no archive folders: set [archive] folders in the config or name "
                          "them: surveil run FOLDER...")
-    scan = scan_folders(chosen, exclude=[warehouse])
-    if not scan.mcap and not scan.raw:
+    local = [f for f in chosen if "://" not in str(f)]
+    where = as_location(warehouse)
+    scan = scan_folders(local, exclude=[where.path] if where.is_local else [])
+    remote = [f for f in chosen if "://" in str(f)]
+    try:  # object-store prefixes: their MCAP objects (an object is whole once written)
+        objects = expand_paths(remote, warehouse) if remote else []
+    except IngestUsageError as exc:
+        raise UsageError(str(exc)) from None
+    if not scan.mcap and not scan.raw and not objects:
         raise UsageError(f"no recordings (MCAP, or NMEA text, AIS CSV, ASTERIX, pcap, ROS 1 "
-                         f"bags) under: {', '.join(chosen)}")
+                         f"bags) under: {', '.join(map(str, chosen))}")
     summary = RunSummary(started_at_ns=time.time_ns(), command=command)
     settle_s = cfg.archive_settle_s
     raws, deferred_raw = settled(scan.raw, settle_s, now_ns, raw=True)
+    if raws and not where.is_local:  # imported/ is a local folder of the warehouse
+        summary.failures += [f"import {p}: raw recordings are imported into a local "
+                             "warehouse only; wrap them first (`surveil import ... --out "
+                             "ARCHIVE`) and name that archive" for p in raws]
+        raws = []
     summary.imports = import_recordings(raws, warehouse, cfg, site=site)
     summary.failures += [f"import {p}: {err}" for p, err in summary.imports.failed]
     files, deferred = settled([*scan.mcap, *summary.imports.mcap], settle_s, now_ns)
+    files += objects
     summary.deferred = [(str(p), why) for p, why in [*deferred_raw, *deferred]]
     before = _ledger_sites(warehouse)
     results: list[UnitResult] = []

@@ -118,6 +118,33 @@ def _folder_names(folders: tuple[str, ...]) -> str | None:
     return None
 
 
+def _storage_options(options: Mapping[str, str]) -> str | None:
+    """``[warehouse] storage_options``: option names and string values."""
+    if any(not str(k).strip() for k in options):
+        return "an option name is empty"
+    return None
+
+
+_SECRET_WORDS = ("secret", "token", "password", "key_id", "access_key", "credential")
+
+
+def is_secret_option(key: str) -> bool:
+    """Whether a storage option's value is a credential (masked wherever it is shown)."""
+    return any(w in key.lower() for w in _SECRET_WORDS)
+
+
+def _masked_options(options: Mapping[str, str]) -> dict[str, str]:
+    """``[warehouse] storage_options`` as ``config check`` shows them: credentials
+    masked (:func:`is_secret_option`)."""
+    return {k: "***" if is_secret_option(k) else v for k, v in options.items()}
+
+
+def _unshown(f: Any) -> Any:
+    """A field left out of ``repr`` (it may hold credentials), equality and hashing."""
+    f.repr = f.compare = False
+    return f
+
+
 @dataclass(frozen=True)
 class Config:
     region: RegionConfig = setting()
@@ -127,6 +154,11 @@ class Config:
     fairway_legs: tuple[FairwayLeg, ...] = setting([], file_only=True)
     sectors: tuple[Sector, ...] = setting([], file_only=True)
     warehouse_path: str = text("warehouse", key=("warehouse", "path"))
+    # object-store options of an s3:// warehouse (endpoint, region, credentials: deltalake's
+    # names; over the AWS_* environment variables): never printed (docs/scale.md)
+    warehouse_storage_options: Mapping[str, str] = _unshown(setting(
+        {}, key=("warehouse", "storage_options"), factory=dict, check=_storage_options,
+        mask=_masked_options))
     # folders `surveil run` scans for MCAP files (absolute, or relative to the working
     # folder); empty: `surveil run FOLDER...` names them
     archive_folders: tuple[str, ...] = setting([], key=("archive", "folders"),

@@ -58,6 +58,7 @@ class Spec:
     check: Callable[[Any], str | None] | None = None
     convert: Callable[..., Any] | None = None
     sources: tuple[str, ...] | None = None
+    mask: Callable[[Any], Any] | None = None  # what `config check` shows of the value
 
     def file_key(self, name: str) -> Path:
         if self.key is not None:
@@ -77,7 +78,8 @@ def setting(default: Any = REQUIRED, *, key: str | Path | None = None, unit: str
             min_len: int | None = None, unique: bool = False,
             check: Callable[[Any], str | None] | None = None,
             convert: Callable[..., Any] | None = None, sources: tuple[str, ...] | None = None,
-            factory: Callable[[], Any] | None = None, file_only: bool = False) -> Any:
+            factory: Callable[[], Any] | None = None, file_only: bool = False,
+            mask: Callable[[Any], Any] | None = None) -> Any:
     """A dataclass field read from the config file.
 
     ``default``: the value when the key is absent, in file units (``REQUIRED``: the key
@@ -93,9 +95,10 @@ def setting(default: Any = REQUIRED, *, key: str | Path | None = None, unit: str
     excepted); ``check``: value -> problem text or None. ``convert``: checked file value
     -> field value. ``sources``: several file keys, all or none present, passed to
     ``convert``, which raises ``ValueError(message)`` or ``ValueError(index of the key
-    at fault, message)``."""
+    at fault, message)``. ``mask``: file value -> what ``surveil config check`` shows
+    (credentials are never printed)."""
     spec = Spec(default, (key,) if isinstance(key, str) else key, unit, gt, ge, lt, le, choices,
-                min_len, unique, check, convert, sources)
+                min_len, unique, check, convert, sources, mask)
     meta = {"setting": spec}
     if factory is not None:
         return field(default_factory=factory, metadata=meta)
@@ -290,7 +293,8 @@ class Document:
             self.problem(at, message)
             return None
         if not _is_table(tp):
-            self._display(path, key, raw, default, table)
+            shown = spec.mask(raw) if spec.mask is not None else raw
+            self._display(path, key, shown, default, table)
         return value if value is None else spec.to_field(value)
 
     def _sources(self, spec: Spec, table: Mapping, path: Path) -> Any:

@@ -62,3 +62,21 @@ def e2e(tmp_path_factory: pytest.TempPathFactory, cfg: Config) -> E2E:
     assert batch.exit_code == 0, batch.render()
     assert sorted(p.name for p in warehouse.iterdir()) == ["surveil.duckdb", "tables"]
     return E2E(cfg, files, warehouse, E2E_START_NS, end_ns)
+
+
+@pytest.fixture(scope="session")
+def s3_server():
+    """moto's S3 server on loopback for the session (tests/s3_server.py); skips without
+    moto."""
+    from tests.s3_server import running_server
+
+    with running_server() as server:
+        yield server
+
+
+@pytest.fixture
+def s3(s3_server, monkeypatch):
+    """The S3 server, with the standard AWS_* variables pointing at it for this test."""
+    for k, v in s3_server.env().items():
+        monkeypatch.setenv(k, v)
+    return s3_server

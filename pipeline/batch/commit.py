@@ -51,7 +51,7 @@ def commit_batch(warehouse: Path, manifests: list[UnitManifest], summary: BatchS
             summary.rows[name] = sum(f.rows for f in staged)
             crash_point(f"batch.{name}")
     staged = [f for m in manifests for f in m.files.get("rejects", [])]
-    rejects = read_staged("rejects", staged) if staged else tables.empty("rejects")
+    rejects = read_staged("rejects", staged, warehouse) if staged else tables.empty("rejects")
     of_site = f"site = {sql_literal(site)} AND " if site is not None else ""
     replace_rows(
         warehouse,

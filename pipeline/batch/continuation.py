@@ -13,9 +13,7 @@ the chain leaves the record, and the next batch of the site runs the chain first
 
 from __future__ import annotations
 
-import contextlib
 import json
-import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -26,6 +24,7 @@ from pipeline.batch.plan import safe_name
 from pipeline.batch.seams import trailing_digests
 from pipeline.families import family
 from pipeline.warehouse.delta import read_table
+from pipeline.warehouse.location import Location, as_location
 
 CONTINUE_DIR = "_continue"
 
@@ -34,33 +33,33 @@ CONTINUE_DIR = "_continue"
 class Continuation:
     """A continuation record left by a killed job (``_continue/``)."""
 
-    path: Path
+    path: Location
     site: str
     end_ns: int
     families: list[str]
 
 
-def promise_continuation(warehouse: Path, site: str | None, end_ns: int,
-                          digests: dict[str, str]) -> Path:
+def promise_continuation(warehouse: Path | Location, site: str | None, end_ns: int,
+                          digests: dict[str, str]) -> Location:
     """Record, before a window's commit, the digests of the rows at its end (atomic
     write): if the job dies before the units after it are batched again, the next batch
     finds the rows changed and does it (:func:`left_continuations`)."""
-    folder = warehouse / CONTINUE_DIR
-    folder.mkdir(exist_ok=True)
+    folder = as_location(warehouse) / CONTINUE_DIR
+    folder.mkdir()
     doc = {"site": site, "end_ns": end_ns, "digests": digests}
     path = folder / f"{safe_name(site or '')}-{end_ns}-{time.time_ns()}.json"
-    tmp = path.with_suffix(".tmp")
-    tmp.write_text(json.dumps(doc))
-    os.replace(tmp, path)
+    path.write_atomic(json.dumps(doc).encode())
     return path
 
 
-def left_continuations(warehouse: Path, site: str | None) -> list[Continuation]:
+def left_continuations(warehouse: Path | Location, site: str | None) -> list[Continuation]:
     """The continuation records (of ``site``, or all) left by killed jobs whose window's
     end changed (those whose rows did not change, a job killed before its commit, are
     removed)."""
     out = []
-    for path in sorted((warehouse / CONTINUE_DIR).glob("*.json")):
+    folder = as_location(warehouse) / CONTINUE_DIR
+    for name in sorted(n for n in folder.listdir(missing_ok=True) if n.endswith(".json")):
+        path = folder / name
         try:
             doc = json.loads(path.read_text())
         except (OSError, ValueError):
@@ -77,11 +76,11 @@ def left_continuations(warehouse: Path, site: str | None) -> list[Continuation]:
     return out
 
 
-def drop_record(record: Path) -> None:
+def drop_record(record: Path | Location) -> None:
     """Remove a continuation record (and its folder once empty)."""
-    record.unlink(missing_ok=True)
-    with contextlib.suppress(OSError):
-        record.parent.rmdir()
+    loc = as_location(record)
+    loc.unlink()
+    loc.parent.rmdir_if_empty()
 
 
 def units_after(warehouse: Path, families: list[str], end_ns: int, site: str | None

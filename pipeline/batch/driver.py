@@ -13,9 +13,7 @@ failed units are listed (exit code 1) so a re-run retries them.
 
 from __future__ import annotations
 
-import contextlib
 import logging
-import shutil
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -47,6 +45,7 @@ from pipeline.families import FAMILIES, family
 from pipeline.family import Family
 from pipeline.signals import deferred_interrupts
 from pipeline.warehouse.crashpoints import crash_point
+from pipeline.warehouse.location import as_location
 from pipeline.warehouse.views import rebuild_views_file, warm_up
 
 log = logging.getLogger(__name__)
@@ -148,8 +147,8 @@ def run_site(
     requested = (start_ns, end_ns)
     start_ns, end_ns, committed_cuts = owned_window(
         warehouse, start_ns, end_ns, site, unit_is_live(warehouse, cfg, site))
-    staging = warehouse / "_staging" / f"batch-{safe_name(site)}-{start_ns}-{end_ns}"
-    shutil.rmtree(staging, ignore_errors=True)
+    staging = as_location(warehouse) / "_staging" / f"batch-{safe_name(site)}-{start_ns}-{end_ns}"
+    staging.rmtree()
     units = plan_units(warehouse, cfg, start_ns, end_ns, staging, fams, committed_cuts, site)
     edge_before = trailing_digests(warehouse, fams, end_ns, site)
     summary = BatchSummary(start_ns=start_ns, end_ns=end_ns, units_total=len(units),
@@ -179,10 +178,10 @@ def run_site(
                 if summary.failed_units:
                     break
     except BaseException:  # interrupted: the pool is stopped, nothing was committed
-        shutil.rmtree(staging, ignore_errors=True)
+        staging.rmtree()
         raise
     if summary.failed_units:
-        shutil.rmtree(staging, ignore_errors=True)
+        staging.rmtree()
         return summary
     t0 = time.perf_counter()
     record = promise_continuation(warehouse, site, end_ns, edge_before)
@@ -197,9 +196,8 @@ def run_site(
         drop_record(record)
     else:
         summary.continuation = record
-    shutil.rmtree(staging, ignore_errors=True)
-    with contextlib.suppress(OSError):  # only when empty: another job may be staging
-        (warehouse / "_staging").rmdir()
+    staging.rmtree()
+    staging.parent.rmdir_if_empty()  # only when empty: another job may be staging
     return summary
 
 

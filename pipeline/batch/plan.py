@@ -35,6 +35,7 @@ from pipeline.families import FAMILIES
 from pipeline.family import Family
 from pipeline.units import NS
 from pipeline.warehouse.delta import has_rows, read_table, rows_per_second, volume_cuts
+from pipeline.warehouse.location import Location, as_location
 
 
 def owned_window(warehouse: Path, start_ns: int, end_ns: int, site: str | None = None,
@@ -111,7 +112,8 @@ def unit_is_live(warehouse: Path, cfg: Config, site: str | None = None
 
 
 def plan_units(
-    warehouse: Path, cfg: Config, start_ns: int, end_ns: int, staging_dir: Path,
+    warehouse: Path | Location, cfg: Config, start_ns: int, end_ns: int,
+    staging_dir: Path | Location,
     families: tuple[Family, ...] = FAMILIES,
     committed_cuts: dict[str, list[int]] | None = None,
     site: str | None = None,
@@ -123,6 +125,7 @@ def plan_units(
     units); per piece for a family with one unit per window, whose needless unit would
     own, and a reprocess of any part of it would re-run, the whole window."""
     derived = frozenset(n for f in FAMILIES for n in f.outputs)
+    where = as_location(warehouse)
     units = []
     for fam in families:
         kept = (committed_cuts or {}).get(fam.name, [])
@@ -137,7 +140,7 @@ def plan_units(
             live = {c for c in cells if has_input_rows(warehouse, fam, cfg, max(c * step, start_ns),
                                                         min((c + 1) * step, end_ns), site, derived)}
             pieces = [(a, b) for a, b in pieces if a // step in live]
-        units += [BatchUnit(str(warehouse), str(staging_dir), a, b, cfg, fam.name, site=site)
+        units += [BatchUnit(where, where.at(staging_dir), a, b, cfg, fam.name, site=site)
                   for a, b in pieces]
     return units
 

@@ -64,7 +64,7 @@ def bounded_window(cfg: Config, warehouse: Path, start_ns: int, end_ns: int,
     or refused (module docstring)."""
     cols = ["status", "start_time_ns", "end_time_ns", "rows_json"]
     try:
-        ledger = read_table(Path(warehouse), "ingest_ledger", columns=cols,
+        ledger = read_table(warehouse, "ingest_ledger", columns=cols,
                             site=site).to_pylist()
     except Exception:  # no warehouse / ledger yet: nothing known, nothing to clip to
         ledger = []

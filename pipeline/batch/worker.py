@@ -2,19 +2,21 @@
 
 Guarantee kept here: **a unit commits nothing and writes its outputs once.** A
 :class:`BatchUnit` (a family's sub-window, small and picklable: the warehouse and the
-staging folder by path) is run by :func:`run_unit`: its inputs read over each table's
-span around the unit (:func:`read_inputs`: a lead-in and a look-ahead for the maritime
-family, this batch's staged rows of another family's output inside the window), the
-family's pure ``stage`` over them, the outputs kept as Arrow IPC files in the unit's
-staging folder with the family's seam (:class:`SeamFile`). Once the unit is joined
-(:mod:`pipeline.batch.seams`), :func:`finalize_unit` writes it as the tables' final
-Parquet data files, relabelled where the join asks. The manifest (:class:`UnitManifest`)
-lists the files; only the driver commits them (:mod:`pipeline.batch.commit`).
+staging folder as locations, :class:`~pipeline.warehouse.location.Location`, local
+folders or object-store prefixes; never rows) is run by :func:`run_unit`: its inputs
+read over each table's span around the unit (:func:`read_inputs`: a lead-in and a
+look-ahead for the maritime family, this batch's staged rows of another family's output
+inside the window), the family's pure ``stage`` over them, the outputs kept as Arrow IPC
+files in the unit's staging folder with the family's seam (:class:`SeamFile`). Once the
+unit is joined (:mod:`pipeline.batch.seams`), :func:`finalize_unit` writes it as the
+tables' final Parquet data files, relabelled where the join asks. The manifest
+(:class:`UnitManifest`) lists the files; only the driver commits them
+(:mod:`pipeline.batch.commit`).
 """
 
 from __future__ import annotations
 
-import shutil
+import io
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -29,15 +31,18 @@ from pipeline.families import family
 from pipeline.family import Family, Relabel, Window, relabel
 from pipeline.time_sources import synthetic_expr
 from pipeline.warehouse.delta import read_table
+from pipeline.warehouse.location import Location, as_location
 from pipeline.warehouse.staged import StagedFile, TableStager
 
 
 @dataclass(frozen=True)
 class BatchUnit:
-    """One picklable work unit: a family's sub-window, read and written by path."""
+    """One picklable work unit: a family's sub-window, read from the warehouse and
+    written to the staging folder (a path or an ``s3://`` prefix, with the config's
+    storage options)."""
 
-    warehouse: str
-    staging_dir: str
+    warehouse: str | Location
+    staging_dir: str | Location
     start_ns: int
     end_ns: int
     cfg: Config
@@ -62,6 +67,11 @@ class UnitManifest:
     staging_dir: str = ""
     elapsed_s: float = 0.0  # the unit's wall time (read, compute, IPC)
     site: str | None = None  # stamped on the outputs when they are staged
+    warehouse: Location | None = None  # the storage its paths are on (None: local)
+
+    def at(self, path: str) -> Location:
+        """One of the manifest's paths on its storage."""
+        return (self.warehouse or Location(".")).at(path)
 
 
 @dataclass(frozen=True)
@@ -72,14 +82,23 @@ class SeamFile:
     2 GB of the driver's memory)."""
 
     path: str
+    location: Location | None = None  # on object storage: where (None: a local path)
 
     @classmethod
-    def write(cls, seam: pl.DataFrame, path: Path) -> SeamFile:
-        seam.write_ipc(path, compression="lz4")
-        return cls(str(path))
+    def write(cls, seam: pl.DataFrame, path: Path | Location) -> SeamFile:
+        loc = as_location(path)
+        if loc.is_local:
+            seam.write_ipc(loc.uri, compression="lz4")
+            return cls(loc.uri)
+        buf = io.BytesIO()
+        seam.write_ipc(buf, compression="lz4")
+        loc.write_atomic(buf.getvalue())
+        return cls(loc.uri, loc)
 
     def read(self) -> pl.DataFrame:
-        return pl.read_ipc(self.path)
+        if self.location is None:
+            return pl.read_ipc(self.path)
+        return pl.read_ipc(io.BytesIO(self.location.read_bytes()))
 
 
 @dataclass(frozen=True)
@@ -91,7 +110,7 @@ class FinalizeTask:
     mapping: Relabel | None
 
 
-def read_inputs(fam: Family, warehouse: Path, cfg: Config, window: Window,
+def read_inputs(fam: Family, warehouse: Path | Location, cfg: Config, window: Window,
                 overrides: dict[str, tuple[str, ...]] | None = None,
                 batch_window: tuple[int, int] | None = None,
                 site: str | None = None) -> dict[str, pl.DataFrame]:
@@ -133,7 +152,8 @@ a file without any time, 1970-01-01 + 1 ms per line) are no family's input: no
 association, identity or integrity decision is made on reports 1 ms apart."""
 
 
-def _overridden(warehouse: Path, name: str, paths: tuple[str, ...], batch_window: tuple[int, int],
+def _overridden(warehouse: Path | Location, name: str, paths: tuple[str, ...],
+                batch_window: tuple[int, int],
                 lo: int | None, hi: int | None, columns: list[str] | None,
                 site: str | None = None) -> pl.DataFrame:
     """Rows of ``name`` in [lo, hi): this batch's (``paths``: one site's) inside
@@ -152,8 +172,10 @@ def _overridden(warehouse: Path, name: str, paths: tuple[str, ...], batch_window
         keep = keep & (pl.col(time_col) < min(hi, w_hi))
     # the staged files of the whole batch, pruned by their row groups' time statistics:
     # an hourly unit of a day's batch reads its hour, not the day (was: read whole, 2+ GB)
-    mine = (pl.scan_parquet(list(paths)).filter(keep).select(columns or pl.all()).collect()
-            if paths else pl.from_arrow(tables.empty(name)).select(columns or pl.all()))
+    loc = as_location(warehouse)
+    options = {"storage_options": _polars_options(loc)} if not loc.is_local else {}
+    mine = (pl.scan_parquet(list(paths), **options).filter(keep).select(columns or pl.all())
+            .collect() if paths else pl.from_arrow(tables.empty(name)).select(columns or pl.all()))
     parts.append(mine)
     if hi is None or hi > w_hi:  # and the warehouse's after it
         parts.append(pl.from_arrow(read_table(warehouse, name, start_ns=w_hi, end_ns=hi,
@@ -164,6 +186,14 @@ def _overridden(warehouse: Path, name: str, paths: tuple[str, ...], batch_window
     # contract), so the rows usually are already: a sort would copy them all (a gaps
     # unit of a dense hour: ~0.85 GB more RSS for its 4 M system-track rows)
     return frame if not keys or is_sorted_by(frame, keys) else frame.sort(keys)
+
+
+def _polars_options(loc: Location) -> dict[str, str]:
+    """The location's storage options polars' object store takes (its S3 client's keys:
+    deltalake's, without delta-rs's own)."""
+    return {k: v for k, v in loc.storage_options.items()
+            if k not in ("aws_conditional_put", "aws_s3_locking_provider",
+                         "aws_s3_allow_unsafe_rename")}
 
 
 def is_sorted_by(frame: pl.DataFrame, keys: list[str]) -> bool:
@@ -187,7 +217,8 @@ def run_unit(unit: BatchUnit) -> UnitManifest:
     t0 = time.perf_counter()
     fam = family(unit.family)
     window = Window(unit.start_ns, unit.end_ns)
-    inputs = read_inputs(fam, Path(unit.warehouse), unit.cfg, window, dict(unit.overrides),
+    warehouse = as_location(unit.warehouse)
+    inputs = read_inputs(fam, warehouse, unit.cfg, window, dict(unit.overrides),
                          unit.window, unit.site)
     out = fam.stage(inputs, window, unit.cfg)
     seam = fam.unit_seam(out) if fam.unit_seam is not None else None
@@ -195,9 +226,9 @@ def run_unit(unit: BatchUnit) -> UnitManifest:
     unknown = set(out) - set(fam.outputs) - {"rejects"}
     if unknown:
         raise ValueError(f"family {fam.name} returned tables it does not own: {unknown}")
-    folder = Path(unit.staging_dir) / f"{unit.family}-{unit.start_ns}"
-    shutil.rmtree(folder, ignore_errors=True)
-    folder.mkdir(parents=True)
+    folder = warehouse.at(unit.staging_dir) / f"{unit.family}-{unit.start_ns}"
+    folder.rmtree()
+    folder.mkdir()
     if isinstance(seam, pl.DataFrame):
         seam = SeamFile.write(seam, folder / "_seam.arrow")
     files: dict[str, list[str]] = {}
@@ -207,13 +238,13 @@ def run_unit(unit: BatchUnit) -> UnitManifest:
             table = tables.shape(name, frame) if ordered else tables.conform(name, frame)
             path = folder / f"{name}.arrow"
             options = pa.ipc.IpcWriteOptions(compression="lz4")
-            with pa.OSFile(str(path), "wb") as sink, pa.ipc.new_file(
+            with path.open_output() as sink, pa.ipc.new_file(
                 sink, table.schema, options=options
             ) as w:
                 w.write_table(table)
             files[name] = [str(path)]
     return UnitManifest(unit.family, unit.start_ns, files, seam, str(folder),
-                        time.perf_counter() - t0, unit.site)
+                        time.perf_counter() - t0, unit.site, warehouse)
 
 
 def finalize_unit(task: FinalizeTask) -> UnitManifest:
@@ -221,13 +252,13 @@ def finalize_unit(task: FinalizeTask) -> UnitManifest:
     and written once as final Parquet data files (``TableStager``: sorted row groups,
     Delta statistics); the manifest then lists those files."""
     m = task.manifest
-    folder = Path(m.staging_dir + "-parquet")
-    shutil.rmtree(folder, ignore_errors=True)
+    folder = m.at(m.staging_dir + "-parquet")
+    folder.rmtree()
     stager = TableStager(folder, threaded=False, presorted=True,
                          site=m.site if m.site is not None else tables.default_site())
     for name, paths in m.files.items():
         for path in paths:
-            with pa.memory_map(path) as source:
+            with m.at(path).open_input() as source:
                 table = pa.ipc.open_file(source).read_all()
             if task.mapping:
                 table = tables.shape(name, relabel(pl.from_arrow(table), task.mapping))
@@ -236,9 +267,9 @@ def finalize_unit(task: FinalizeTask) -> UnitManifest:
     files: dict[str, list[StagedFile]] = {}
     for f in stager.close():
         files.setdefault(f.table, []).append(f)
-    shutil.rmtree(m.staging_dir, ignore_errors=True)
+    m.at(m.staging_dir).rmtree()
     return UnitManifest(m.family, m.start_ns, files, m.seam, str(folder), m.elapsed_s,
-                        m.site)
+                        m.site, m.warehouse)
 
 
 def batch_task(task: BatchUnit | FinalizeTask) -> UnitManifest:

@@ -9,18 +9,26 @@ from pipeline.config import ValidationConfig
 from pipeline.errors import UsageError
 from pipeline.ingest.worker import IngestUnit
 from pipeline.io.mcap_site import SiteConflictError, declared_site
+from pipeline.warehouse.location import Location, as_location, parse_location
 
 
 class IngestUsageError(UsageError):
     """Bad input paths (missing path, directory without MCAP files) or window: exit 2."""
 
 
-def expand_paths(paths: Iterable[Path | str]) -> list[Path]:
+def expand_paths(paths: Iterable[Path | str], where: Path | Location | None = None
+                 ) -> list[Path | str]:
     """Absolute file paths: directories expand to their ``*.mcap`` files (recursive,
-    sorted); an explicit file is taken as given. Raises :class:`IngestUsageError` for a
-    missing path, a directory without MCAP files, or no paths at all."""
-    out: list[Path] = []
+    sorted); an explicit file is taken as given. An ``s3://`` URI is a prefix (its
+    ``*.mcap`` objects) or an object, listed with ``where``'s storage options (the
+    warehouse's) and returned as URIs. Raises :class:`IngestUsageError` for a missing
+    path, a directory or prefix without MCAP files, or no paths at all."""
+    out: list[Path | str] = []
+    base = as_location(where) if where is not None else Location(".")
     for raw in paths:
+        if "://" in str(raw):
+            out.extend(_objects(base, str(raw)))
+            continue
         p = Path(raw).expanduser()
         if not p.exists():
             raise IngestUsageError(f"input path does not exist: {p}")
@@ -33,14 +41,35 @@ def expand_paths(paths: Iterable[Path | str]) -> list[Path]:
             out.append(p)
     if not out:
         raise IngestUsageError("no input paths given")
-    return list(dict.fromkeys(q.resolve() for q in out))
+    return list(dict.fromkeys(q if isinstance(q, str) else q.resolve() for q in out))
+
+
+def _objects(base: Location, uri: str) -> list[str]:
+    """The ``*.mcap`` objects of an archive prefix (or the one object) on object storage."""
+    import pyarrow.fs as pafs
+
+    try:
+        loc = base.at(parse_location(uri).uri)
+    except UsageError as exc:
+        raise IngestUsageError(f"input {uri!r}: {exc}") from None
+    info = loc.fs.get_file_info(loc.fs_path)
+    if info.type == pafs.FileType.File:
+        return [loc.uri]
+    found = loc.fs.get_file_info(pafs.FileSelector(loc.fs_path, recursive=True,
+                                                   allow_not_found=True))
+    files = sorted(f"s3://{i.path}" for i in found
+                   if i.type == pafs.FileType.File and i.path.endswith(".mcap"))
+    if not files:
+        raise IngestUsageError(f"no *.mcap objects under {loc.uri}" + (
+            "" if info.type != pafs.FileType.NotFound else " (nothing there)"))
+    return files
 
 
 def plan_units(
     paths: Iterable[Path | str],
     *,
-    warehouse: Path,
-    staging: Path,
+    warehouse: Path | Location,
+    staging: Path | Location,
     validation: ValidationConfig,
     start_ns: int | None = None,
     end_ns: int | None = None,
@@ -55,11 +84,12 @@ def plan_units(
         raise IngestUsageError("give both start and end of the window, or neither")
     if start_ns is not None and end_ns <= start_ns:  # type: ignore[operator]
         raise IngestUsageError(f"empty window [{start_ns}, {end_ns})")
-    wh, stage = str(warehouse), str(staging)
+    wh = as_location(warehouse)
+    stage = wh.at(staging)
     return [
         IngestUnit(str(f), wh, stage, validation, start_ns, end_ns, force, asterix_editions,
                    site)
-        for f in expand_paths(paths)
+        for f in expand_paths(paths, wh)
     ]
 
 
@@ -71,7 +101,12 @@ def check_sites(units: list[IngestUnit]) -> None:
         if u.site is None:
             continue
         try:
-            named = declared_site(u.path)
+            source = as_location(u.warehouse).at(u.path)
+            if source.is_local:
+                named = declared_site(u.path)
+            else:  # its metadata read in place (the footer and summary: ranged reads)
+                with source.open_input() as f:
+                    named = declared_site(f)
         except SiteConflictError as exc:
             bad.append(str(exc))
             continue

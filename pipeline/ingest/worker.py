@@ -28,8 +28,13 @@ unknown_schema) are clipped into the window.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
+import os
+import shutil
+import tempfile
 from collections import Counter
+from collections.abc import Iterator
 from concurrent.futures import Future, wait
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -46,6 +51,7 @@ from pipeline.io.mcap_read import ReadStatus, read_mcap_batches
 from pipeline.io.mcap_site import declared_site
 from pipeline.tables import conform, default_site, empty, spec
 from pipeline.warehouse.ledger import SKIP_STATUSES, file_fingerprint, lookup
+from pipeline.warehouse.location import Location, as_location
 from pipeline.warehouse.staged import StagedFile, TableStager
 
 WINDOW_READ_MARGIN_NS = 60 * 10**9
@@ -56,11 +62,11 @@ MISSING_DECODER = "decoder not installed"
 
 @dataclass(frozen=True)
 class IngestUnit:
-    """One source file to ingest (picklable; carries paths, not data)."""
+    """One source file to ingest (picklable; carries paths and locations, not data)."""
 
     path: str
-    warehouse: str
-    staging_dir: str
+    warehouse: str | Location
+    staging_dir: str | Location
     validation: ValidationConfig
     start_ns: int | None = None
     end_ns: int | None = None
@@ -101,17 +107,42 @@ class FileManifest:
     changed_while_read: bool = False
 
 
-def file_site(unit: IngestUnit) -> str:
+def file_site(unit: IngestUnit, path: Path | None = None) -> str:
     """The file's site: its MCAP metadata's (:mod:`pipeline.io.mcap_site`), else the
     command's ``--site``, else the default (``schemas/tables.toml [site]``). The driver
-    refuses an explicit ``--site`` that contradicts a file's metadata before any work."""
-    return declared_site(unit.path) or unit.site or default_site()
+    refuses an explicit ``--site`` that contradicts a file's metadata before any work.
+    ``path``: where the file's bytes are read (its local copy)."""
+    return declared_site(path or unit.path) or unit.site or default_site()
+
+
+@contextlib.contextmanager
+def local_copy(unit: IngestUnit) -> Iterator[Path]:
+    """The unit's file as a local path: itself, or for an archive on object storage
+    (``s3://``, reached with the warehouse's storage options) a copy in this worker's
+    temporary folder, removed afterwards. The file is read whole (decoded, hashed), so
+    one download costs what the reads would."""
+    source = as_location(unit.warehouse).at(unit.path)
+    if source.is_local:
+        yield Path(unit.path)
+        return
+    fd, tmp = tempfile.mkstemp(prefix="surveil-", suffix=".mcap")
+    try:
+        with os.fdopen(fd, "wb") as out, source.fs.open_input_stream(source.fs_path) as src:
+            shutil.copyfileobj(src, out, 8 << 20)
+        yield Path(tmp)
+    finally:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
 
 
 def ingest_file(unit: IngestUnit, ctx: IngestContext) -> FileManifest:
     """Decode one file and stage its rows (runs in a worker; commits nothing). ``ctx``:
     the worker process's context (entered), whose buffers and threads it uses."""
-    path = Path(unit.path)
+    with local_copy(unit) as path:
+        return _ingest(unit, ctx, path)
+
+
+def _ingest(unit: IngestUnit, ctx: IngestContext, path: Path) -> FileManifest:
     before = path.stat()
     size = before.st_size
     sha: str | Future[str] = ""
@@ -157,7 +188,7 @@ def _decode_and_stage(
         parse_pool=ctx.parse_pool,
         strings=ctx.strings,
     )
-    site = file_site(unit)
+    site = file_site(unit, path)
     stager = TableStager(_stage_folder(unit), site=site)
     reasons: Counter = Counter()
 
@@ -174,7 +205,7 @@ def _decode_and_stage(
             for name, parts in decoder.drain().items():
                 for part in parts:
                     stage(name, part)
-        decoder.add_rejects(_status_rejects(unit, scan.status))
+        decoder.add_rejects(_status_rejects(unit, scan.status, path))
         for name, table in decoder.finish().items():
             stage(name, table)
     finally:
@@ -213,9 +244,10 @@ def _decode_and_stage(
     )
 
 
-def _stage_folder(unit: IngestUnit) -> Path:
+def _stage_folder(unit: IngestUnit) -> Location:
     """``<staging>/<hash of path>``: deterministic per source file."""
-    return Path(unit.staging_dir) / hashlib.sha256(unit.path.encode()).hexdigest()[:24]
+    folder = as_location(unit.warehouse).at(unit.staging_dir)
+    return folder / hashlib.sha256(unit.path.encode()).hexdigest()[:24]
 
 
 def _read_window(unit: IngestUnit) -> tuple[int | None, int | None]:
@@ -224,14 +256,14 @@ def _read_window(unit: IngestUnit) -> tuple[int | None, int | None]:
     return unit.start_ns - WINDOW_READ_MARGIN_NS, unit.end_ns + WINDOW_READ_MARGIN_NS
 
 
-def _status_rejects(unit: IngestUnit, status: ReadStatus) -> pa.Table:
+def _status_rejects(unit: IngestUnit, status: ReadStatus, path: Path) -> pa.Table:
     """One rejects row per problem the reader reported (not MCAP, lost chunk, cut-off)."""
     if not status.problems:
         return empty("rejects")
     raw: list[bytes | None] = []
     for p in status.problems:
         if p.reason_code == "not_mcap":
-            with open(unit.path, "rb") as f:
+            with open(path, "rb") as f:
                 raw.append(f.read(_MAGIC_SAMPLE))
         else:
             raw.append(None)

@@ -9,7 +9,9 @@ is read. Ingest stamps it on every row of the file (``schemas/tables.toml [site]
 
 from __future__ import annotations
 
+import contextlib
 from pathlib import Path
+from typing import BinaryIO
 
 from mcap.reader import make_reader
 from mcap.records import DataEnd, Footer, Metadata
@@ -23,19 +25,21 @@ class SiteConflictError(ValueError):
     """Two ``surveil`` metadata records of one file name different sites."""
 
 
-def declared_site(path: Path | str) -> str | None:
+def declared_site(path: Path | str | BinaryIO) -> str | None:
     """The site ``path``'s metadata names, or None (none named, or nothing readable: a
     damaged file's problems are the ingest reader's to report). Read from the summary's
     metadata index; a file without a summary (still being written, or cut off) is
     scanned for its metadata records instead (:func:`_scanned_metadata`: a writer puts
-    them ahead of the messages, so a half-written file names its site too)."""
+    them ahead of the messages, so a half-written file names its site too). ``path`` may
+    be an open seekable binary file (an object-store file)."""
     names: set[str] = set()
     try:
-        with open(path, "rb") as f:
+        with (open(path, "rb") if not hasattr(path, "read")
+              else contextlib.nullcontext(path)) as f:
             records = list(make_reader(f).iter_metadata())
     except Exception:  # untrusted bytes: the ingest reader reports the damage, not us
         records = []
-    if not records:
+    if not records and not hasattr(path, "read"):
         records = _scanned_metadata(Path(path))
     for record in records:
         if record.name == RECORD_PREFIX or record.name.startswith(RECORD_PREFIX + "."):

@@ -16,9 +16,9 @@ it with its own (``supersedes``). Until then the pinned tables read as before th
 later commits to them included; ``surveil run`` re-does a crashed batch window by itself
 (its files are not covered by committed units).
 
-The marker is written with ``os.replace`` (atomic); readers list ``_pending/`` (nothing
-to list in normal operation). Versions come from the ``_delta_log`` listing (no table
-load).
+The marker is written with ``os.replace`` (atomic; on object storage one PUT, which is
+atomic too); readers list ``_pending/`` (nothing to list in normal operation). Versions
+come from the ``_delta_log`` listing (no table load).
 """
 
 from __future__ import annotations
@@ -31,43 +31,41 @@ import uuid
 from collections.abc import Callable, Iterable
 from pathlib import Path
 
+from pipeline.warehouse.location import Location, as_location
+
 PENDING_DIR = "_pending"
 
 
-def _tables_dir(warehouse: Path) -> Path:
-    return Path(warehouse) / "tables"
-
-
-def latest_version(warehouse: Path, name: str) -> int:
+def latest_version(warehouse: Path | Location, name: str) -> int:
     """Latest Delta version of table ``name`` from its log listing; -1 without a table."""
-    log = _tables_dir(warehouse) / name / "_delta_log"
+    log = as_location(warehouse) / "tables" / name / "_delta_log"
     try:
-        names = os.listdir(log)
+        names = log.listdir()
     except FileNotFoundError:
         return -1
     versions = [int(n[:-5]) for n in names if n.endswith(".json") and n[:-5].isdigit()]
     return max(versions, default=-1)
 
 
-def begin(warehouse: Path, names: Iterable[str], *, job: str, **about: object) -> Path:
-    """Write the marker of a job about to commit ``names``; returns its path. ``about``
-    (JSON values: the window, the source file) lets a later job tell it supersedes it."""
-    folder = Path(warehouse) / PENDING_DIR
-    folder.mkdir(parents=True, exist_ok=True)
+def begin(warehouse: Path | Location, names: Iterable[str], *, job: str,
+          **about: object) -> Location:
+    """Write the marker of a job about to commit ``names``; returns its location.
+    ``about`` (JSON values: the window, the source file) lets a later job tell it
+    supersedes it."""
+    folder = as_location(warehouse) / PENDING_DIR
+    folder.mkdir()
     doc = {"job": job, "started_at_ns": time.time_ns(), "pid": os.getpid(), **about,
            "pins": {n: latest_version(warehouse, n) for n in dict.fromkeys(names)}}
     path = folder / f"{job}-{time.time_ns()}-{uuid.uuid4().hex[:8]}.json"
-    tmp = path.with_suffix(".tmp")
-    tmp.write_text(json.dumps(doc))
-    os.replace(tmp, path)
+    path.write_atomic(json.dumps(doc).encode())
     return path
 
 
-def markers(warehouse: Path) -> list[tuple[Path, dict]]:
-    """Every pending marker (path, content), oldest first."""
-    folder = Path(warehouse) / PENDING_DIR
+def markers(warehouse: Path | Location) -> list[tuple[Location, dict]]:
+    """Every pending marker (location, content), oldest first."""
+    folder = as_location(warehouse) / PENDING_DIR
     try:
-        names = sorted(n for n in os.listdir(folder) if n.endswith(".json"))
+        names = sorted(n for n in folder.listdir() if n.endswith(".json"))
     except FileNotFoundError:
         return []
     out = []
@@ -77,19 +75,17 @@ def markers(warehouse: Path) -> list[tuple[Path, dict]]:
     return out
 
 
-def finish(warehouse: Path, marker: Path,
+def finish(warehouse: Path | Location, marker: Path | Location,
            supersedes: Callable[[dict], bool] = lambda _doc: False) -> None:
     """The job's commits are all made: remove its marker, and every other marker whose
     work this job re-did (``supersedes(doc)``), then the folder when empty."""
     for path, doc in markers(warehouse):
-        if path == marker or supersedes(doc):
-            with contextlib.suppress(FileNotFoundError):
-                path.unlink()
-    with contextlib.suppress(OSError):
-        (Path(warehouse) / PENDING_DIR).rmdir()
+        if path.uri == str(marker) or supersedes(doc):
+            path.unlink()
+    (as_location(warehouse) / PENDING_DIR).rmdir_if_empty()
 
 
-def pinned_versions(warehouse: Path) -> dict[str, int]:
+def pinned_versions(warehouse: Path | Location) -> dict[str, int]:
     """Table -> the version readers read (the earliest pin over the markers); tables not
     pinned are absent (readers read their latest version)."""
     pins: dict[str, int] = {}

@@ -36,6 +36,11 @@ storage format of :data:`STORAGE_VERSION` (``ATTACH ... (STORAGE_VERSION ...)``)
 every DuckDB 1.x opens (the 2.x default, storage version 69, makes the 1.x command line
 fail with "we can only read versions between 64 and 68"); a file in another format is
 built anew.
+
+**Object storage.** A warehouse on object storage (``s3://``) has no views file: DuckDB
+cannot write a database file there, and an analyst reads it with ``surveil sql`` (the
+views of :func:`register_tables`, over each snapshot's pyarrow dataset on the
+warehouse's own filesystem). :func:`rebuild_views_file` returns None there.
 """
 
 from __future__ import annotations
@@ -57,6 +62,7 @@ import pyarrow as pa
 from pipeline.tables import column_comment, spec, table_specs
 from pipeline.warehouse.crashpoints import crash_point
 from pipeline.warehouse.delta import sql_literal, table_path, table_snapshot
+from pipeline.warehouse.location import Location, as_location
 from pipeline.warehouse.pending import pinned_versions
 
 VIEWS_FILE = "surveil.duckdb"
@@ -194,14 +200,47 @@ def _docs_digest() -> str:
 
 
 def register_tables(
-    con: duckdb.DuckDBPyConnection, warehouse: Path, names: Iterable[str] | None = None
+    con: duckdb.DuckDBPyConnection, warehouse: Path | Location,
+    names: Iterable[str] | None = None
 ) -> list[str]:
     """Create one view per table (all canonical tables when ``names`` is None) in ``con``
-    over the table's current snapshot; returns the view names."""
+    over the table's current snapshot; returns the view names. On object storage each
+    view reads the snapshot's pyarrow dataset (:func:`_register_datasets`)."""
+    if not as_location(warehouse).is_local:
+        return _register_datasets(con, as_location(warehouse), names)
     statements = view_statements(warehouse, names)
     for sql in statements.values():
         con.execute(sql)
     return list(statements)
+
+
+def _register_datasets(con: duckdb.DuckDBPyConnection, loc: Location,
+                       names: Iterable[str] | None) -> list[str]:
+    """The views of a warehouse on object storage: each table's snapshot as the pyarrow
+    dataset ``read_table`` reads (the warehouse's own ``S3FileSystem``, its native
+    reader; DuckDB pushes the projection and filters into it), registered on ``con`` as
+    ``_surveil_arrow_<table>``, and the view casting it to the canonical types. The
+    tables' Delta logs are read in parallel: on object storage each costs round trips
+    (~10-60 ms each on a store here), locally ~3 ms."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from pipeline.warehouse.delta import reader_dataset
+
+    selected = list(names) if names is not None else list(table_specs())
+    pins = pinned_versions(loc)
+    with ThreadPoolExecutor(max(1, min(8, len(selected)))) as pool:
+        found = list(pool.map(lambda n: reader_dataset(loc, n, pins), selected))
+    for name, dataset in zip(selected, found, strict=True):
+        s = spec(name).schema
+        if dataset is None:
+            con.execute(view_sql(name, []))
+            continue
+        arrow = f"_surveil_arrow_{name}"
+        con.register(arrow, dataset)
+        present = _missing_only(s, set(dataset.schema.names))
+        con.execute(f"CREATE OR REPLACE VIEW {_ident(name)} AS SELECT "
+                    f"{_select_list(s, null=False, present=present)} FROM {_ident(arrow)}")
+    return selected
 
 
 _TEMPLATE = "views_template"  # in-memory database: the documented views of a new file
@@ -224,7 +263,8 @@ class ViewsEngine:
         job's decoding hides its cost. Given a ``warehouse`` without a views file yet,
         also the documented views a new file copies (~1 s of CPU: only then is it worth
         spending while the job works)."""
-        new_file = warehouse is not None and not (Path(warehouse) / VIEWS_FILE).exists()
+        new_file = (warehouse is not None and as_location(warehouse).is_local
+                    and not (Path(warehouse) / VIEWS_FILE).exists())
         self._warming = threading.Thread(
             target=self._warm, args=(new_file,), name="duckdb-warm-up", daemon=True
         )
@@ -284,9 +324,9 @@ class ViewsEngine:
                 self._con.close()
                 self._con, self._template_digest = None, None
 
-    def rebuild(self, warehouse: Path) -> Path:
+    def rebuild(self, warehouse: Path | Location) -> Path | None:
         """:func:`rebuild_views_file` through this engine."""
-        return _rebuild(self, Path(warehouse))
+        return _rebuild(self, warehouse)
 
 
 _SHARED = ViewsEngine()  # for callers without an engine of their own (batch, calibrate)
@@ -297,7 +337,8 @@ def warm_up(warehouse: Path | None = None) -> None:
     _SHARED.warm_up(warehouse)
 
 
-def rebuild_views_file(warehouse: Path, engine: ViewsEngine | None = None) -> Path:
+def rebuild_views_file(warehouse: Path | Location, engine: ViewsEngine | None = None
+                       ) -> Path | None:
     """Bring ``<warehouse>/surveil.duckdb`` up to date with the views of every table.
 
     The views whose statement changed (their table got new files, or the code a new
@@ -305,12 +346,14 @@ def rebuild_views_file(warehouse: Path, engine: ViewsEngine | None = None) -> Pa
     ``os.replace``: an analyst opening the file sees the old or the new views. An
     unchanged file is left alone. The result equals a build from scratch
     (tests/warehouse/test_views.py checks it). ``engine``: the DuckDB instance to work
-    through (``None``: the shared one).
+    through (``None``: the shared one). None (nothing written) on object storage.
     """
-    return _rebuild(engine if engine is not None else _SHARED, Path(warehouse))
+    return _rebuild(engine if engine is not None else _SHARED, warehouse)
 
 
-def _rebuild(engine: ViewsEngine, warehouse: Path) -> Path:
+def _rebuild(engine: ViewsEngine, warehouse: Path | Location) -> Path | None:
+    if not as_location(warehouse).is_local:
+        return None
     warehouse = Path(warehouse)
     warehouse.mkdir(parents=True, exist_ok=True)
     target = warehouse / VIEWS_FILE
@@ -389,7 +432,9 @@ def views_stale(warehouse: Path) -> bool:
     while tables exist). A job killed between its commits and its views rebuild leaves
     such a file. Costs a listing of each table's log; a rebuild that finds nothing to
     change touches the file, so a table pinned by a crashed job's marker does not make
-    every later check rebuild."""
+    every later check rebuild. False on object storage (no views file there)."""
+    if not as_location(warehouse).is_local:
+        return False
     warehouse = Path(warehouse)
     try:
         built = (warehouse / VIEWS_FILE).stat().st_mtime_ns
@@ -443,7 +488,7 @@ def _snapshot_key(warehouse: Path, name: str, pins: dict[str, int]) -> str | Non
     if version < 0:
         return f"{_empty_view_digest(name)}:none"
     try:
-        written_ns = (log / f"{version:020d}.json").stat().st_mtime_ns
+        written_ns = os.stat(log / f"{version:020d}.json").st_mtime_ns
     except FileNotFoundError:
         return None
     return f"{_empty_view_digest(name)}:{version}@{written_ns}"
