@@ -64,6 +64,14 @@ class _State:
             self._cfg = load_config(self.config_path)
         return self._cfg
 
+    def world(self, scenarios: list[str] | tuple[str, ...]) -> Config:
+        """The config with the simulator's world of ``scenarios`` on top (the demo
+        site's shipped ``config/scenarios/`` files): what the experiments read
+        (:func:`pipeline.simulate.scenarios.with_scenario`)."""
+        from pipeline.simulate.scenarios import with_scenario
+
+        return with_scenario(self.cfg, scenarios)
+
     @property
     def warehouse(self) -> Path:
         """The warehouse a command writes (``ingest``, ``run``, ``demo`` create it),
@@ -268,15 +276,21 @@ def cli(ctx: click.Context, config_path, warehouse, log_level, log_json) -> None
 @click.option("--radars", type=int, default=None,
               help="region: number of radar sites along the coast (default 6)")
 @click.option("--out", type=click.Path(file_okay=False), required=True)
+@click.option("--scenario-config", type=click.Path(dir_okay=False), default=None,
+              help="the scenario's world on top of the site config: fault schedules, "
+                   "injected biases, the own ship's voyage (default: for the demo site, "
+                   "the shipped config/scenarios/<scenario>.toml; for yours, none)")
 @click.pass_obj
-def simulate(st: _State, scenario, duration, seed, start, ships, radars, out) -> None:
+def simulate(st: _State, scenario, duration, seed, start, ships, radars, out,
+             scenario_config) -> None:
     """Write a simulated scenario as an MCAP archive (one file per hour). The region
     scenario also writes its config, region.toml, beside the files."""
     from jobs.simulate import run_simulate
 
     start_ns = parse_time_ns(start) if start else None
     for f in run_simulate(scenario, _duration_s(duration) if duration else None, seed,
-                          Path(out), st.cfg, start_ns=start_ns, ships=ships, radars=radars):
+                          Path(out), st.cfg, start_ns=start_ns, ships=ships, radars=radars,
+                          scenario_config=scenario_config):
         click.echo(str(f))
 
 
@@ -748,7 +762,8 @@ def channel_faults(st: _State, runs, first_seed, executor, fmt, out_path) -> Non
     from pipeline.experiments.channel_montecarlo import run_montecarlo, summarise
     from pipeline.render import format_report
 
-    res = run_montecarlo(st.cfg, seeds=range(first_seed, first_seed + runs),
+    res = run_montecarlo(st.world(["channel", "ownship"]),
+                         seeds=range(first_seed, first_seed + runs),
                          executor=executor or st.cfg.execution.executor)
     if out_path:
         res["faults"].write_parquet(out_path)
@@ -771,7 +786,7 @@ def ownship(st: _State, runs, first_seed, duration, per_seed, executor, fmt) -> 
     from pipeline.experiments.ownship_montecarlo import run_montecarlo, summarise
     from pipeline.render import format_report
 
-    table = run_montecarlo(st.cfg, seeds=range(first_seed, first_seed + runs),
+    table = run_montecarlo(st.world(["ownship"]), seeds=range(first_seed, first_seed + runs),
                            duration_s=_duration_s(duration),
                            executor=executor or st.cfg.execution.executor)
     out = table if per_seed else summarise(table)

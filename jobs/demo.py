@@ -1,8 +1,8 @@
 """`surveil demo`: simulate one hour (the `channel`, `airfield` and `ownship` scenarios:
-every family's tables, so the audit page has every section; with the config's fault
-schedules: ``[[channel_faults]]``, ``[[airfield.faults]]``, the own ship's GNSS outages
-and jump) into an archive, ingest it, run the batch over the hour and print the
-accuracy, identification and channel-fault reports."""
+every family's tables, so the audit page has every section; with the scenarios' fault
+schedules, ``config/scenarios/*.toml``: ``[[channel_faults]]``, ``[[airfield.faults]]``,
+the own ship's GNSS outages and jump) into an archive, ingest it, run the batch over the
+hour and print the accuracy, identification and channel-fault reports."""
 
 from __future__ import annotations
 
@@ -17,6 +17,7 @@ from pipeline.batch import SitesSummary, run_batch
 from pipeline.config import Config
 from pipeline.render import format_report
 from pipeline.reports import run_named_report
+from pipeline.simulate.scenarios import with_scenario
 
 DEMO_REPORTS = ("accuracy_by_sector", "identification_by_sector", "channel_faults_by_sector")
 DEMO_SCENARIOS = ("channel", "airfield", "ownship")
@@ -43,6 +44,7 @@ def run_demo(
     executor_kind: str | None = None,
     scenarios: Sequence[str] = DEMO_SCENARIOS,
 ) -> DemoResult:
+    cfg = with_scenario(cfg, scenarios)  # the demo site's fault schedules (config/scenarios)
     archive_dir = warehouse / "demo-archive"
     echo(f"1/4 simulate: {', '.join(scenarios)} scenario(s), {duration_s:.0f} s, seed {seed} "
          f"-> {archive_dir}")

@@ -158,7 +158,8 @@ class AirfieldConfig:
     sectors: tuple[AirfieldSector, ...] = setting([], file_only=True)
     filter: FilterConfig = setting({})
     integrity: IntegrityConfig = setting({})
-    faults: tuple[FaultConfig, ...] = setting([], file_only=True)
+    # the airfield scenario's fault schedule: config/scenarios/airfield.toml only
+    faults: tuple[FaultConfig, ...] = setting([], file_only=True, scenario="airfield")
 
     def sensor(self, sensor_id: str) -> SensorConfig:
         for s in self.sensors:

@@ -1,7 +1,10 @@
 """The maritime family's configuration: ``[sync]``, ``[association]``, ``[siap]``,
-``[radar_bias]``, ``[fairway]``, ``[channel_integrity]`` and the channel scenario's fault
-schedule ``[[channel_faults]]`` (the geography it shares with the other families,
-radar sites, AIS settings, legs and sectors, is in the core :class:`~pipeline.config.Config`).
+``[radar_bias]``, ``[fairway]``, ``[channel_integrity]`` (the geography it shares with
+the other families, radar sites, AIS settings, legs and sectors, is in the core
+:class:`~pipeline.config.Config`). The channel scenario's fault schedule
+``[[channel_faults]]`` and the biases it injects ``[radar_bias.simulate]`` are the
+simulator's world: they are read from a scenario file (``config/scenarios/channel.toml``)
+only, never from a site config (``setting(scenario=...)``).
 
 Degrees and seconds in the file; radians and seconds here. Each value's file key,
 default and valid range are declared beside it (:func:`pipeline.configspec.setting`).
@@ -67,7 +70,7 @@ class RadarBiasConfig:
 
     apply: bool = setting(False)
     correction: Mapping[str, SiteBias] = setting({}, factory=dict)
-    simulate: Mapping[str, SiteBias] = setting({}, factory=dict)
+    simulate: Mapping[str, SiteBias] = setting({}, factory=dict, scenario="channel")
     max_ais_gap_s: float = positive(40.0)
     prior_range_bias_m: float = positive(100.0)
     prior_azimuth_bias_rad: float = setting(1.0, unit="deg", gt=0.0, le=180.0)
@@ -234,7 +237,8 @@ class MaritimeConfig:
     max_cross_track_m: float = positive(2000.0, key=("fairway", "max_cross_track_m"))
     integrity: ChannelIntegrityConfig = setting({}, key="channel_integrity",
                                                 factory=ChannelIntegrityConfig)
-    faults: tuple[ChannelFault, ...] = setting([], key="channel_faults")
+    # the channel scenario's fault schedule: config/scenarios/channel.toml, never a site's
+    faults: tuple[ChannelFault, ...] = setting([], key="channel_faults", scenario="channel")
 
 
 def maritime_config(cfg: Config) -> MaritimeConfig:
