@@ -33,6 +33,7 @@ from jobs.common import (
     parse_duration,
     parse_time_ns,
     refuse_pre_sites,
+    require_site,
     require_warehouse,
     setup_logging,
 )
@@ -86,6 +87,11 @@ class _State:
         """The warehouse a command reads: exit 2 naming it when it does not exist (a
         typo in ``--warehouse`` must not read as an empty warehouse, nor create one)."""
         return require_warehouse(self.warehouse)
+
+    def site(self, name: str | None) -> str | None:
+        """``--site`` of a command over an existing warehouse: exit 2 naming the
+        warehouse's sites when it holds no such site."""
+        return require_site(self.existing_warehouse, name)
 
     def sector(self, name: str | None) -> str | None:
         """``--sector``, checked against the config's sectors (maritime and airfield)."""
@@ -361,6 +367,7 @@ def batch(st: _State, from_, to, site, executor, wait) -> None:
 
     window = _window(from_, to, required=True)
     warehouse = st.existing_warehouse
+    site = st.site(site)
     start, end = _bounded(st, *window, site)
     progress = terminal_progress()
     with _locked(st, wait), progress or contextlib.nullcontext():
@@ -384,6 +391,7 @@ def reprocess(st: _State, from_, to, site, executor, wait) -> None:
 
     window = _window(from_, to, required=True)
     warehouse = st.existing_warehouse
+    site = st.site(site)
     start, end = _bounded(st, *window, site)
     progress = terminal_progress()
     with _locked(st, wait), progress or contextlib.nullcontext():
@@ -477,6 +485,7 @@ def report(st: _State, name, from_, to, sector, fmt, params, list_, site) -> Non
         return
     start, end = _window(from_, to, required=False)
     sector = st.sector(sector)
+    site = st.site(site)
     try:  # CSV is written as DuckDB streams it; a table or JSON is formatted whole
         with named_report_batches(st.existing_warehouse, name, start_ns=start, end_ns=end,
                                   sector=sector, cfg=st.cfg, params=_params(params),
@@ -500,7 +509,7 @@ def report(st: _State, name, from_, to, sector, fmt, params, list_, site) -> Non
         sys.exit(1)
     if rows == 0:
         why = explain_empty(st.existing_warehouse, load_report(name, dirs), start_ns=start,
-                            end_ns=end, sector=sector, cfg=st.cfg)
+                            end_ns=end, sector=sector, cfg=st.cfg, site=site)
         click.echo(f"{name}: no rows. {why}", err=True)
     if fmt != "csv":
         click.echo(format_report(table, fmt, title=name), nl=fmt != "table")
@@ -545,6 +554,7 @@ def audit(st: _State, from_, to, sector, out_dir, pdf, site) -> None:
     from jobs.audit import run_audit
 
     start, end = _window(from_, to, required=True)
+    site = st.site(site)
     result = run_audit(st.cfg, st.existing_warehouse, Path(out_dir), start_ns=start, end_ns=end,
                        sector=st.sector(sector), pdf=pdf, site=site)
     click.echo(result.render())
@@ -564,6 +574,7 @@ def export(st: _State, from_, to, out_path, site) -> None:
     from jobs.export import run_export
 
     start, end = _window(from_, to, required=True)
+    site = st.site(site)
     summary = run_export(st.cfg, st.existing_warehouse, Path(out_path), start_ns=start,
                          end_ns=end, site=site)
     click.echo(summary.render())
@@ -664,6 +675,7 @@ def calibrate(st: _State, from_, to, max_order, min_speed, site) -> None:
 
     start, end = _window(from_, to, required=True)
     warehouse = st.existing_warehouse
+    site = st.site(site)
     with _locked(st):
         summary = run_calibrate(st.cfg, warehouse, start_ns=start, end_ns=end,
                                 max_order=max_order, min_speed_mps=min_speed, site=site)
@@ -684,6 +696,7 @@ def calibrate_radars(st: _State, from_, to, fmt, site) -> None:
 
     start, end = _window(from_, to, required=True)
     warehouse = st.existing_warehouse
+    site = st.site(site)
     with _locked(st):
         est = run_calibration(st.cfg, warehouse, start_ns=start, end_ns=end, site=site)
     click.echo(est.write_json() if fmt == "json" else render(est))
@@ -845,10 +858,55 @@ def config_check(st: _State, file: str | None) -> None:
     click.echo(resolved_config(file or st.config_path), nl=False)
 
 
+def _origin(_ctx: click.Context, _param: click.Parameter, value: str | None
+            ) -> tuple[float, float] | None:
+    if value is None:
+        return None
+    try:
+        lat, lon = (float(x) for x in value.replace(" ", "").split(","))
+    except ValueError:
+        raise click.BadParameter(f"{value!r}: give LAT,LON in degrees, e.g. 41.297,2.083"
+                                 ) from None
+    if not (-90 <= lat <= 90 and -180 <= lon <= 180):
+        raise click.BadParameter(f"{value!r}: latitude in [-90, 90], longitude in [-180, 180]")
+    return lat, lon
+
+
+@config_group.command("init")
+@click.argument("sources", nargs=-1, type=click.Path(path_type=Path))
+@click.option("--out", "out_path", required=True, type=click.Path(dir_okay=False, path_type=Path),
+              help="the site config to write (refused when it exists, unless --force)")
+@click.option("--name", default=None, help="the region's name (default: --site, else the "
+              "first source's name)")
+@_site_option("a warehouse's site to describe (needed when it holds several)")
+@click.option("--origin", default=None, callback=_origin, metavar="LAT,LON",
+              help="the site's reference point, deg (default: the median of the recordings' "
+                   "positions; needed when they carry none, e.g. an SMR + MLAT capture)")
+@click.option("--coastline", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="water or land polygons (GeoJSON or WKT) for the gap forecasts' "
+                   "admissible area (which of the two is read from the vessels' positions)")
+@click.option("--force", is_flag=True, help="replace --out when it exists")
+@click.pass_obj
+def config_init(st: _State, sources, out_path, name, site, origin, coastline, force) -> None:
+    """Write a commented site config for what SOURCES hold: a warehouse, or recordings
+    (MCAP and anything `surveil import` reads, files or folders; read through a
+    temporary import + ingest, removed afterwards). Region and origin from the data's
+    positions, the AIS sources, radar sites and airfield sensors present (positions from
+    the data, or estimated against another sensor, marked PROPOSED), own ships, proposed
+    sectors over the traffic, the requirement presets commented out (docs/site.md)."""
+    from jobs.config_init import run_config_init
+
+    wh = Path(st.warehouse_option) if st.warehouse_option else None
+    result = run_config_init(st.cfg, list(sources), out_path, warehouse=wh, name=name,
+                             site=site, origin=origin, coastline=coastline, force=force)
+    click.echo(result.render())
+
+
 for _cmd in [*cli.commands.values(), *experiment.commands.values()]:
     if not isinstance(_cmd, click.Group):
         _global_options(_cmd)
 _global_options(config_check, validate=False)  # it validates FILE (or --config) itself
+_global_options(config_init)
 
 
 def main() -> None:

@@ -21,6 +21,7 @@ from pipeline.airfield.config import AirfieldConfig, parse_airfield
 from pipeline.airfield.frames import config_sensor_id, sensor_rows, to_common_frame
 from pipeline.airfield.fusion import fuse_airfield
 from pipeline.airfield.score import score
+from pipeline.airfield.selfcal import scaled_models
 from pipeline.config import Config
 from pipeline.family import Family, Inputs, Outputs, TableInput, Window
 
@@ -72,9 +73,14 @@ def airfield_stage(obs: pl.DataFrame, truth: pl.DataFrame | None, model_rows: pl
     rejects = unknown_sensor_rejects(reports, cfg, start_ns, end_ns)
     common = to_common_frame(sensor_rows(reports, cfg), cfg)
     models = stored_models(model_rows, cfg, end_ns)
+    models = scaled_models(common, cfg, models, start_ns=start_ns, end_ns=end_ns)
     tracks, health = fuse_airfield(common, cfg, models, start_ns=start_ns, end_ns=end_ns)
     if tracks.height:
         tracks, health = score(tracks, health, truth, cfg)
+    if health.height:  # where each row's error model came from (config, default, fit)
+        health = health.with_columns(
+            pl.col("channel").replace_strict(dict(models.source), default=None,
+                                             return_dtype=pl.String).alias("error_model"))
     return StageOutput(tracks, health, rejects, dict(models.source))
 
 
