@@ -148,3 +148,31 @@ def main() -> None:  # pragma: no cover (by hand)
 
 if __name__ == "__main__":  # pragma: no cover
     main()
+
+
+def write_cat010_capture(out: Path, *, duration_s: float = 3600.0, seed: int = 11,
+                         scenario_config: Path | None = None) -> Path:
+    """An airfield capture as a real one arrives: the ``airfield`` scenario's CAT010 data
+    blocks (SMR 0/10, MLAT 0/20; the demo's fault schedule unless ``scenario_config``)
+    back to back in a raw ASTERIX file, without truth, VASN or MCAP metadata. Read with
+    ``surveil import --base-time 2026-01-15`` (the records carry the time of day)."""
+    import tempfile
+
+    from mcap.reader import make_reader
+
+    from jobs.simulate import run_simulate
+    from pipeline.families import load_config
+
+    with tempfile.TemporaryDirectory() as tmp:
+        files = run_simulate("airfield", duration_s, seed, Path(tmp), load_config(),
+                             scenario_config=scenario_config)
+        blocks: list[tuple[int, bytes]] = []
+        for f in files:
+            with open(f, "rb") as fh:
+                for _, ch, m in make_reader(fh).iter_messages():
+                    if ch.message_encoding == "asterix":
+                        blocks.append((m.log_time, m.data))
+    blocks.sort(key=lambda b: b[0])
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_bytes(b"".join(d for _, d in blocks))
+    return out
