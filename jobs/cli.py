@@ -886,8 +886,12 @@ def _origin(_ctx: click.Context, _param: click.Parameter, value: str | None
               help="water or land polygons (GeoJSON or WKT) for the gap forecasts' "
                    "admissible area (which of the two is read from the vessels' positions)")
 @click.option("--force", is_flag=True, help="replace --out when it exists")
+@click.option("--base-time", default="1970-01-01T00:00:00Z", show_default=True,
+              help="as `surveil import --base-time`: the day of recordings whose times are "
+                   "a time of day only (ISO 8601 or ns)")
 @click.pass_obj
-def config_init(st: _State, sources, out_path, name, site, origin, coastline, force) -> None:
+def config_init(st: _State, sources, out_path, name, site, origin, coastline, force,
+                base_time) -> None:
     """Write a commented site config for what SOURCES hold: a warehouse, or recordings
     (MCAP and anything `surveil import` reads, files or folders; read through a
     temporary import + ingest, removed afterwards). Region and origin from the data's
@@ -898,7 +902,8 @@ def config_init(st: _State, sources, out_path, name, site, origin, coastline, fo
 
     wh = Path(st.warehouse_option) if st.warehouse_option else None
     result = run_config_init(st.cfg, list(sources), out_path, warehouse=wh, name=name,
-                             site=site, origin=origin, coastline=coastline, force=force)
+                             site=site, origin=origin, coastline=coastline, force=force,
+                             base_time_ns=parse_time_ns(base_time))
     click.echo(result.render())
 
 

@@ -77,10 +77,12 @@ def split_sources(sources: list[Path]) -> tuple[list[Path], list[Path]]:
 def run_config_init(cfg: Config, sources: list[Path], out: Path, *, warehouse: Path | None,
                     name: str | None = None, site: str | None = None,
                     origin: tuple[float, float] | None = None,
-                    coastline: Path | None = None, force: bool = False) -> InitResult:
+                    coastline: Path | None = None, force: bool = False,
+                    base_time_ns: int = 0) -> InitResult:
     """Survey the sources, write the config to ``out`` (refused when it exists, unless
     ``force``), load it back; ``cfg``: the config the recordings are decoded with (its
-    ``[validation]``, ``[import.csv]``, ``[asterix]``)."""
+    ``[validation]``, ``[import.csv]``, ``[asterix]``); ``base_time_ns``: as ``surveil
+    import --base-time`` (the day of time-of-day-only recordings)."""
     if out.exists() and not force:
         raise UsageError(f"{out} exists: choose another --out, or --force to replace it")
     if coastline is not None and not coastline.is_file():
@@ -107,12 +109,15 @@ def run_config_init(cfg: Config, sources: list[Path], out: Path, *, warehouse: P
         else:
             tmp = Path(tempfile.mkdtemp(prefix="surveil-config-init-"))
             wh = tmp / "warehouse"
-            _ingest(cfg, sources, tmp, wh)
+            _ingest(cfg, sources, tmp, wh, base_time_ns)
             described = [str(s.resolve()) for s in sources]
         survey = survey_warehouse(wh, site)
         if survey.start_ns is None:
-            raise UsageError("the recordings hold no AIS, radar, airfield or own-ship row "
-                             "(nothing to describe); `surveil ingest` them to see why")
+            held = _held(wh, site)
+            raise UsageError("the recordings hold no AIS, radar, airfield or own-ship row, "
+                             "nothing a site config declares"
+                             + (f" (they hold: {held})" if held else "")
+                             + "; `surveil ingest` them to see what they hold")
         title = name or site or (sources[0].resolve().stem if sources else "site")
         prop = propose(survey, wh, name=title, origin=origin, coastline=coastline)
         text = render(prop, sources=described)
@@ -125,13 +130,34 @@ def run_config_init(cfg: Config, sources: list[Path], out: Path, *, warehouse: P
     return InitResult(out, summary_lines(prop))
 
 
-def _ingest(cfg: Config, sources: list[Path], tmp: Path, wh: Path) -> None:
+def _held(warehouse: Path, site: str | None) -> str:
+    """``asterix_service 2, rejects 1`` from the ledger's rows per table (what ingest kept)."""
+    import json
+
+    import polars as pl
+
+    from pipeline.warehouse.delta import read_table
+
+    led = pl.from_arrow(read_table(warehouse, "ingest_ledger", columns=["site", "rows_json",
+                                                                       "not_stored_json"]))
+    if site is not None:
+        led = led.filter(pl.col("site") == site)
+    rows: dict[str, int] = {}
+    for col in ("rows_json", "not_stored_json"):
+        for text in led[col].drop_nulls().to_list():
+            for k, n in json.loads(text or "{}").items():
+                rows[k] = rows.get(k, 0) + int(n)
+    return ", ".join(f"{k} {n:,}" for k, n in sorted(rows.items()) if n)
+
+
+def _ingest(cfg: Config, sources: list[Path], tmp: Path, wh: Path, base_time_ns: int
+            ) -> None:
     from jobs.ingest import run_ingest
     from pipeline.convert.importer import run_import
 
     mcap, legacy = split_sources(sources)
     if legacy:
-        summary = run_import(legacy, tmp / "imported", cfg=cfg)
+        summary = run_import(legacy, tmp / "imported", cfg=cfg, base_time_ns=base_time_ns)
         mcap += [Path(f.output) for f in summary.imported]
     if not mcap:
         raise UsageError("none of the recordings could be read (surveil import lists why)")

@@ -13,7 +13,8 @@
 -- source tables: airfield_tracks, channel_health (written by `surveil batch`)
 WITH updates AS (   -- one row per update of a target by a source
     SELECT site, coalesce(area, '(outside areas)') AS area, channel AS source, track_id, time_ns,
-           error_m, CAST(NULL AS BOOLEAN) AS identity_correct, CAST(NULL AS BOOLEAN) AS cooperative
+           error_m, CAST(NULL AS BOOLEAN) AS identity_correct, CAST(NULL AS BOOLEAN) AS cooperative,
+           coalesce(error_model, 'config') AS error_model
     FROM channel_health
     WHERE report_x_m IS NOT NULL
       AND time_ns >= $start_ns AND time_ns < $end_ns
@@ -21,7 +22,7 @@ WITH updates AS (   -- one row per update of a target by a source
       AND (CAST($site AS VARCHAR) IS NULL OR site = CAST($site AS VARCHAR))
     UNION ALL
     SELECT site, coalesce(area, '(outside areas)'), 'fused', track_id, time_ns, error_m,
-           identity_correct, cooperative
+           identity_correct, cooperative, NULL
     FROM airfield_tracks
     WHERE n_channels > 0
       AND time_ns >= $start_ns AND time_ns < $end_ns
@@ -59,7 +60,13 @@ SELECT
     round(avg(CASE WHEN g.gap_s >= 3 AND g.gap_s <= 5 THEN 1.0 ELSE 0.0 END)
           FILTER (WHERE g.gap_s IS NOT NULL), 5)::DOUBLE                      AS gap_3_5s_share,    -- updates after a 3-5 s gap
     round(avg(CASE WHEN g.gap_s > 5 THEN 1.0 ELSE 0.0 END)
-          FILTER (WHERE g.gap_s IS NOT NULL), 5)::DOUBLE                      AS gap_over_5s_share  -- updates after a > 5 s gap
+          FILTER (WHERE g.gap_s IS NOT NULL), 5)::DOUBLE                      AS gap_over_5s_share, -- updates after a > 5 s gap
+    CASE WHEN g.source = 'fused'
+         THEN (SELECT string_agg(DISTINCT channel || ': ' || coalesce(error_model, 'config'), '; '
+                                 ORDER BY channel || ': ' || coalesce(error_model, 'config'))
+               FROM channel_health AS c
+               WHERE c.site = g.site AND c.time_ns >= $start_ns AND c.time_ns < $end_ns)
+         ELSE string_agg(DISTINCT g.error_model, '; ') END::VARCHAR           AS error_model        -- the channel's error model: config, fit [..] (surveil calibrate) or 'default ...' (its kind's, scaled to the data); fused: every channel's
 FROM gaps AS g
 LEFT JOIN req AS r ON r.area = g.area
 GROUP BY g.site, g.area, g.source

@@ -36,6 +36,7 @@ from pipeline.families import declared
 from pipeline.family import Family
 from pipeline.warehouse.delta import read_table
 
+FUSED_KINDS = ("smr", "mlat", "vasn")  # pipeline.airfield.config.SENSOR_KINDS
 REFERENCES = frozenset({"truth", "ownship_truth", "airfield_truth", "fault_truth"})
 """Reference tables (simulated truth): a family does not run on them alone."""
 
@@ -118,6 +119,9 @@ def _undeclared_data(warehouse: Path, fam: Family, cfg: Config, raw: list[str],
         sources = airfield_sources(warehouse, start_ns, end_ns, site)
         if sources:
             text += " from " + ", ".join(sources)
+        if sources and not any(f"({k}," in s for s in sources for k in FUSED_KINDS):
+            return text + " (kinds the airfield family does not fuse: the rows stay in " \
+                          "airfield_obs for SQL)"
     return text + ": declare them (`surveil config init`, docs/site.md)"
 
 

@@ -181,6 +181,15 @@ def _airfield(p: Proposal, out: list[str]) -> None:
     n = sum(x.reports for x in p.survey.airfield)
     add(f"# --- airfield: {len(p.survey.airfield)} data source(s), {n:,} target reports "
         "(airfield_obs).")
+    if not a.sensors:  # nothing the airfield family fuses: no [airfield] (the batch skips it)
+        for s, why in a.other:
+            add(f"# not declared: {s.sensor_id} ({s.kind}"
+                f"{f', CAT{s.category:03d}' if s.category is not None else ''}, "
+                f"{s.reports:,} reports):")
+            out += _wrap(why, "#   ")
+        add("# No [airfield] section: none of these is a sensor the airfield family fuses.")
+        add("")
+        return
     add("[airfield]")
     add(_kv("name", f"{p.name}-airfield", "the airfield's name"))
     add(_kv("reference_lat_deg", _deg(a.reference_lat_deg), "deg N: airfield reference point"))
