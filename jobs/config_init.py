@@ -118,7 +118,9 @@ def run_config_init(cfg: Config, sources: list[Path], out: Path, *, warehouse: P
                              "nothing a site config declares"
                              + (f" (they hold: {held})" if held else "")
                              + "; `surveil ingest` them to see what they hold")
-        title = name or site or (sources[0].resolve().stem if sources else "site")
+        named = [s for s in sites_of(wh) if s != "default"]
+        title = name or site or (named[0] if len(named) == 1 else None) or (
+            sources[0].resolve().stem if sources else "site")
         prop = propose(survey, wh, name=title, origin=origin, coastline=coastline)
         text = render(prop, sources=described)
     finally:

@@ -56,5 +56,12 @@ def run_simulate(
             raise UsageError(f"--{k} must be at least 1, got {v}")
     start = DEFAULT_START_NS if start_ns is None else int(start_ns)
     duration = default_duration_s(scenario) if duration_s is None else duration_s
+    needs = [what for what, have in (("[[radar_sites]]", cfg.radar_sites),
+                                     ("[[fairway_legs]]", cfg.fairway_legs))
+             if scenario in ("channel", "channel-clean", "gaps") and not have]
+    if needs:  # every family is optional in a site config; this scenario's world is not
+        raise UsageError(f"scenario {scenario!r} simulates ships on a fairway seen by radars: "
+                         f"config {cfg.source} has no {' and no '.join(needs)} (the demo site "
+                         "config/surveil.toml has both)")
     world = with_scenario(cfg, [scenario], scenario_config)
     return SCENARIOS[scenario](world, start, duration, seed, Path(out_dir), **given)

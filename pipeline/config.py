@@ -300,13 +300,16 @@ def _toml(p: Path) -> tuple[dict[str, Any], str, Path]:
 
 
 def config_from_mapping(raw: Mapping[str, Any], source: str,
-                        families: Sequence[FamilySections]) -> Config:
-    """Validate an already parsed TOML document (see :func:`load_config`)."""
-    doc = Document(raw, source)
+                        families: Sequence[FamilySections], *, scenario: bool = False
+                        ) -> Config:
+    """Validate an already parsed TOML document (see :func:`load_config`); ``scenario``:
+    it is a site merged with the simulator's world, which it may then hold (the config is
+    marked as one: ``scenario_files``)."""
+    doc = Document(raw, source, scenario=scenario)
     cfg = _read(doc, families)
     doc.finish()
     assert cfg is not None
-    return cfg
+    return replace(cfg, scenario_files=("(in memory)",)) if scenario else cfg
 
 
 def _read(doc: Document, families: Sequence[FamilySections]) -> Config | None:

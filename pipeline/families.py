@@ -91,9 +91,12 @@ def with_scenario_files(cfg: Config, scenario_files: Sequence[str | Path]) -> Co
     return _config.with_scenario_files(cfg, scenario_files, (*FAMILY_SECTIONS, *SECTIONS))
 
 
-def config_from_mapping(raw: Mapping[str, Any], source: str = "(in memory)") -> Config:
-    """The same as :func:`load_config` for an already parsed TOML document."""
-    return _config.config_from_mapping(raw, source, (*FAMILY_SECTIONS, *SECTIONS))
+def config_from_mapping(raw: Mapping[str, Any], source: str = "(in memory)", *,
+                        scenario: bool = False) -> Config:
+    """The same as :func:`load_config` for an already parsed TOML document (``scenario``:
+    a site with the simulator's world in it, :func:`pipeline.config.config_from_mapping`)."""
+    return _config.config_from_mapping(raw, source, (*FAMILY_SECTIONS, *SECTIONS),
+                                       scenario=scenario)
 
 
 def read_config(path: str | Path | None = None, scenario_files: Sequence[str | Path] = ()

@@ -97,7 +97,7 @@ checks AS (
            count(*) FILTER (WHERE eta = 1) AS flagged,
            avg(q) AS q,
            count(*) FILTER (WHERE excluded) AS excluded_rows,
-           string_agg(DISTINCT error_model, '; ') AS error_model
+           string_agg(DISTINCT h.error_model, '; ') AS models
     FROM h
     GROUP BY site, family, sector, channel
 ),
@@ -133,7 +133,7 @@ SELECT
     round(coalesce(ce.total, 0) / 1e9, 1)::DOUBLE                  AS channel_fault_s,   -- their total duration, s
     round(coalesce(ce.longest, 0) / 1e9, 1)::DOUBLE                AS channel_longest_s, -- longest, s
     round(c.excluded_rows / nullif(c.rows_total, 0), 5)::DOUBLE    AS excluded_share,    -- share of decisions excluded
-    c.error_model::VARCHAR                                         AS error_model        -- airfield: the channel's error model (config, fit [..], or 'default ...': its kind's, scaled to the data); radar: reported sigmas
+    c.models::VARCHAR                                              AS error_model        -- airfield: the channel's error model (config, fit [..], or 'default ...': its kind's, scaled to the data); radar: reported sigmas
 FROM checks AS c
 LEFT JOIN chance AS p ON p.site = c.site AND p.family = c.family AND p.sector = c.sector AND p.channel = c.channel
 LEFT JOIN te ON te.site = c.site AND te.family = c.family AND te.sector = c.sector AND te.channel = c.channel

@@ -36,6 +36,9 @@ from pipeline.families import declared
 from pipeline.family import Family
 from pipeline.warehouse.delta import read_table
 
+UNCONFIGURED_INPUTS = {"airfield": ("airfield_obs",)}
+"""The raw inputs of a family that declares none without its section (its ``inputs``
+are empty then): what the skipped line counts."""
 FUSED_KINDS = ("smr", "mlat", "vasn")  # pipeline.airfield.config.SENSOR_KINDS
 REFERENCES = frozenset({"truth", "ownship_truth", "airfield_truth", "fault_truth"})
 """Reference tables (simulated truth): a family does not run on them alone."""
@@ -83,6 +86,7 @@ def batch_scope(warehouse: Path, cfg: Config, fams: tuple[Family, ...], start_ns
                and i.table not in REFERENCES and tables.spec(i.table).kind == "raw"]
         why = decl.unconfigured(fam.name)
         if why is not None:
+            raw = raw or list(UNCONFIGURED_INPUTS.get(fam.name, ()))
             notes.append(f"{fam.name}: skipped: {why}"
                          + _undeclared_data(warehouse, fam, cfg, raw, rows, start_ns, end_ns,
                                             site))

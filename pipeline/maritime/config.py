@@ -252,10 +252,11 @@ def channel_faults(cfg: Config) -> tuple[ChannelFault, ...]:
 
 
 def with_faults(cfg: Config, faults: tuple[ChannelFault, ...]) -> Config:
-    """``cfg`` with ``faults`` as the channel scenario's schedule."""
+    """``cfg`` with ``faults`` as the channel scenario's schedule: the simulator's world
+    (marked so: a scenario file is not merged on top of it again)."""
     fam = dict(cfg.families)
     fam["maritime"] = replace(maritime_config(cfg), faults=tuple(faults))
-    return replace(cfg, families=fam)
+    return replace(cfg, families=fam, scenario_files=cfg.scenario_files or ("(in memory)",))
 
 
 def without_faults(cfg: Config) -> Config:

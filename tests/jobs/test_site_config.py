@@ -214,3 +214,37 @@ def test_verdicts_say_not_applicable_apart_from_not_enough_samples():
                                   "cross_track": "no radar at this site"})
     assert {v.status for v in na} == {"not applicable: no radar at this site"}
     assert {v.outcome for v in na} == {NOT_APPLICABLE}
+
+
+def test_a_family_without_its_config_is_skipped_with_one_line_naming_its_data(tmp_path,
+                                                                              capture):
+    """Every family optional: with [region] alone the airfield family is skipped, and the
+    line names the data it would have had (the SAC/SIC to declare)."""
+    only = tmp_path / "region_only.toml"
+    only.write_text('[region]\nname = "x"\norigin_lat_deg = 46.4268\n'
+                    'origin_lon_deg = 30.6765\n', encoding="utf-8")
+    cfg = load_config(only)
+    wh = tmp_path / "wh"
+    run_ingest([capture["root"] / "archive"], cfg, wh, executor="serial")
+    summary = run_batch(cfg, wh, start_ns=START, end_ns=START + HOUR, executor_kind="serial")
+    text = summary.render()
+    line = next(x for x in text.splitlines() if "airfield: skipped" in x)
+    assert "no [airfield] section in the config" in line
+    assert "0/10 (smr, CAT010" in line and "0/20 (mlat, CAT010" in line
+    assert "declare them" in line
+    assert summary.units_total == 0 and summary.exit_code == 0
+    res = surveil("report", "surface_accuracy_by_area", "--config", str(only), "--warehouse",
+                  str(wh))
+    assert res.returncode == 0
+    assert "not applicable at this site: no airfield is declared" in res.stderr
+    assert "config init" in res.stderr and "simulate" not in res.stderr
+
+
+def test_simulating_the_channel_on_a_site_without_radars_is_exit_2(tmp_path):
+    only = tmp_path / "ais_only.toml"
+    only.write_text('[region]\nname = "x"\norigin_lat_deg = 50.8\norigin_lon_deg = -1.1\n',
+                    encoding="utf-8")
+    res = surveil("--config", str(only), "simulate", "--scenario", "channel", "--duration",
+                  "60s", "--out", str(tmp_path / "sim"))
+    assert res.returncode == 2 and "no [[radar_sites]] and no [[fairway_legs]]" in res.stderr
+    assert "Traceback" not in res.stderr
