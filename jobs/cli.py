@@ -877,7 +877,7 @@ def _origin(_ctx: click.Context, _param: click.Parameter, value: str | None
 @click.option("--out", "out_path", required=True, type=click.Path(dir_okay=False, path_type=Path),
               help="the site config to write (refused when it exists, unless --force)")
 @click.option("--name", default=None, help="the region's name (default: --site, else the "
-              "first source's name)")
+              "recordings' site, else the first source's name)")
 @_site_option("a warehouse's site to describe (needed when it holds several)")
 @click.option("--origin", default=None, callback=_origin, metavar="LAT,LON",
               help="the site's reference point, deg (default: the median of the recordings' "
