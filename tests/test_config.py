@@ -426,3 +426,10 @@ def test_loading_a_config_imports_no_stage():
             "print(sorted(m for m in sys.modules if m.endswith('.stage') or m == 'scipy.stats'))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]", out.stdout
+
+
+def test_the_documented_template_checks(monkeypatch, capsys):
+    """config/site-template.toml (every section optional, commented) is a valid site."""
+    code, out, err = surveil(monkeypatch, capsys, "config", "check",
+                             str(resource_path("config") / "site-template.toml"))
+    assert (code, err) == (0, "") and 'name = "my-harbour"' in out
