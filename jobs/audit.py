@@ -11,7 +11,7 @@ from pipeline.audit.data import AuditData, collect
 from pipeline.audit.page import render
 from pipeline.config import Config
 from pipeline.reports import open_warehouse
-from pipeline.requirements import FAIL, NOT_ENOUGH, PASS
+from pipeline.requirements import FAIL, OUTCOMES
 
 
 @dataclass(frozen=True)
@@ -23,13 +23,14 @@ class AuditResult:
 
     def render(self) -> str:
         v = self.data.verdicts
-        counts = ", ".join(f"{sum(x.status == s for x in v)} {s}" for s in (PASS, FAIL,
-                                                                              NOT_ENOUGH))
+        counts = ", ".join(f"{sum(x.outcome == s for x in v)} {s}" for s in OUTCOMES)
         lines = [f"audit: {self.html}", f"requirements: {counts}"]
         lines += [f"  FAIL {x.requirement} [{x.scope}]: {x.value} {x.unit}, required "
                   f"{x.comparison} {x.limit:g} {x.unit} ({x.samples} samples)"
                   for x in v if x.status == FAIL]
         lines += [f"WARNING: {w}" for w in self.data.provenance_warnings]
+        why = sorted({x.status for x in v if x.not_applicable})
+        lines += [f"  {w}" for w in why]
         if self.pdf:
             lines.append(f"pdf: {self.pdf}")
         if self.pdf_skipped:

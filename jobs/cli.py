@@ -33,6 +33,7 @@ from jobs.common import (
     parse_duration,
     parse_time_ns,
     refuse_pre_sites,
+    require_site,
     require_warehouse,
     setup_logging,
 )
@@ -65,6 +66,14 @@ class _State:
             self._cfg = load_config(self.config_path)
         return self._cfg
 
+    def world(self, scenarios: list[str] | tuple[str, ...]) -> Config:
+        """The config with the simulator's world of ``scenarios`` on top (the demo
+        site's shipped ``config/scenarios/`` files): what the experiments read
+        (:func:`pipeline.simulate.scenarios.with_scenario`)."""
+        from pipeline.simulate.scenarios import with_scenario
+
+        return with_scenario(self.cfg, scenarios)
+
     @property
     def warehouse(self) -> Path:
         """The warehouse a command writes (``ingest``, ``run``, ``demo`` create it): a
@@ -89,6 +98,11 @@ class _State:
         where = self.warehouse
         require_warehouse(where)
         return where
+
+    def site(self, name: str | None) -> str | None:
+        """``--site`` of a command over an existing warehouse: exit 2 naming the
+        warehouse's sites when it holds no such site."""
+        return require_site(self.existing_warehouse, name)
 
     def sector(self, name: str | None) -> str | None:
         """``--sector``, checked against the config's sectors (maritime and airfield)."""
@@ -285,15 +299,21 @@ def cli(ctx: click.Context, config_path, warehouse, log_level, log_json) -> None
 @click.option("--radars", type=int, default=None,
               help="region: number of radar sites along the coast (default 6)")
 @click.option("--out", type=click.Path(file_okay=False), required=True)
+@click.option("--scenario-config", type=click.Path(dir_okay=False), default=None,
+              help="the scenario's world on top of the site config: fault schedules, "
+                   "injected biases, the own ship's voyage (default: for the demo site, "
+                   "the shipped config/scenarios/<scenario>.toml; for yours, none)")
 @click.pass_obj
-def simulate(st: _State, scenario, duration, seed, start, ships, radars, out) -> None:
+def simulate(st: _State, scenario, duration, seed, start, ships, radars, out,
+             scenario_config) -> None:
     """Write a simulated scenario as an MCAP archive (one file per hour). The region
     scenario also writes its config, region.toml, beside the files."""
     from jobs.simulate import run_simulate
 
     start_ns = parse_time_ns(start) if start else None
     for f in run_simulate(scenario, _duration_s(duration) if duration else None, seed,
-                          Path(out), st.cfg, start_ns=start_ns, ships=ships, radars=radars):
+                          Path(out), st.cfg, start_ns=start_ns, ships=ships, radars=radars,
+                          scenario_config=scenario_config):
         click.echo(str(f))
 
 
@@ -366,6 +386,7 @@ def batch(st: _State, from_, to, site, executor, ignore_place, wait) -> None:
 
     window = _window(from_, to, required=True)
     warehouse = st.existing_warehouse
+    site = st.site(site)
     start, end = _bounded(st, *window, site)
     progress = terminal_progress()
     with _locked(st, wait), progress or contextlib.nullcontext():
@@ -391,6 +412,7 @@ def reprocess(st: _State, from_, to, site, executor, ignore_place, wait) -> None
 
     window = _window(from_, to, required=True)
     warehouse = st.existing_warehouse
+    site = st.site(site)
     start, end = _bounded(st, *window, site)
     progress = terminal_progress()
     with _locked(st, wait), progress or contextlib.nullcontext():
@@ -492,6 +514,7 @@ def report(st: _State, name, from_, to, sector, fmt, params, list_, site) -> Non
         return
     start, end = _window(from_, to, required=False)
     sector = st.sector(sector)
+    site = st.site(site)
     try:  # CSV is written as DuckDB streams it; a table or JSON is formatted whole
         with named_report_batches(st.existing_warehouse, name, start_ns=start, end_ns=end,
                                   sector=sector, cfg=st.cfg, params=_params(params),
@@ -515,7 +538,7 @@ def report(st: _State, name, from_, to, sector, fmt, params, list_, site) -> Non
         sys.exit(1)
     if rows == 0:
         why = explain_empty(st.existing_warehouse, load_report(name, dirs), start_ns=start,
-                            end_ns=end, sector=sector, cfg=st.cfg)
+                            end_ns=end, sector=sector, cfg=st.cfg, site=site)
         click.echo(f"{name}: no rows. {why}", err=True)
     if fmt != "csv":
         click.echo(format_report(table, fmt, title=name), nl=fmt != "table")
@@ -578,6 +601,7 @@ def audit(st: _State, from_, to, sector, out_dir, pdf, site) -> None:
     from jobs.audit import run_audit
 
     start, end = _window(from_, to, required=True)
+    site = st.site(site)
     result = run_audit(st.cfg, st.existing_warehouse, Path(out_dir), start_ns=start, end_ns=end,
                        sector=st.sector(sector), pdf=pdf, site=site)
     click.echo(result.render())
@@ -597,6 +621,7 @@ def export(st: _State, from_, to, out_path, site) -> None:
     from jobs.export import run_export
 
     start, end = _window(from_, to, required=True)
+    site = st.site(site)
     summary = run_export(st.cfg, st.existing_warehouse, Path(out_path), start_ns=start,
                          end_ns=end, site=site)
     click.echo(summary.render())
@@ -697,6 +722,7 @@ def calibrate(st: _State, from_, to, max_order, min_speed, site) -> None:
 
     start, end = _window(from_, to, required=True)
     warehouse = st.existing_warehouse
+    site = st.site(site)
     with _locked(st):
         summary = run_calibrate(st.cfg, warehouse, start_ns=start, end_ns=end,
                                 max_order=max_order, min_speed_mps=min_speed, site=site)
@@ -717,6 +743,7 @@ def calibrate_radars(st: _State, from_, to, fmt, site) -> None:
 
     start, end = _window(from_, to, required=True)
     warehouse = st.existing_warehouse
+    site = st.site(site)
     with _locked(st):
         est = run_calibration(st.cfg, warehouse, start_ns=start, end_ns=end, site=site)
     click.echo(est.write_json() if fmt == "json" else render(est))
@@ -795,7 +822,8 @@ def channel_faults(st: _State, runs, first_seed, executor, fmt, out_path) -> Non
     from pipeline.experiments.channel_montecarlo import run_montecarlo, summarise
     from pipeline.render import format_report
 
-    res = run_montecarlo(st.cfg, seeds=range(first_seed, first_seed + runs),
+    res = run_montecarlo(st.world(["channel", "ownship"]),
+                         seeds=range(first_seed, first_seed + runs),
                          executor=executor or st.cfg.execution.executor)
     if out_path:
         res["faults"].write_parquet(out_path)
@@ -818,7 +846,7 @@ def ownship(st: _State, runs, first_seed, duration, per_seed, executor, fmt) -> 
     from pipeline.experiments.ownship_montecarlo import run_montecarlo, summarise
     from pipeline.render import format_report
 
-    table = run_montecarlo(st.cfg, seeds=range(first_seed, first_seed + runs),
+    table = run_montecarlo(st.world(["ownship"]), seeds=range(first_seed, first_seed + runs),
                            duration_s=_duration_s(duration),
                            executor=executor or st.cfg.execution.executor)
     out = table if per_seed else summarise(table)
@@ -904,10 +932,60 @@ def config_check(st: _State, file: str | None) -> None:
     click.echo(resolved_config(file or st.config_path), nl=False)
 
 
+def _origin(_ctx: click.Context, _param: click.Parameter, value: str | None
+            ) -> tuple[float, float] | None:
+    if value is None:
+        return None
+    try:
+        lat, lon = (float(x) for x in value.replace(" ", "").split(","))
+    except ValueError:
+        raise click.BadParameter(f"{value!r}: give LAT,LON in degrees, e.g. 41.297,2.083"
+                                 ) from None
+    if not (-90 <= lat <= 90 and -180 <= lon <= 180):
+        raise click.BadParameter(f"{value!r}: latitude in [-90, 90], longitude in [-180, 180]")
+    return lat, lon
+
+
+@config_group.command("init")
+@click.argument("sources", nargs=-1, type=click.Path(path_type=Path))
+@click.option("--out", "out_path", required=True, type=click.Path(dir_okay=False, path_type=Path),
+              help="the site config to write (refused when it exists, unless --force)")
+@click.option("--name", default=None, help="the region's name (default: --site, else the "
+              "recordings' site, else the first source's name)")
+@_site_option("a warehouse's site to describe (needed when it holds several)")
+@click.option("--origin", default=None, callback=_origin, metavar="LAT,LON",
+              help="the site's reference point, deg (default: the median of the recordings' "
+                   "positions; needed when they carry none, e.g. an SMR + MLAT capture)")
+@click.option("--coastline", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="water or land polygons (GeoJSON or WKT) for the gap forecasts' "
+                   "admissible area (which of the two is read from the vessels' positions)")
+@click.option("--force", is_flag=True, help="replace --out when it exists")
+@click.option("--base-time", default="1970-01-01T00:00:00Z", show_default=True,
+              help="as `surveil import --base-time`: the day of recordings whose times are "
+                   "a time of day only (ISO 8601 or ns)")
+@click.pass_obj
+def config_init(st: _State, sources, out_path, name, site, origin, coastline, force,
+                base_time) -> None:
+    """Write a commented site config for what SOURCES hold: a warehouse, or recordings
+    (MCAP and anything `surveil import` reads, files or folders; read through a
+    temporary import + ingest, removed afterwards). Region and origin from the data's
+    positions, the AIS sources, radar sites and airfield sensors present (positions from
+    the data, or estimated against another sensor, marked PROPOSED), own ships, proposed
+    sectors over the traffic, the requirement presets commented out (docs/site.md)."""
+    from jobs.config_init import run_config_init
+
+    wh = Path(st.warehouse_option) if st.warehouse_option else None
+    result = run_config_init(st.cfg, list(sources), out_path, warehouse=wh, name=name,
+                             site=site, origin=origin, coastline=coastline, force=force,
+                             base_time_ns=parse_time_ns(base_time))
+    click.echo(result.render())
+
+
 for _cmd in [*cli.commands.values(), *experiment.commands.values()]:
     if not isinstance(_cmd, click.Group):
         _global_options(_cmd)
 _global_options(config_check, validate=False)  # it validates FILE (or --config) itself
+_global_options(config_init)
 
 
 def main() -> None:

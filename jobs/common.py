@@ -33,6 +33,34 @@ def checked_site(name: str) -> str:
     return name
 
 
+def warehouse_sites(warehouse: Path) -> list[str]:
+    """The sites a warehouse holds: of its ingest ledger's files and its committed batch
+    units, sorted."""
+    import polars as pl
+
+    from pipeline.warehouse.delta import read_table
+
+    found: set[str] = set()
+    for table in ("ingest_ledger", "batch_units"):
+        found |= set(pl.from_arrow(read_table(warehouse, table, columns=["site"]))["site"]
+                     .to_list())
+    return sorted(found)
+
+
+def require_site(warehouse: Path, site: str | None) -> str | None:
+    """``site`` when the warehouse holds it (or None); :class:`UsageError` (exit 2)
+    naming the warehouse's sites otherwise: a typo in ``--site`` must not read as a site
+    without data (was: ``report --site nosuch`` exit 0 blaming the gyro signals, ``batch
+    --site nosuch`` committed empty units)."""
+    if site is None:
+        return None
+    known = warehouse_sites(warehouse)
+    if site not in known:
+        raise UsageError(f"no site {site!r} in warehouse {warehouse} (its sites: "
+                         f"{', '.join(known) or 'none: ingest recordings first'})")
+    return site
+
+
 def one_site(warehouse: Path, site: str | None, start_ns: int, end_ns: int) -> str | None:
     """``site`` as given (None: every site). A command drawing one picture (audit,
     export) over several sites without ``--site`` warns: their rows are drawn together

@@ -1,8 +1,8 @@
 """`surveil demo`: simulate one hour (the `channel`, `airfield` and `ownship` scenarios:
-every family's tables, so the audit page has every section; with the config's fault
-schedules: ``[[channel_faults]]``, ``[[airfield.faults]]``, the own ship's GNSS outages
-and jump) into an archive, ingest it, run the batch over the hour and print the
-accuracy, identification and channel-fault reports."""
+every family's tables, so the audit page has every section; with the scenarios' fault
+schedules, ``config/scenarios/*.toml``: ``[[channel_faults]]``, ``[[airfield.faults]]``,
+the own ship's GNSS outages and jump) into an archive, ingest it, run the batch over the
+hour and print the accuracy, identification and channel-fault reports."""
 
 from __future__ import annotations
 
@@ -18,6 +18,7 @@ from pipeline.batch import SitesSummary, run_batch
 from pipeline.config import Config
 from pipeline.render import format_report
 from pipeline.reports import run_named_report
+from pipeline.simulate.scenarios import with_scenario
 from pipeline.warehouse.location import as_location
 
 DEMO_REPORTS = ("accuracy_by_sector", "identification_by_sector", "channel_faults_by_sector")
@@ -45,6 +46,7 @@ def run_demo(
     executor_kind: str | None = None,
     scenarios: Sequence[str] = DEMO_SCENARIOS,
 ) -> DemoResult:
+    cfg = with_scenario(cfg, scenarios)  # the demo site's fault schedules (config/scenarios)
     local = as_location(warehouse).is_local
     # the simulator writes files: beside a local warehouse, else in a temporary folder
     archive_dir = (warehouse / "demo-archive" if local

@@ -52,6 +52,15 @@ class RegionConfig:
 
 @dataclass(frozen=True)
 class RadarSite:
+    """A coastal radar site (``[[radar_sites]]``, optional: a site may have none).
+
+    The sigmas are the expected accuracy of the site's track reports. The batch uses
+    each report's own sigmas (``radar_tracks.sigma_*``, from the tracker); these are what
+    the simulator draws from and the experiments assume. When the file does not give
+    them they are the documented defaults of the ``vts`` class (a coastal X-band VTS
+    radar with a plot-extractor tracker: 15 m in range, 0.45 deg in azimuth, 0.25 m/s,
+    2 deg; :data:`RADAR_CLASS_DEFAULTS`), and ``sigmas_default`` says so."""
+
     site_id: str = text(unique=True)
     lat_deg: float = latitude()
     lon_deg: float = longitude()
@@ -59,10 +68,17 @@ class RadarSite:
     north_alignment_rad: float = setting(0.0, unit="deg", ge=-180.0, le=180.0, file_only=True)
     scan_period_s: float = positive()
     max_range_m: float = positive()
-    sigma_range_m: float = positive()
-    sigma_azimuth_rad: float = setting(unit="deg", gt=0.0, lt=180.0)
-    sigma_speed_mps: float = positive()
-    sigma_course_rad: float = setting(unit="deg", gt=0.0, lt=180.0)
+    sigma_range_m: float = positive(15.0)
+    sigma_azimuth_rad: float = setting(0.45, unit="deg", gt=0.0, lt=180.0)
+    sigma_speed_mps: float = positive(0.25)
+    sigma_course_rad: float = setting(2.0, unit="deg", gt=0.0, lt=180.0)
+    # none of the four sigmas was in the file: the class defaults (set when it loads)
+    sigmas_default: bool = field(default=False, repr=False)
+
+
+RADAR_CLASS_DEFAULTS = {"vts": {"sigma_range_m": 15.0, "sigma_azimuth_deg": 0.45,
+                                "sigma_speed_mps": 0.25, "sigma_course_deg": 2.0}}
+"""The documented sigmas of a radar site that declares none, per class (file units)."""
 
 
 @dataclass(frozen=True)
@@ -148,7 +164,8 @@ def _unshown(f: Any) -> Any:
 @dataclass(frozen=True)
 class Config:
     region: RegionConfig = setting()
-    radar_sites: tuple[RadarSite, ...] = setting(min_len=1)
+    # optional: an AIS-only, airfield-only or own-ship-only site declares no radar
+    radar_sites: tuple[RadarSite, ...] = setting([], file_only=True)
     ais: AisConfig = setting({})
     validation: ValidationConfig = setting({})
     fairway_legs: tuple[FairwayLeg, ...] = setting([], file_only=True)
@@ -168,6 +185,9 @@ class Config:
     archive_settle_s: float = setting(300.0, key=("archive", "settle_s"), ge=0.0)
     execution: ExecutionConfig = setting({}, factory=ExecutionConfig)
     source: str = ""
+    # the scenario files merged on top of the site (the simulator's world: fault
+    # schedules, injected biases; read_config); () for a site config
+    scenario_files: tuple[str, ...] = field(default=(), compare=False, repr=False)
     # The whole parsed TOML (raw), and each sensor family's section parsed into its own
     # typed config object when the file loaded ({family name: object}).
     sections: Mapping[str, Any] = field(default_factory=dict, compare=False, repr=False)
@@ -210,25 +230,104 @@ class FamilySections(Protocol):
     parse_config: FamilyParser
 
 
-def load_config(path: str | Path | None, families: Sequence[FamilySections]) -> Config:
+def load_config(path: str | Path | None, families: Sequence[FamilySections],
+                scenario_files: Sequence[str | Path] = ()) -> Config:
     """Load and validate a TOML config; ``None`` loads the shipped default.
 
     Every family's sections are parsed here, so a bad value fails the load (one
     :class:`ConfigError` listing every problem), not a later work unit; a section no
     family claims is an unknown section. ``pipeline.families.load_config`` passes every
-    registered family."""
-    cfg, doc = read_config(path, families)
+    registered family. ``scenario_files``: see :func:`read_config`."""
+    cfg, doc = read_config(path, families, scenario_files)
     doc.finish()
     assert cfg is not None  # finish raised otherwise
     return cfg
 
 
-def read_config(path: str | Path | None, families: Sequence[FamilySections]
+def read_config(path: str | Path | None, families: Sequence[FamilySections],
+                scenario_files: Sequence[str | Path] = ()
                 ) -> tuple[Config | None, Document]:
     """The config and its :class:`Document` (``Document.finish`` not yet called: the
     caller raises the problems, or renders ``Document.resolved``). ConfigError when the
-    file cannot be read as TOML at all."""
-    p = Path(path) if path is not None else DEFAULT_CONFIG_PATH
+    file cannot be read as TOML at all.
+
+    ``scenario_files``: the simulator's world on top of the site (``surveil simulate``,
+    ``demo``, the experiments): each may hold only simulator settings
+    (:data:`SCENARIO_KEYS`), merged into the site's tables; the document then reads
+    them (a site config alone never does: ``setting(scenario=...)``)."""
+    raw, text, p = _toml(Path(path) if path is not None else DEFAULT_CONFIG_PATH)
+    if not scenario_files:
+        doc = Document(raw, str(p), text)
+        return _read(doc, families), doc
+    return _world(raw, str(p), scenario_files, families)
+
+
+def with_scenario_files(cfg: Config, scenario_files: Sequence[str | Path],
+                        families: Sequence[FamilySections]) -> Config:
+    """``cfg`` (a site config) with ``scenario_files`` merged on top and every section
+    parsed again (:func:`read_config`); ConfigError listing every problem."""
+    out, doc = _world(cfg.sections, cfg.source, scenario_files, families)
+    doc.finish()
+    assert out is not None
+    return out
+
+
+def _world(raw: Mapping[str, Any], source: str, scenario_files: Sequence[str | Path],
+           families: Sequence[FamilySections]) -> tuple[Config | None, Document]:
+    merged: dict[str, Any] = dict(raw)
+    names = []
+    for f in scenario_files:
+        extra, _, fp = _toml(Path(f))
+        _check_scenario_keys(extra, fp)
+        merged = _merged(merged, extra)
+        names.append(str(fp))
+    doc = Document(merged, " + ".join([source, *names]), None, scenario=True)
+    cfg = _read(doc, families)
+    if cfg is not None:
+        cfg = replace(cfg, source=source, scenario_files=tuple(names))
+    return cfg, doc
+
+
+SCENARIO_KEYS: tuple[tuple[str, ...], ...] = (
+    ("channel_faults",), ("radar_bias", "simulate"), ("airfield", "faults"),
+    ("ownship", "scenario"),
+)
+"""The simulator settings a scenario file may hold (each declared beside its field with
+``setting(scenario=...)``; the own ship's scenario in ``pipeline.nav.config``)."""
+
+
+def _check_scenario_keys(raw: Mapping[str, Any], path: Path) -> None:
+    """A scenario file holds simulator settings only (a site setting there would
+    silently override the site's)."""
+    bad = []
+    for k, v in raw.items():
+        if (k,) in SCENARIO_KEYS:
+            continue
+        subs = [key[1] for key in SCENARIO_KEYS if key[0] == k and len(key) == 2]
+        if subs and isinstance(v, Mapping):
+            bad += [f"[{k}.{sub}]" for sub in v if sub not in subs]
+        else:
+            bad.append(f"[{k}]")
+    if bad:
+        allowed = ", ".join("[" + ".".join(key) + "]" for key in SCENARIO_KEYS)
+        raise ConfigError(f"scenario file {path}: {', '.join(bad)} is a site setting, not the "
+                          f"simulator's: put it in the site config (a scenario file holds "
+                          f"only {allowed})")
+
+
+def _merged(base: Mapping[str, Any], extra: Mapping[str, Any]) -> dict[str, Any]:
+    """``base`` with ``extra``'s tables merged in (arrays and values replaced)."""
+    out = dict(base)
+    for k, v in extra.items():
+        if isinstance(v, Mapping) and isinstance(out.get(k), Mapping):
+            out[k] = _merged(out[k], v)
+        else:
+            out[k] = v
+    return out
+
+
+def _toml(p: Path) -> tuple[dict[str, Any], str, Path]:
+    """A TOML file parsed: (document, text, path); ConfigError naming the problem."""
     try:
         text = p.read_bytes().decode("utf-8")
         raw = tomllib.loads(text)
@@ -241,18 +340,20 @@ def read_config(path: str | Path | None, families: Sequence[FamilySections]
                           f"at byte {exc.start})") from exc
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"config file {p} is not valid TOML: {exc}") from exc
-    doc = Document(raw, str(p), text)
-    return _read(doc, families), doc
+    return raw, text, p
 
 
 def config_from_mapping(raw: Mapping[str, Any], source: str,
-                        families: Sequence[FamilySections]) -> Config:
-    """Validate an already parsed TOML document (see :func:`load_config`)."""
-    doc = Document(raw, source)
+                        families: Sequence[FamilySections], *, scenario: bool = False
+                        ) -> Config:
+    """Validate an already parsed TOML document (see :func:`load_config`); ``scenario``:
+    it is a site merged with the simulator's world, which it may then hold (the config is
+    marked as one: ``scenario_files``)."""
+    doc = Document(raw, source, scenario=scenario)
     cfg = _read(doc, families)
     doc.finish()
     assert cfg is not None
-    return cfg
+    return replace(cfg, scenario_files=("(in memory)",)) if scenario else cfg
 
 
 def _read(doc: Document, families: Sequence[FamilySections]) -> Config | None:
@@ -260,6 +361,11 @@ def _read(doc: Document, families: Sequence[FamilySections]) -> Config | None:
     then the keys nobody read (``doc.finish``, by the caller)."""
     core = doc.read(Config)
     if core is not None:
+        sigmas = RADAR_CLASS_DEFAULTS["vts"]
+        given = [r if isinstance(r, Mapping) else {} for r in doc.raw.get("radar_sites", [])]
+        core = replace(core, radar_sites=tuple(
+            replace(s, sigmas_default=not any(k in g for k in sigmas))
+            for s, g in zip(core.radar_sites, given, strict=True)))
         for i, leg in enumerate(core.fairway_legs):
             if (leg.start_lat_deg, leg.start_lon_deg) == (leg.end_lat_deg, leg.end_lon_deg):
                 doc.problem(("fairway_legs", i, "end"), "equals start (a leg needs two points)")

@@ -59,6 +59,7 @@ class Spec:
     convert: Callable[..., Any] | None = None
     sources: tuple[str, ...] | None = None
     mask: Callable[[Any], Any] | None = None  # what `config check` shows of the value
+    scenario: str | None = None  # a simulator setting: the scenario file that holds it
 
     def file_key(self, name: str) -> Path:
         if self.key is not None:
@@ -79,7 +80,8 @@ def setting(default: Any = REQUIRED, *, key: str | Path | None = None, unit: str
             check: Callable[[Any], str | None] | None = None,
             convert: Callable[..., Any] | None = None, sources: tuple[str, ...] | None = None,
             factory: Callable[[], Any] | None = None, file_only: bool = False,
-            mask: Callable[[Any], Any] | None = None) -> Any:
+            mask: Callable[[Any], Any] | None = None,
+            scenario: str | None = None) -> Any:
     """A dataclass field read from the config file.
 
     ``default``: the value when the key is absent, in file units (``REQUIRED``: the key
@@ -96,9 +98,14 @@ def setting(default: Any = REQUIRED, *, key: str | Path | None = None, unit: str
     -> field value. ``sources``: several file keys, all or none present, passed to
     ``convert``, which raises ``ValueError(message)`` or ``ValueError(index of the key
     at fault, message)``. ``mask``: file value -> what ``surveil config check`` shows
-    (credentials are never printed)."""
+    (credentials are never printed).
+
+    ``scenario``: the value is the simulator's world, not the site's (a fault schedule,
+    an injected bias): it is read only from a scenario file (``config/scenarios/
+    <scenario>.toml``, :func:`scenario_problem`); in a site config it is a problem
+    saying where it moved, and the field keeps its default."""
     spec = Spec(default, (key,) if isinstance(key, str) else key, unit, gt, ge, lt, le, choices,
-                min_len, unique, check, convert, sources, mask)
+                min_len, unique, check, convert, sources, mask, scenario)
     meta = {"setting": spec}
     if factory is not None:
         return field(default_factory=factory, metadata=meta)
@@ -178,10 +185,14 @@ class Document:
     ``finish`` reports the keys no reader looked up and raises :class:`ConfigError` with
     every problem. ``resolved`` renders the values read, in file units, as TOML."""
 
-    def __init__(self, raw: Mapping[str, Any], source: str, text: str | None = None) -> None:
+    def __init__(self, raw: Mapping[str, Any], source: str, text: str | None = None,
+                 *, scenario: bool = False) -> None:
         self.raw = raw
         self.source = source
         self.text = text
+        # a site config (False) or a site config merged with scenario files (True): only
+        # the latter may hold simulator settings (``setting(scenario=...)``)
+        self.scenario = scenario
         self._problems: dict[str, Path] = {}  # message -> path (for its line)
         self._reported = 0  # problems reported, repeats included
         self._seen: set[Path] = set()  # every path a reader looked up, present or not
@@ -205,6 +216,16 @@ class Document:
     def _add(self, text: str, path: Path) -> None:
         self._reported += 1
         self._problems.setdefault(text, path)
+
+    def simulator_setting(self, path: Path, scenario: str) -> bool:
+        """Whether the simulator setting at ``path`` may be read: True in a scenario
+        document; in a site config False, and a problem when the file has it (where it
+        moved: :func:`scenario_problem`). The path is marked as looked up either way."""
+        if self.scenario:
+            return True
+        if self._get(self.raw, (), path) is not _MISSING:
+            self._add(scenario_problem(path, scenario), path)
+        return False
 
     def claim(self, *sections: str) -> None:
         """Top-level tables owned by a reader, known even when it does not look at them
@@ -272,6 +293,9 @@ class Document:
         return cls(**kw) if self._reported == before else None
 
     def _field(self, spec: Spec, name: str, tp: Any, table: Mapping, path: Path) -> Any:
+        if spec.scenario is not None and not self.simulator_setting(
+                (*path, *spec.file_key(name)), spec.scenario):
+            return _default_value(spec, tp)
         if spec.sources:
             return self._sources(spec, table, path)
         key = spec.file_key(name)
@@ -443,6 +467,33 @@ class Document:
             hint = f"; did you mean {close[0]!r}?" if close else ""
             text = f"{render_path(path, table=True)} unknown key {key!r}{hint}"
         self._add(text, (*path, key))
+
+
+SCENARIO_DIR = "config/scenarios"
+"""Where the shipped scenario files are (``pipeline.resources.resource_path``)."""
+
+
+def scenario_problem(path: Path, scenario: str) -> str:
+    """What a site config holding a simulator setting is told: what it is and where it
+    lives now."""
+    what = render_path(path, table=True)
+    if path and path[-1] in ("faults", "channel_faults"):
+        what = f"[[{'.'.join(map(str, path))}]]"
+    return (f"{what} is a simulator setting (the `{scenario}` scenario's world), not your "
+            f"site's: it moved to {SCENARIO_DIR}/{scenario}.toml, which `surveil simulate "
+            f"--scenario {scenario}` and `surveil demo` read (`--scenario-config FILE` for "
+            "your own); delete it from this file")
+
+
+def _default_value(spec: Spec, tp: Any) -> Any:
+    """A field's value when the file does not set it (a simulator setting in a site
+    config): its default, converted."""
+    if spec.default is REQUIRED:
+        return None
+    typed = _frozen(spec.default) if isinstance(spec.default, list) else spec.default
+    if isinstance(spec.default, dict):
+        return {}
+    return typed if typed is None or isinstance(typed, tuple) else spec.to_field(typed)
 
 
 @functools.cache

@@ -13,7 +13,8 @@ config check) do not pay for them.
 from __future__ import annotations
 
 import importlib
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -75,18 +76,97 @@ def family(name: str) -> Family:
     raise KeyError(name)
 
 
-def load_config(path: str | Path | None = None) -> Config:
+def load_config(path: str | Path | None = None,
+                scenario_files: Sequence[str | Path] = ()) -> Config:
     """Load a TOML config (``None``: the shipped default) with every family's sections
-    parsed and validated; :class:`~pipeline.config.ConfigError` on any problem."""
-    return _config.load_config(path, (*FAMILY_SECTIONS, *SECTIONS))
+    parsed and validated; :class:`~pipeline.config.ConfigError` on any problem.
+    ``scenario_files``: the simulator's world merged on top (``surveil simulate``,
+    ``demo``; :func:`pipeline.config.read_config`)."""
+    return _config.load_config(path, (*FAMILY_SECTIONS, *SECTIONS), scenario_files)
 
 
-def config_from_mapping(raw: Mapping[str, Any], source: str = "(in memory)") -> Config:
-    """The same as :func:`load_config` for an already parsed TOML document."""
-    return _config.config_from_mapping(raw, source, (*FAMILY_SECTIONS, *SECTIONS))
+def with_scenario_files(cfg: Config, scenario_files: Sequence[str | Path]) -> Config:
+    """``cfg`` with the simulator's world of ``scenario_files`` on top
+    (:func:`pipeline.config.with_scenario_files`)."""
+    return _config.with_scenario_files(cfg, scenario_files, (*FAMILY_SECTIONS, *SECTIONS))
 
 
-def read_config(path: str | Path | None = None) -> tuple[Config | None, Document]:
+def config_from_mapping(raw: Mapping[str, Any], source: str = "(in memory)", *,
+                        scenario: bool = False) -> Config:
+    """The same as :func:`load_config` for an already parsed TOML document (``scenario``:
+    a site with the simulator's world in it, :func:`pipeline.config.config_from_mapping`)."""
+    return _config.config_from_mapping(raw, source, (*FAMILY_SECTIONS, *SECTIONS),
+                                       scenario=scenario)
+
+
+def read_config(path: str | Path | None = None, scenario_files: Sequence[str | Path] = ()
+                ) -> tuple[Config | None, Document]:
     """The config and the document it was read from, problems not yet raised (for
     ``surveil config check``: ``Document.finish``, then ``Document.resolved``)."""
-    return _config.read_config(path, (*FAMILY_SECTIONS, *SECTIONS))
+    return _config.read_config(path, (*FAMILY_SECTIONS, *SECTIONS), scenario_files)
+
+
+# --- what a site declares ---------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class DeclaredSensor:
+    """One declared sensor: its family, id, kind, the SAC/SIC it is matched by (ASTERIX
+    sources; None otherwise) and where its error model comes from (``config``: the
+    file gives it; ``default``: the documented default of its kind)."""
+
+    family: str
+    sensor_id: str
+    kind: str
+    sac_sic: str | None = None
+    error_model: str = "config"
+
+
+@dataclass(frozen=True)
+class Declared:
+    """What a config declares, family by family: the one answer to "which families and
+    sensors does this site have" (the batch's skipped families, empty reports, verdicts
+    "not applicable", ``surveil config init``). Every family and sensor is optional."""
+
+    sensors: tuple[DeclaredSensor, ...]
+    airfield: bool  # an [airfield] section (the airfield family runs)
+    sectors: tuple[str, ...]  # maritime sectors
+    legs: tuple[str, ...]  # fairway legs
+    airfield_sectors: tuple[str, ...]
+    water: bool  # [[gaps.admissible]] polygons (gap forecasts are constrained)
+
+    def of(self, kind: str) -> tuple[DeclaredSensor, ...]:
+        """The declared sensors of a kind (``radar``, ``smr``, ``mlat``, ``vasn``)."""
+        return tuple(s for s in self.sensors if s.kind == kind)
+
+    @property
+    def radars(self) -> tuple[str, ...]:
+        return tuple(s.sensor_id for s in self.of("radar"))
+
+    def unconfigured(self, family_name: str) -> str | None:
+        """Why ``family_name`` cannot run on this config, or None when it can (only the
+        airfield family needs a section of its own; the others run on defaults)."""
+        if family_name == "airfield" and not self.airfield:
+            return "no [airfield] section in the config"
+        return None
+
+
+def declared(cfg: Config) -> Declared:
+    """What ``cfg`` declares (see :class:`Declared`)."""
+    fams = cfg.families or {}
+    sensors = [DeclaredSensor("maritime", s.site_id, "radar",
+                              error_model="default" if s.sigmas_default else "config")
+               for s in cfg.radar_sites]
+    a = fams.get("airfield")
+    for s in getattr(a, "sensors", ()) or ():
+        sensors.append(DeclaredSensor("airfield", s.sensor_id, s.kind,
+                                      None if s.kind == "vasn" else s.sac_sic,
+                                      getattr(s, "error_model", "config")))
+    g = fams.get("gaps")
+    return Declared(
+        sensors=tuple(sensors), airfield=a is not None,
+        sectors=tuple(s.name for s in cfg.sectors),
+        legs=tuple(leg.leg_id for leg in cfg.fairway_legs),
+        airfield_sectors=tuple(s.name for s in getattr(a, "sectors", ()) or ()),
+        water=bool(getattr(g, "admissible", ())),
+    )

@@ -128,7 +128,11 @@ class ReportSql:
     def source_tables(self) -> list[str]:
         """Tables named by the header's ``source table(s):`` line."""
         text = self.header.get("source tables", self.header.get("source table", ""))
-        return [t.strip() for t in text.split("(")[0].split(",") if _NAME.fullmatch(t.strip())]
+        # each name may carry a remark in parentheses ("channel_health (airfield), ..."):
+        # the names are what remains once the remarks are removed (was: the text before
+        # the first parenthesis, so only the first table of such a list)
+        text = re.sub(r"\([^)]*(\)|$)", "", text)
+        return [t.strip() for t in text.split(",") if _NAME.fullmatch(t.strip())]
 
 
 def _folders(dirs: tuple[str, ...]) -> str | None:

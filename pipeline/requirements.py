@@ -45,7 +45,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import pyarrow as pa
@@ -55,6 +55,8 @@ from pipeline.configspec import Document, count, positive, setting
 SECTION = "requirements"
 AREAS = ("manoeuvring", "apron_taxiway", "stand")  # ED-87 area classes ([[airfield.sectors]] area)
 PASS, FAIL, NOT_ENOUGH = "pass", "fail", "not enough samples"
+NOT_APPLICABLE = "not applicable"  # the site has no sensor (or reference) the requirement needs
+OUTCOMES = (PASS, FAIL, NOT_ENOUGH, NOT_APPLICABLE)
 
 
 def rule_of_three_samples(p_min: float) -> int:
@@ -257,9 +259,20 @@ class Verdict:
     unit: str
     samples: int
     min_samples: int
+    # why the requirement does not apply at this site ("no radar at this site"), or ""
+    not_applicable: str = ""
+
+    @property
+    def outcome(self) -> str:
+        """pass, fail, not enough samples, or not applicable (:data:`OUTCOMES`)."""
+        return NOT_APPLICABLE if self.not_applicable else self.status
 
     @property
     def status(self) -> str:
+        """``pass`` / ``fail`` / ``not enough samples``, or ``not applicable: <why>``
+        (a site without the sensor the requirement needs is not short of samples)."""
+        if self.not_applicable:
+            return f"{NOT_APPLICABLE}: {self.not_applicable}"
         if self.value is None or self.samples < self.min_samples:
             return NOT_ENOUGH
         ok = self.value <= self.limit if self.comparison == "<=" else self.value >= self.limit
@@ -287,6 +300,7 @@ def evaluate(
     sectors: Iterable[str] = (),
     legs: Iterable[str] = (),
     airfield: bool = True,
+    not_applicable: Mapping[str, str] | None = None,
 ) -> list[Verdict]:
     """Judge every requirement on the report tables it applies to.
 
@@ -295,9 +309,14 @@ def evaluate(
     ``siap_by_sector``; a missing one counts as empty). ``sectors`` / ``legs``: the
     configured maritime sectors and fairway legs; each gets a verdict even without rows
     ("not enough samples", 0). ``airfield``: the config has an airfield (its three area
-    classes and P(ID) get verdicts even without rows)."""
+    classes and P(ID) get verdicts even without rows). ``not_applicable``: requirement
+    group -> why it does not apply at this site (``maritime``: the fused picture's
+    accuracy and identification, e.g. "no radar at this site"; ``siap``, ``cross_track``,
+    ``airfield``: ED-87 accuracy, sensor accuracy, P(ID)); such verdicts say so instead
+    of "not enough samples"."""
     out: list[Verdict] = []
     n_min = req.min_samples
+    na = dict(not_applicable or {})
 
     # airfield: ED-87 per area (fused), sensor level per area and channel, P(ID) per area
     surface = _rows(reports.get("surface_accuracy_by_area"))
@@ -362,7 +381,19 @@ def evaluate(
                            _num(r.get("p95_rms_60s_m")), "<=",
                            req.maritime_cross_track_rms_60s_p95_m, "m",
                            int(r.get("samples") or 0), n_min))
-    return out + evaluate_reference_presets(reports, req)
+    out += evaluate_reference_presets(reports, req)
+    return [replace(v, not_applicable=na[g]) if (g := _group(v)) in na else v for v in out]
+
+
+def _group(v: Verdict) -> str:
+    """The requirement group of a verdict (``evaluate``'s ``not_applicable`` keys)."""
+    if v.report in ("surface_accuracy_by_area", "surface_detection_by_area"):
+        return "airfield"
+    if v.report == "siap_by_sector":
+        return "siap"
+    if v.report == "cross_track_by_leg":
+        return "cross_track"
+    return "maritime"
 
 
 def evaluate_reference_presets(reports: Mapping[str, pa.Table], req: RequirementsConfig

@@ -18,22 +18,25 @@
 WITH d AS (   -- every decision of every family: one unit = one target (airfield) or the channel
     SELECT site, 'airfield' AS family, sensor_kind, channel, sector, track_id AS unit, time_ns,
            eta, excluded,
-           (1.0 - exp(-d1 / 2.0)) + exp(-d2 / 2.0) AS q      -- chi2(2): P(xi <= d1) + P(xi >= d2)
+           (1.0 - exp(-d1 / 2.0)) + exp(-d2 / 2.0) AS q,     -- chi2(2): P(xi <= d1) + P(xi >= d2)
+           coalesce(error_model, 'config') AS error_model
     FROM channel_health
     WHERE time_ns >= $start_ns AND time_ns < $end_ns
     UNION ALL
-    SELECT site, 'maritime', sensor_kind, channel, sector, '', time_ns, eta, excluded, q
+    SELECT site, 'maritime', sensor_kind, channel, sector, '', time_ns, eta, excluded, q,
+           CASE WHEN sensor_kind = 'radar' THEN 'reported sigmas' END
     FROM maritime_channel_health
     WHERE time_ns >= $start_ns AND time_ns < $end_ns
     UNION ALL
-    SELECT site, 'nav', 'gnss', platform_id, sector, '', time_ns, gnss_eta, gnss_excluded, gnss_q
+    SELECT site, 'nav', 'gnss', platform_id, sector, '', time_ns, gnss_eta, gnss_excluded, gnss_q,
+           NULL
     FROM nav_solution
     WHERE time_ns >= $start_ns AND time_ns < $end_ns
       AND (gnss_eta IS NOT NULL OR gnss_excluded)
 ),
 h AS (
     SELECT site, family, sensor_kind, channel, coalesce(sector, '(outside sectors)') AS sector,
-           unit, time_ns, eta, coalesce(excluded, FALSE) AS excluded, q
+           unit, time_ns, eta, coalesce(excluded, FALSE) AS excluded, q, error_model
     FROM d
     WHERE (CAST($sector AS VARCHAR) IS NULL OR sector = CAST($sector AS VARCHAR))
       AND (CAST($site AS VARCHAR) IS NULL OR site = CAST($site AS VARCHAR))
@@ -93,7 +96,8 @@ checks AS (
            count(eta) AS decisions,
            count(*) FILTER (WHERE eta = 1) AS flagged,
            avg(q) AS q,
-           count(*) FILTER (WHERE excluded) AS excluded_rows
+           count(*) FILTER (WHERE excluded) AS excluded_rows,
+           string_agg(DISTINCT h.error_model, '; ') AS models
     FROM h
     GROUP BY site, family, sector, channel
 ),
@@ -128,7 +132,8 @@ SELECT
     coalesce(ce.n, 0)::BIGINT                                      AS channel_episodes,  -- channel-wide fault episodes
     round(coalesce(ce.total, 0) / 1e9, 1)::DOUBLE                  AS channel_fault_s,   -- their total duration, s
     round(coalesce(ce.longest, 0) / 1e9, 1)::DOUBLE                AS channel_longest_s, -- longest, s
-    round(c.excluded_rows / nullif(c.rows_total, 0), 5)::DOUBLE    AS excluded_share     -- share of decisions excluded
+    round(c.excluded_rows / nullif(c.rows_total, 0), 5)::DOUBLE    AS excluded_share,    -- share of decisions excluded
+    c.models::VARCHAR                                              AS error_model        -- airfield: the channel's error model (config, fit [..], or 'default ...': its kind's, scaled to the data); radar: reported sigmas
 FROM checks AS c
 LEFT JOIN chance AS p ON p.site = c.site AND p.family = c.family AND p.sector = c.sector AND p.channel = c.channel
 LEFT JOIN te ON te.site = c.site AND te.family = c.family AND te.sector = c.sector AND te.channel = c.channel

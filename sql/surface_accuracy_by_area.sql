@@ -23,7 +23,8 @@
 WITH updates AS (   -- one row per update of a target by a source
     SELECT site, coalesce(area, '(outside areas)') AS area, channel AS source, track_id, time_ns,
            error_m, CAST(NULL AS BOOLEAN) AS identity_correct, CAST(NULL AS BOOLEAN) AS cooperative,
-           reference, coalesce(reference_correction_m2, 0.0) AS corr, reference_p95_m
+           reference, coalesce(reference_correction_m2, 0.0) AS corr, reference_p95_m,
+           coalesce(error_model, 'config') AS error_model
     FROM channel_health
     WHERE report_x_m IS NOT NULL
       AND time_ns >= $start_ns AND time_ns < $end_ns
@@ -32,7 +33,7 @@ WITH updates AS (   -- one row per update of a target by a source
     UNION ALL
     SELECT site, coalesce(area, '(outside areas)'), 'fused', track_id, time_ns, error_m,
            identity_correct, cooperative, reference, coalesce(reference_correction_m2, 0.0),
-           reference_p95_m
+           reference_p95_m, NULL
     FROM airfield_tracks
     WHERE n_channels > 0
       AND time_ns >= $start_ns AND time_ns < $end_ns
@@ -65,7 +66,8 @@ agg AS (
         count(*) FILTER (WHERE g.cooperative AND g.identity_correct IS NOT NULL) AS id_samples,
         avg(CASE WHEN g.gap_s >= 3 AND g.gap_s <= 5 THEN 1.0 ELSE 0.0 END)
             FILTER (WHERE g.gap_s IS NOT NULL) AS gap35,
-        avg(CASE WHEN g.gap_s > 5 THEN 1.0 ELSE 0.0 END) FILTER (WHERE g.gap_s IS NOT NULL) AS gap5
+        avg(CASE WHEN g.gap_s > 5 THEN 1.0 ELSE 0.0 END) FILTER (WHERE g.gap_s IS NOT NULL) AS gap5,
+        string_agg(DISTINCT g.error_model, '; ') AS channel_error_model
     FROM gaps AS g
     LEFT JOIN req AS r ON r.area = g.area
     GROUP BY g.site, g.area, g.source, coalesce(g.reference, '(none)')
@@ -115,6 +117,12 @@ SELECT
     CAST($p_identification_min AS DOUBLE)                                 AS p_id_req,          -- ED-87
     (p_id >= CAST($p_identification_min AS DOUBLE))::BOOLEAN              AS meets_p_id,        -- NULL: no cooperative target / no truth
     round(gap35, 5)::DOUBLE                                               AS gap_3_5s_share,    -- updates after a 3-5 s gap
-    round(gap5, 5)::DOUBLE                                                AS gap_over_5s_share  -- updates after a > 5 s gap
+    round(gap5, 5)::DOUBLE                                                AS gap_over_5s_share, -- updates after a > 5 s gap
+    CASE WHEN source = 'fused'
+         THEN (SELECT string_agg(DISTINCT c.channel || ': ' || coalesce(c.error_model, 'config'), '; '
+                                 ORDER BY c.channel || ': ' || coalesce(c.error_model, 'config'))
+               FROM channel_health AS c
+               WHERE c.site = est.site AND c.time_ns >= $start_ns AND c.time_ns < $end_ns)
+         ELSE channel_error_model END::VARCHAR                           AS error_model        -- the channel's error model: config, fit [..] (surveil calibrate) or 'default ...' (its kind's, scaled to the data); fused: every channel's
 FROM est
 ORDER BY site, area, reference, (source = 'fused') DESC, source;

@@ -68,8 +68,13 @@ def _reprs(cfg: Config) -> str:
 
 
 def test_shipped_config_parses_to_the_same_objects_as_before():
-    """tests/data/shipped_config.repr was recorded from the hand-written parsers (9392eae)."""
-    assert _reprs(load_config()) == GOLDEN.read_text()
+    """tests/data/shipped_config.repr was recorded from the hand-written parsers (9392eae),
+    when the demo's fault schedules were in the site config: the demo site with its
+    scenario files (config/scenarios/) on top parses to exactly those objects."""
+    from pipeline.simulate.scenarios import with_scenario
+
+    world = with_scenario(load_config(), ["channel", "airfield", "ownship"])
+    assert _reprs(world) == GOLDEN.read_text()
 
 
 def test_config_dataclasses_stay_frozen_picklable_and_keyword_constructible():
@@ -188,9 +193,6 @@ CASES = {  # name: (old, new, nth line starting with, expected message after "li
     "unknown airfield table": (
         "[airfield.filter]", "[airfield.filtre]", ("[airfield.filtre]", 1),
         "unknown section [airfield.filtre]; did you mean [airfield.filter]?"),
-    "fault on an unknown sensor": (
-        'sensor_id = "VASN1"\nstart_s', 'sensor_id = "VASN2"\nstart_s', ('sensor_id = "VASN2"', 1),
-        "[airfield.faults][2].sensor_id: no sensor 'VASN2' (sensors: SMR1, MLAT1, VASN1)"),
     "gaps particles": (
         "particles = 2000 ", "particles = 2000.5 ", ("particles", 1),
         "[gaps].particles: expected an integer, got 2000.5"),
@@ -224,22 +226,79 @@ def test_every_problem_is_reported_at_once(tmp_path, monkeypatch, capsys):
     assert code == 2
     lines = err.removeprefix("error: ").splitlines()
     found = {line.split(": ", 1)[1] for line in lines}
-    # the fault's sensor is only checked once the sensors themselves parse (pd = 1.5 here)
-    expected = {m for k, (*_, m) in CASES.items() if k not in ("unknown section",
-                                                                "fault on an unknown sensor")}
+    expected = {m for k, (*_, m) in CASES.items() if k != "unknown section"}
     assert expected <= found, expected - found
     numbers = [int(line.split(" line ")[1].split(":")[0]) for line in lines]
     assert numbers == sorted(numbers)  # in file order
 
 
-@pytest.mark.parametrize("section", ["[region]", "[[radar_sites]]"])
-def test_missing_required_section(section, tmp_path, monkeypatch, capsys):
-    start = TEXT.index(section)
-    end = TEXT.index("[sync]") if section == "[[radar_sites]]" else TEXT.index("# Each radar")
+def test_missing_required_section(tmp_path, monkeypatch, capsys):
+    start = TEXT.index("[region]")
+    end = TEXT.index("# Each radar")
     path = tmp_path / "surveil.toml"
     path.write_text(TEXT[:start] + TEXT[end:], encoding="utf-8")
     code, _, err = surveil(monkeypatch, capsys, "--config", str(path), "report", "--list")
-    assert (code, err) == (2, f"error: {path}: missing required section {section}\n")
+    assert (code, err) == (2, f"error: {path}: missing required section [region]\n")
+
+
+def test_a_file_with_only_region_passes_config_check(tmp_path, monkeypatch, capsys):
+    """Issue 35: `config check` of a file with only [region] exited 2 ([[radar_sites]]
+    was required): an AIS-only site could not be declared. Every family is optional."""
+    path = tmp_path / "ais_only.toml"
+    path.write_text('[region]\nname = "solent"\norigin_lat_deg = 50.75\n'
+                    'origin_lon_deg = -1.30\n', encoding="utf-8")
+    code, out, err = surveil(monkeypatch, capsys, "config", "check", str(path))
+    assert (code, err) == (0, "")
+    cfg = load_config(path)
+    assert cfg.radar_sites == () and cfg.family("airfield") is None
+    assert "[[radar_sites]]" not in out
+
+
+def test_an_old_config_with_simulator_settings_says_where_they_moved(tmp_path, monkeypatch,
+                                                                     capsys):
+    """Issue 35: the demo config mixed the site with the simulator's fault schedules; they
+    moved to config/scenarios/*.toml, and a site config still holding one is told so
+    (exit 2, its line), not silently ignored."""
+    path, text = edited(tmp_path, "[[airfield.sectors]]\nname = \"runway\"",
+                        '[[airfield.faults]]\nkind = "jam"\nsensor_id = "SMR1"\nstart_s = 1.0\n'
+                        'duration_s = 1.0\n\n[[airfield.sectors]]\nname = "runway"')
+    text += ('\n[[channel_faults]]\nkind = "radar_outage"\nsite_id = "R1"\nstart_s = 1.0\n'
+             'duration_s = 1.0\n\n[radar_bias.simulate]\nR1 = { range_bias_m = 5.0 }\n'
+             '\n[ownship.scenario]\naccel_mps2 = 0.1\n')
+    path.write_text(text, encoding="utf-8")
+    code, _, err = surveil(monkeypatch, capsys, "config", "check", str(path))
+    assert code == 2
+    lines = err.removeprefix("error: ").splitlines()
+    assert len(lines) == 4
+    for what, scenario in (("[[airfield.faults]]", "airfield"), ("[[channel_faults]]", "channel"),
+                           ("[radar_bias.simulate]", "channel"),
+                           ("[ownship.scenario]", "ownship")):
+        (line,) = [x for x in lines if f": {what} is a simulator setting" in x]
+        assert f"config/scenarios/{scenario}.toml" in line and " line " in line
+
+
+def test_scenario_files_hold_simulator_settings_only_and_are_validated(tmp_path):
+    from pipeline.families import with_scenario_files
+    from pipeline.simulate.scenarios import with_scenario
+
+    site = load_config()
+    assert site.family("maritime").faults == () and site.family("airfield").faults == ()
+    world = with_scenario(site, ["channel", "airfield"])
+    assert len(world.family("maritime").faults) == 10
+    assert len(world.family("airfield").faults) == 5
+    bad = tmp_path / "bad.toml"
+    bad.write_text('[[airfield.faults]]\nkind = "dropout"\nsensor_id = "VASN2"\n'
+                   'start_s = 0.0\nduration_s = 1.0\n', encoding="utf-8")
+    with pytest.raises(ConfigError, match=r"\[airfield.faults\]\[0\].sensor_id: no sensor "
+                                          r"'VASN2' \(sensors: SMR1, MLAT1, VASN1\)"):
+        with_scenario_files(site, [bad])
+    bad.write_text("[sync]\nepoch_period_s = 2.0\n", encoding="utf-8")
+    with pytest.raises(ConfigError, match=r"\[sync\] is a site setting"):
+        with_scenario_files(site, [bad])
+    # a site of your own is simulated without the demo's faults unless a file is given
+    own = tmp_path / "own.toml"
+    own.write_text(TEXT, encoding="utf-8")
+    assert with_scenario(load_config(own), ["channel"]).family("maritime").faults == ()
 
 
 def test_missing_required_key_names_the_table(tmp_path, monkeypatch, capsys):
@@ -276,9 +335,10 @@ def test_config_check_prints_the_resolved_config(tmp_path, monkeypatch, capsys):
     assert out.startswith(f"# {path}: ok.")
     for line in ("[region]\nname = \"demo-estuary\"\n", "[sync]\nsigma_dt_s = 0.1  # default\n",
                  "max_course_difference_deg = 30.0  # default\n",
-                 "[gaps]\ngap_threshold_s = 600.0  # default\n", "[ownship.scenario]\n"):
+                 "[gaps]\ngap_threshold_s = 600.0  # default\n"):
         assert line in out
     assert "[airfield]" not in out  # no section: the airfield family writes nothing
+    assert "[ownship.scenario]" not in out  # the simulator's, not the site's
     # --config is what `config check` checks when no FILE is given
     code, out2, _ = surveil(monkeypatch, capsys, "--config", str(path), "config", "check")
     assert (code, out2) == (0, out)
@@ -366,3 +426,10 @@ def test_loading_a_config_imports_no_stage():
             "print(sorted(m for m in sys.modules if m.endswith('.stage') or m == 'scipy.stats'))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]", out.stdout
+
+
+def test_the_documented_template_checks(monkeypatch, capsys):
+    """config/site-template.toml (every section optional, commented) is a valid site."""
+    code, out, err = surveil(monkeypatch, capsys, "config", "check",
+                             str(resource_path("config") / "site-template.toml"))
+    assert (code, err) == (0, "") and 'name = "my-harbour"' in out

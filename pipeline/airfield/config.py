@@ -7,7 +7,8 @@ and valid range are declared beside it (:func:`pipeline.configspec.setting`).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+import math
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -28,6 +29,21 @@ from pipeline.configspec import (
 from pipeline.filters.ar_errors import VarModel, is_stable
 
 SENSOR_KINDS = ("smr", "mlat", "vasn")
+
+# The documented default error model of each sensor kind, for a sensor whose config gives
+# none (a new site cannot know its AR coefficients): AR(1) per axis, Y(k) = b Y(k-1) +
+# sigma sqrt(1 - b^2) N(k), i.e. a stationary error of sigma (m, per axis) correlated over
+# about 1 / (1 - b) steps of 1 s. sigma is of the order of the ED-116 / ED-117 sensor
+# figures (7.5 m at 95 %, ~3-4 m per axis) with a margin; the batch scales each default
+# model to the data (pipeline.airfield.selfcal), and every row computed with one says so.
+# (kind: (b, sigma_m)); the VASN velocity model: (b, sigma_mps).
+DEFAULT_POSITION_AR = {"smr": (0.9, 5.0), "mlat": (0.9, 5.0), "vasn": (0.8, 5.0)}
+DEFAULT_VELOCITY_AR = (0.8, 0.3)
+
+
+def default_model(b: float, sigma: float) -> VarModel:
+    """The AR(1) model ``b I`` with a stationary standard deviation ``sigma`` per axis."""
+    return VarModel(np.array([b * np.eye(2)]), sigma * math.sqrt(1.0 - b * b) * np.eye(2))
 AREAS = ("manoeuvring", "apron_taxiway", "stand")
 FAULT_KINDS = ("jam", "bias", "dropout")
 
@@ -57,7 +73,9 @@ class SensorConfig:
     (SMR: the antenna; MLAT, VASN: their reference point, normally the runway centre).
     ``position_model`` / ``velocity_model``: the nominal coloured-error models (airfield
     paper eq. 7, 8) the simulator draws from and the filter uses until ``surveil
-    calibrate`` has stored fitted ones. ``pd``: probability of a report per update."""
+    calibrate`` has stored fitted ones; optional: without them the documented default of
+    the sensor's kind (:data:`DEFAULT_POSITION_AR`), and ``error_model`` is ``default``
+    (else ``config``). ``pd``: probability of a report per update (the simulator's)."""
 
     sensor_id: str = text(unique=True)
     kind: str = setting(choices=SENSOR_KINDS)
@@ -67,11 +85,13 @@ class SensorConfig:
     lon_deg: float = longitude()
     height_m: float = height(0.0, file_only=True)
     pd: float = setting(1.0, gt=0.0, le=1.0, file_only=True)
-    position_model: VarModel = setting(sources=("position_ar", "position_gamma"),
-                                       convert=var_model)
+    position_model: VarModel | None = setting(None, sources=("position_ar", "position_gamma"),
+                                              convert=var_model)
     velocity_model: VarModel | None = setting(None, sources=("velocity_ar", "velocity_gamma"),
                                               convert=var_model)
     velocity_noise_mps: float = positive(0.5)
+    # "default": no model in the file, the kind's default (set when it loads)
+    error_model: str = field(default="config", repr=False)
 
     @property
     def sac_sic(self) -> str:
@@ -158,7 +178,8 @@ class AirfieldConfig:
     sectors: tuple[AirfieldSector, ...] = setting([], file_only=True)
     filter: FilterConfig = setting({})
     integrity: IntegrityConfig = setting({})
-    faults: tuple[FaultConfig, ...] = setting([], file_only=True)
+    # the airfield scenario's fault schedule: config/scenarios/airfield.toml only
+    faults: tuple[FaultConfig, ...] = setting([], file_only=True, scenario="airfield")
 
     def sensor(self, sensor_id: str) -> SensorConfig:
         for s in self.sensors:
@@ -192,15 +213,26 @@ def parse_airfield(doc: Document, core: Config | None = None) -> AirfieldConfig 
         if sum(t.kind == s.kind for t in a.sensors[:i]):
             doc.problem(("airfield", "sensors", i, "kind"), f"a second {s.kind!r} sensor "
                         "(at most one of each kind is supported)")
-        if s.kind == "vasn" and s.velocity_model is None:
-            doc.problem(("airfield", "sensors", i, "velocity_ar"),
-                        "a vasn sensor needs velocity_ar and velocity_gamma")
+    a = replace(a, sensors=tuple(_with_defaults(s) for s in a.sensors))
     ids = [s.sensor_id for s in a.sensors]
     for i, f in enumerate(a.faults):
         if f.sensor_id not in ids:
             doc.problem(("airfield", "faults", i, "sensor_id"),
                         f"no sensor {f.sensor_id!r} (sensors: {', '.join(ids)})")
     return a
+
+
+def _with_defaults(s: SensorConfig) -> SensorConfig:
+    """A sensor without an error model in the file gets its kind's documented default
+    (``error_model = "default"``); a VASN without a velocity model, the default one."""
+    out = s
+    if s.position_model is None:
+        out = replace(out, position_model=default_model(*DEFAULT_POSITION_AR[s.kind]),
+                      error_model="default")
+    if s.kind == "vasn" and s.velocity_model is None:
+        out = replace(out, velocity_model=default_model(*DEFAULT_VELOCITY_AR),
+                      error_model="default")
+    return out
 
 
 def airfield_config(cfg: Config) -> AirfieldConfig:

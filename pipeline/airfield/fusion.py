@@ -60,7 +60,7 @@ def config_models(cfg: AirfieldConfig) -> ChannelModels:
     return ChannelModels(
         position={s.sensor_id: s.position_model for s in cfg.sensors},
         velocity=vasn[0].velocity_model if vasn else None,
-        source={s.sensor_id: "config" for s in cfg.sensors},
+        source={s.sensor_id: s.error_model for s in cfg.sensors},
     )
 
 

@@ -17,11 +17,12 @@ from dataclasses import dataclass
 import polars as pl
 
 from pipeline.airfield.calibrate import calibrate, stored_models
-from pipeline.airfield.config import AirfieldConfig, parse_airfield
+from pipeline.airfield.config import SENSOR_KINDS, AirfieldConfig, parse_airfield
 from pipeline.airfield.frames import config_sensor_id, sensor_rows, to_common_frame
 from pipeline.airfield.fusion import fuse_airfield_run
 from pipeline.airfield.reference import empty_reference, smooth
 from pipeline.airfield.score import score
+from pipeline.airfield.selfcal import scaled_models
 from pipeline.config import Config
 from pipeline.family import Family, Inputs, Outputs, TableInput, Window
 
@@ -43,18 +44,35 @@ def target_reports(obs: pl.DataFrame) -> pl.DataFrame:
 def unknown_sensor_rejects(obs: pl.DataFrame, cfg: AirfieldConfig, start_ns: int,
                            end_ns: int) -> pl.DataFrame:
     """One batch rejects row per sensor whose reports (logged in the window) belong to no
-    configured airfield sensor, with their count: nothing is dropped silently."""
+    configured airfield sensor, with their count, its kind and what to declare: nothing
+    is dropped silently (issue 35: 6,666 reports of SMR 0/7 were rejected and the reports
+    blamed the missing reference). A kind the family does not fuse (ADS-B, system
+    tracks, PSR/SSR) says so instead (reason_code ``unfused_sensor_kind``)."""
     inside = obs.filter(pl.col("log_time_ns").is_between(start_ns, end_ns, closed="left"))
     lost = inside.filter(config_sensor_id(inside, cfg).is_null())
     if lost.height == 0:
         return pl.DataFrame()
+    fused = pl.col("sensor_kind").is_in(list(SENSOR_KINDS))
+    declare = pl.when(pl.col("sac").is_not_null() & pl.col("sic").is_not_null()).then(
+        pl.format("declare it in [[airfield.sensors]] with kind = \"{}\", sac = {}, sic = {} "
+                  "(`surveil config init` writes it)", pl.col("sensor_kind"), pl.col("sac"),
+                  pl.col("sic"))).otherwise(
+        pl.format("declare it in [[airfield.sensors]] with sensor_id = \"{}\"",
+                  pl.col("sensor_id")))
     return lost.group_by("sensor_id").agg(
         pl.col("log_time_ns").min(), pl.col("source_file").first(), pl.col("topic").first(),
-        pl.len().alias("n")).select(
+        pl.col("sensor_kind").first(), pl.col("sac").first(), pl.col("sic").first(),
+        pl.len().alias("n")).sort("sensor_id").select(
         "log_time_ns", "source_file", "topic", pl.lit("batch").alias("stage"),
-        pl.lit("unknown_sensor").alias("reason_code"),
-        pl.format("{} airfield_obs reports from sensor {} not in the [airfield] config",
-                  pl.col("n"), pl.col("sensor_id")).alias("reason"))
+        pl.when(fused).then(pl.lit("unknown_sensor")).otherwise(pl.lit("unfused_sensor_kind"))
+        .alias("reason_code"),
+        pl.when(fused).then(pl.format(
+            "{} airfield_obs reports from sensor {} ({}) not in the [airfield] config: {}",
+            pl.col("n"), pl.col("sensor_id"), pl.col("sensor_kind"), declare))
+        .otherwise(pl.format(
+            "{} airfield_obs reports from sensor {} ({}): the airfield family fuses smr, mlat "
+            "and vasn only (the rows stay in airfield_obs)", pl.col("n"), pl.col("sensor_id"),
+            pl.col("sensor_kind"))).alias("reason"))
 
 
 @dataclass(frozen=True, eq=False)
@@ -74,6 +92,7 @@ def airfield_stage(obs: pl.DataFrame, truth: pl.DataFrame | None, model_rows: pl
     rejects = unknown_sensor_rejects(reports, cfg, start_ns, end_ns)
     common = to_common_frame(sensor_rows(reports, cfg), cfg)
     models = stored_models(model_rows, cfg, end_ns)
+    models = scaled_models(common, cfg, models, start_ns=start_ns, end_ns=end_ns)
     tracks, health, run = fuse_airfield_run(common, cfg, models, start_ns=start_ns,
                                             end_ns=end_ns, record=True)
     # the reconstructed reference: the fused filter smoothed (issue 37)
@@ -82,6 +101,10 @@ def airfield_stage(obs: pl.DataFrame, truth: pl.DataFrame | None, model_rows: pl
     ).sort("time_ns", "track_id")
     if tracks.height:
         tracks, health = score(tracks, health, truth, cfg, reference)
+    if health.height:  # where each row's error model came from (config, default, fit)
+        health = health.with_columns(
+            pl.col("channel").replace_strict(dict(models.source), default=None,
+                                             return_dtype=pl.String).alias("error_model"))
     return StageOutput(tracks, health, rejects, dict(models.source), reference)
 
 

@@ -18,6 +18,7 @@ import pyarrow as pa
 from pipeline.batch.provenance import rows_provenance
 from pipeline.catalog import explain_empty_report
 from pipeline.config import Config
+from pipeline.families import declared
 from pipeline.reports import load_report, run_report, site_geometry
 from pipeline.requirements import Verdict, evaluate, requirements_config
 
@@ -65,6 +66,31 @@ def map_step_s(start_ns: int, end_ns: int) -> float:
     return max(5.0, round((end_ns - start_ns) / 1e9 / MAP_POINTS_PER_TRACK_HOUR))
 
 
+def _has_rows(con: duckdb.DuckDBPyConnection, table: str, site: str | None) -> bool:
+    sql = f'SELECT count(*) FROM "{table}"' + (" WHERE site = ?" if site is not None else "")
+    return bool(con.execute(sql, [site] if site is not None else []).fetchall()[0][0])
+
+
+def not_applicable(con: duckdb.DuckDBPyConnection, cfg: Config, site: str | None
+                   ) -> dict[str, str]:
+    """Requirement group -> why it does not apply at ``site`` (``requirements.evaluate``):
+    no radar (no fused picture to judge), no fairway leg, no reference to score SIAP or
+    the airfield's accuracy against."""
+    decl = declared(cfg)
+    out: dict[str, str] = {}
+    if not decl.radars:
+        out = dict.fromkeys(("maritime", "siap", "cross_track"), "no radar at this site")
+    else:
+        if not decl.legs:
+            out["cross_track"] = "no fairway leg declared at this site"
+        if not _has_rows(con, "truth", site):
+            out["siap"] = "no truth at this site (SIAP is scored against a reference)"
+    if decl.airfield and not _has_rows(con, "airfield_truth", site):
+        out["airfield"] = ("no reference (airfield_truth) at this site: accuracy and "
+                           "identification are scored against one")
+    return out
+
+
 def collect(con: duckdb.DuckDBPyConnection, cfg: Config, warehouse: Path, *, start_ns: int,
             end_ns: int, sector: str | None = None, site: str | None = None) -> AuditData:
     """Run every audit report over ``[start_ns, end_ns)`` (one sector, or all) of
@@ -84,13 +110,14 @@ def collect(con: duckdb.DuckDBPyConnection, cfg: Config, warehouse: Path, *, sta
         reports[name] = table
         if table.num_rows == 0:
             reasons[name] = explain_empty_report(con, report, start_ns=start_ns, end_ns=end_ns,
-                                                 sector=sector, cfg=cfg)
+                                                 sector=sector, cfg=cfg, site=site)
     airfield = (cfg.families or {}).get("airfield") is not None
     verdicts = evaluate(
         reports, req,
         sectors=[s.name for s in cfg.sectors] if sector is None else [sector],
         legs=[leg.leg_id for leg in cfg.fairway_legs],
         airfield=airfield and sector is None,
+        not_applicable=not_applicable(con, cfg, site),
     )
     derived = [t for name in AUDIT_REPORTS for t in load_report(name).source_tables()]
     lines, warnings = rows_provenance(warehouse, cfg, derived, start_ns, end_ns, site)

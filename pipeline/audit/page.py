@@ -22,7 +22,14 @@ from pipeline.audit import ais as ais_audit
 from pipeline.audit import charts
 from pipeline.audit import evaluation_charts as ev
 from pipeline.audit.data import AuditData
-from pipeline.requirements import FAIL, NOT_ENOUGH, PASS, Verdict, requirements_config
+from pipeline.requirements import (
+    FAIL,
+    NOT_APPLICABLE,
+    NOT_ENOUGH,
+    PASS,
+    Verdict,
+    requirements_config,
+)
 
 
 @dataclass(frozen=True)
@@ -210,8 +217,8 @@ Promise.all(Array.from(document.querySelectorAll('.chart > div')).map(function (
 """
 
 
-def _badge(status: str) -> str:
-    cls = {PASS: "pass", FAIL: "fail", NOT_ENOUGH: "nes"}[status]
+def _badge(status: str, outcome: str | None = None) -> str:
+    cls = {PASS: "pass", FAIL: "fail", NOT_ENOUGH: "nes", NOT_APPLICABLE: "nes"}[outcome or status]
     return f'<span class="badge {cls}">{html.escape(status)}</span>'
 
 
@@ -223,14 +230,16 @@ def _fmt(v: float | None, unit: str) -> str:
 
 
 def verdict_table(verdicts: list[Verdict] | tuple[Verdict, ...]) -> str:
-    counts = {s: sum(v.status == s for v in verdicts) for s in (PASS, FAIL, NOT_ENOUGH)}
+    counts = {s: sum(v.outcome == s for v in verdicts)
+              for s in (PASS, FAIL, NOT_ENOUGH, NOT_APPLICABLE)}
     head = ('<p class="summary">' + "".join(f"<span>{_badge(s)} {n}</span>"
                                            for s, n in counts.items()) + "</p>")
     body = []
-    for v in sorted(verdicts, key=lambda v: ({FAIL: 0, PASS: 1, NOT_ENOUGH: 2}[v.status])):
+    order = {FAIL: 0, PASS: 1, NOT_ENOUGH: 2, NOT_APPLICABLE: 3}
+    for v in sorted(verdicts, key=lambda v: order[v.outcome]):
         body.append(
             "<tr>"
-            f"<td>{_badge(v.status)}</td><td>{html.escape(v.requirement)}</td>"
+            f"<td>{_badge(v.status, v.outcome)}</td><td>{html.escape(v.requirement)}</td>"
             f"<td>{html.escape(v.scope)}</td>"
             f'<td class="num">{_fmt(v.value, v.unit)}</td>'
             f'<td class="num">{html.escape(v.comparison)} {_fmt(v.limit, v.unit)}</td>'

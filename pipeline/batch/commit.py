@@ -16,6 +16,7 @@ import time
 from pathlib import Path
 
 import polars as pl
+import pyarrow as pa
 
 from pipeline import tables
 from pipeline.batch.provenance import family_digest
@@ -63,6 +64,7 @@ def commit_batch(warehouse: Path, manifests: list[UnitManifest], summary: BatchS
         ),
     )
     summary.rejects = rejects.num_rows
+    summary.reject_reasons = reject_reasons(rejects)
     crash_point("batch.rejects")
     if units is not None:
         _record_units(warehouse, units, summary)
@@ -72,6 +74,23 @@ def commit_batch(warehouse: Path, manifests: list[UnitManifest], summary: BatchS
                    and doc.get("site") in (None, site)
                    and lo <= doc["window"][0] and doc["window"][1] <= hi)
     summary.committed = True
+
+
+def reject_reasons(rejects: pa.Table, limit: int = 8) -> list[str]:
+    """The batch rejects by cause, most rows first: ``unknown_sensor: 6666 airfield_obs
+    reports from sensor 0/7 (smr, CAT010) not in the [airfield] config: ...`` (a cause
+    whose rows all say the same is given once with its count)."""
+    if rejects.num_rows == 0:
+        return []
+    by = (pl.from_arrow(rejects.select(["reason_code", "reason"]))
+          .group_by("reason_code", "reason").len()
+          .sort(["len", "reason_code", "reason"], descending=[True, False, False]))
+    out = [f"{code}: {reason}" + (f" ({n:,} rows)" if n > 1 else "")
+           for code, reason, n in by.head(limit).iter_rows()]
+    if by.height > limit:
+        out.append(f"... and {by.height - limit} more causes (SELECT reason_code, reason FROM "
+                   "rejects WHERE stage = 'batch')")
+    return out
 
 
 def _record_units(warehouse: Path, units: list[BatchUnit], summary: BatchSummary) -> None:

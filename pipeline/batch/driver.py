@@ -36,6 +36,7 @@ from pipeline.batch.plan import (
     sites_in,
     unit_is_live,
 )
+from pipeline.batch.scope import batch_scope
 from pipeline.batch.seams import Joiner, trailing_digests
 from pipeline.batch.summary import BatchSummary, SitesSummary, iso_s
 from pipeline.batch.worker import BatchUnit, FinalizeTask, UnitManifest, batch_task
@@ -149,11 +150,14 @@ def run_site(
         warehouse, start_ns, end_ns, site, unit_is_live(warehouse, cfg, site))
     staging = as_location(warehouse) / "_staging" / f"batch-{safe_name(site)}-{start_ns}-{end_ns}"
     staging.rmtree()
-    units = plan_units(warehouse, cfg, start_ns, end_ns, staging, fams, committed_cuts, site)
+    scope = batch_scope(warehouse, cfg, fams, start_ns, end_ns, site)
+    # a skipped family plans no unit; its tables are still committed (empty) for the window
+    units = plan_units(warehouse, cfg, start_ns, end_ns, staging,
+                       tuple(f for f in fams if f.name in scope.run), committed_cuts, site)
     edge_before = trailing_digests(warehouse, fams, end_ns, site)
     summary = BatchSummary(start_ns=start_ns, end_ns=end_ns, units_total=len(units),
                            requested=None if requested == (start_ns, end_ns) else requested,
-                           site=site)
+                           site=site, notes=list(scope.notes))
     ex = cfg.execution
     kind, workers = executor_kind or ex.executor, min(ex.max_workers, len(units))
     executor = make_executor(kind, workers, ex.threads_per_worker)

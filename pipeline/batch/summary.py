@@ -21,6 +21,10 @@ class BatchSummary:
     failed_units: list[str] = field(default_factory=list)
     rows: dict[str, int] = field(default_factory=dict)
     rejects: int = 0
+    # the batch rejects by cause: "unknown_sensor: 6666 airfield_obs reports from ..."
+    reject_reasons: list[str] = field(default_factory=list)
+    # one line per family skipped (no config, no inputs) or run with a caveat
+    notes: list[str] = field(default_factory=list)
     committed: bool = False
     family_s: dict[str, float] = field(default_factory=dict)  # summed unit wall time
     commit_s: float = 0.0
@@ -46,6 +50,7 @@ class BatchSummary:
         if self.requested is not None:
             lines.append(f"  (asked for [{iso_s(self.requested[0])}, {iso_s(self.requested[1])}): "
                          "widened to the committed units it overlaps, re-run whole)")
+        lines += [f"  {note}" for note in self.notes]
         lines += [f"  {name:<16} {n:>9} rows" for name, n in self.rows.items()]
         if self.family_s:
             lines.append("  time: " + ", ".join(f"{fam} {s:.1f} s" for fam, s in
@@ -53,6 +58,7 @@ class BatchSummary:
                          + f" (summed over units); commit {self.commit_s:.1f} s")
         if self.rejects:
             lines.append(f"  rejects (batch)  {self.rejects:>9} rows")
+            lines += [f"    {r}" for r in self.reject_reasons]
         lines += [f"  failed: {u}" for u in self.failed_units]
         for c in self.continued:
             lines.append("  the rows at the window's end changed: the next committed units "

@@ -68,8 +68,10 @@ def align_reports(
         .partition_by("site_id", as_dict=True, maintain_order=True)
         .items()
     ]
-    if not parts:
-        return _align_site(radar_tracks.clear(), cfg.radar_sites[0], cfg), unknown
+    if not parts:  # no report of a configured site (or no site: an AIS-only site)
+        nowhere = RadarSite("", cfg.region.origin_lat_deg, cfg.region.origin_lon_deg, 0.0, 0.0,
+                            1.0, 1.0)
+        return _align_site(radar_tracks.clear(), nowhere, cfg), unknown
     return pl.concat(parts), unknown
 
 

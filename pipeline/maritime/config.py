@@ -1,7 +1,10 @@
 """The maritime family's configuration: ``[sync]``, ``[association]``, ``[siap]``,
-``[radar_bias]``, ``[fairway]``, ``[channel_integrity]`` and the channel scenario's fault
-schedule ``[[channel_faults]]`` (the geography it shares with the other families,
-radar sites, AIS settings, legs and sectors, is in the core :class:`~pipeline.config.Config`).
+``[radar_bias]``, ``[fairway]``, ``[channel_integrity]`` (the geography it shares with
+the other families, radar sites, AIS settings, legs and sectors, is in the core
+:class:`~pipeline.config.Config`). The channel scenario's fault schedule
+``[[channel_faults]]`` and the biases it injects ``[radar_bias.simulate]`` are the
+simulator's world: they are read from a scenario file (``config/scenarios/channel.toml``)
+only, never from a site config (``setting(scenario=...)``).
 
 Degrees and seconds in the file; radians and seconds here. Each value's file key,
 default and valid range are declared beside it (:func:`pipeline.configspec.setting`).
@@ -68,7 +71,7 @@ class RadarBiasConfig:
 
     apply: bool = setting(False)
     correction: Mapping[str, SiteBias] = setting({}, factory=dict)
-    simulate: Mapping[str, SiteBias] = setting({}, factory=dict)
+    simulate: Mapping[str, SiteBias] = setting({}, factory=dict, scenario="channel")
     max_ais_gap_s: float = positive(40.0)
     prior_range_bias_m: float = positive(100.0)
     prior_azimuth_bias_rad: float = setting(1.0, unit="deg", gt=0.0, le=180.0)
@@ -277,7 +280,8 @@ class MaritimeConfig:
     max_cross_track_m: float = positive(2000.0, key=("fairway", "max_cross_track_m"))
     integrity: ChannelIntegrityConfig = setting({}, key="channel_integrity",
                                                 factory=ChannelIntegrityConfig)
-    faults: tuple[ChannelFault, ...] = setting([], key="channel_faults")
+    # the channel scenario's fault schedule: config/scenarios/channel.toml, never a site's
+    faults: tuple[ChannelFault, ...] = setting([], key="channel_faults", scenario="channel")
     reference: ReferenceConfig = setting({}, factory=ReferenceConfig)
 
 
@@ -292,10 +296,11 @@ def channel_faults(cfg: Config) -> tuple[ChannelFault, ...]:
 
 
 def with_faults(cfg: Config, faults: tuple[ChannelFault, ...]) -> Config:
-    """``cfg`` with ``faults`` as the channel scenario's schedule."""
+    """``cfg`` with ``faults`` as the channel scenario's schedule: the simulator's world
+    (marked so: a scenario file is not merged on top of it again)."""
     fam = dict(cfg.families)
     fam["maritime"] = replace(maritime_config(cfg), faults=tuple(faults))
-    return replace(cfg, families=fam)
+    return replace(cfg, families=fam, scenario_files=cfg.scenario_files or ("(in memory)",))
 
 
 def without_faults(cfg: Config) -> Config:

@@ -319,7 +319,7 @@ def _radar_arrays(
         (pl.col("system_track_id").rank("dense").over("time_ns") - 1).cast(pl.Int64)
         .alias("_slot"),
     )
-    site = df["_site"].to_numpy()
+    site = df["_site"].to_numpy().astype(np.int64)  # (int even when empty: no radar)
     sector = _sector_codes(df["sector"], sector_index)
     xy = df.select("x_enu_m", "y_enu_m").to_numpy()
     P = df.select("P_xx", "P_yy", "P_xy").to_numpy()
@@ -349,7 +349,8 @@ def _radar_arrays(
     track = np.zeros(N, np.int64)
     track[gslot] = df["system_track_id"].to_numpy()
     return _Radar(
-        bounds=bounds, slot=slot, group=site * (G + 1) + sector, site=site, xy=xy, P=P,
+        bounds=bounds, slot=slot, group=(site * (G + 1) + sector).astype(np.int64), site=site,
+        xy=xy, P=P,
         info=info, H=H, v=np.column_stack([vx, vy]), sv=df["sigma_speed_mps"].to_numpy(),
         sc=df["sigma_course_rad"].to_numpy(), slot_bounds=slot_bounds, track=track,
         slot_sector=sector[first], p_all=p_all, P_all=P_all, near=geo.near(p_all),
@@ -444,7 +445,7 @@ def _sector_codes(sector: pl.Series, sector_index: dict[str | None, int]) -> np.
     names = [n for n in sector_index if n is not None]
     return (sector.replace_strict(names, [sector_index[n] for n in names],
                                   return_dtype=pl.Int64)
-            .fill_null(sector_index[None]).to_numpy())
+            .fill_null(sector_index[None]).to_numpy().astype(np.int64))  # (int when empty)
 
 
 def _same_as_previous(key: list[str]) -> pl.Expr:

@@ -78,7 +78,8 @@ def inputs(cfg: Config) -> tuple[TableInput, ...]:
     period before it, and a scan's reports start one period before its end; plus 1 s of
     slack), AIS reports from the identification's report age before it, truth 2 s
     around it."""
-    scan_margin_s = 2 * max(s.scan_period_s for s in cfg.radar_sites) + 1.0
+    # (no radar site: an AIS-only site; its radar reports, if any, are rejects)
+    scan_margin_s = 2 * max((s.scan_period_s for s in cfg.radar_sites), default=4.0) + 1.0
     lead_s, look_s = continuity_margins_s(cfg)
     # the steps order the rows themselves: no sort of every row read
     return (

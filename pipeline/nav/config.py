@@ -157,7 +157,10 @@ def parse_ownship(doc: Document, core: Config | None = None) -> OwnshipConfig | 
     f = doc.read(_FilterKeys, "ownship")
     g = doc.read(_GyroKeys, "ownship", "gyro")
     r = doc.read(_RollKeys, "ownship", "roll")
-    sc = doc.read(OwnshipScenarioConfig, "ownship", "scenario")
+    # the simulator's own ship ([ownship.scenario]): a scenario file only, never a site's
+    sc = (doc.read(OwnshipScenarioConfig, "ownship", "scenario")
+          if doc.simulator_setting(("ownship", "scenario"), "ownship")
+          else OwnshipScenarioConfig())
     if nav is None or f is None or g is None or r is None or sc is None:
         return None
     gyro = GyroModel(

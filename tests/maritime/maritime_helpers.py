@@ -13,14 +13,16 @@ from pipeline.family import Window
 from pipeline.maritime.config import without_faults
 from pipeline.maritime.stage import stage
 from pipeline.simulate.channel import simulate_channel
+from pipeline.simulate.scenarios import with_scenario
 from pipeline.units import NS
 
 T0_NS = 1_768_435_200 * NS  # 2026-01-15T00:00:00Z
 
 
 def with_sections(cfg: Config, **sections: dict) -> Config:
-    """``cfg`` with TOML sections replaced (e.g. radar_bias={...}), parsed again."""
-    return config_from_mapping({**cfg.sections, **sections}, cfg.source)
+    """``cfg`` with TOML sections replaced (e.g. radar_bias={...}), parsed again as the
+    simulator's world (it may hold [radar_bias.simulate])."""
+    return config_from_mapping({**cfg.sections, **sections}, cfg.source, scenario=True)
 
 
 def biased(cfg: Config, simulate: dict[str, dict], *, apply: bool = False,
@@ -37,7 +39,9 @@ def scenario_tables(cfg: Config, *, duration_s: float, seed: int, start_ns: int 
     """(radar_tracks, ais_reports, truth) of the channel scenario, canonical columns
     (radar_tracks also keeps the simulator's ``status``: new/confirmed/coasting);
     without the config's fault schedule unless ``faults``."""
-    sc = simulate_channel(cfg if faults else without_faults(cfg), start_ns=start_ns,
+    # the fault schedule: the demo site's scenario file (config/scenarios/channel.toml)
+    world = with_scenario(cfg, ["channel"])
+    sc = simulate_channel(world if faults else without_faults(world), start_ns=start_ns,
                           duration_s=duration_s, seed=seed)
     radar = sc.radar_reports.rename(
         {"track_id": "local_track_id", "x_m": "x_site_m", "y_m": "y_site_m"}

@@ -47,7 +47,9 @@ def window(f: ChannelFault) -> pl.Expr:
 
 
 def test_default_schedule_parses_every_kind(cfg):
-    kinds = {f.kind for f in channel_faults(cfg)}
+    from pipeline.simulate.scenarios import with_scenario
+
+    kinds = {f.kind for f in channel_faults(with_scenario(cfg, ["channel"]))}
     assert kinds == {"radar_outage", "radar_blank", "radar_range_bias", "radar_azimuth_bias",
                      "radar_time_offset", "radar_noise", "ais_offset", "ais_stuck",
                      "ais_mmsi_swap", "ais_spoof"}
@@ -63,8 +65,18 @@ def test_default_schedule_parses_every_kind(cfg):
     ({"kind": "radar_noise", "site_id": "R1", "start_s": 0, "duration_s": 1, "factor": 0.5},
      "factor"),
 ])
-def test_bad_fault_entries_fail_the_load(cfg, entry, message):
+def test_bad_fault_entries_fail_the_load(cfg, entry, message, tmp_path):
+    import tomllib
+
+    from pipeline.families import with_scenario_files
+
+    scenario = tmp_path / "scenario.toml"
+    scenario.write_text("[[channel_faults]]\n" + "\n".join(
+        f"{k} = {v!r}".replace("'", '"') for k, v in entry.items()) + "\n", encoding="utf-8")
+    assert tomllib.loads(scenario.read_text())["channel_faults"] == [entry]
     with pytest.raises(ConfigError, match=message):
+        with_scenario_files(cfg, [scenario])
+    with pytest.raises(ConfigError, match="is a simulator setting"):  # never in a site config
         config_from_mapping({**cfg.sections, "channel_faults": [entry]})
 
 

@@ -35,6 +35,7 @@ def con():
         "nis": 1.0, "dof": 2, "d1": 0.01003, "d2": 10.5966, "innovation_m": 2.0,
         "eta": [1 if i == 10 else 0 for i in range(40)] * 2,
         "excluded": [10 <= i < 20 for i in range(40)] * 2,
+        "error_model": "default smr AR(1) x0.50 (median NIS, 80 checks)",
     })
     # maritime: R1 in inner_channel every 4 s, excluded at epochs 5-9; an AIS transponder
     # with one isolated false alarm (excluded for its next 5 reports)
@@ -92,6 +93,10 @@ def test_faults_by_sector_has_every_family(con):
     rows = {(x["family"], x["channel"]): x for x in r.iter_rows(named=True)}
     assert set(rows) == {("airfield", "SMR1"), ("maritime", "R1"), ("maritime", "211000001"),
                          ("nav", "ownship")}
+    # every row says which error model its decisions were made with (issue 35)
+    assert rows[("airfield", "SMR1")]["error_model"].startswith("default smr AR(1)")
+    assert rows[("maritime", "R1")]["error_model"] == "reported sigmas"
+    assert rows[("nav", "ownship")]["error_model"] is None
     smr = rows[("airfield", "SMR1")]
     assert smr["target_episodes"] == 2 and smr["channel_episodes"] == 1
     assert smr["channel_fault_s"] == 10.0 and smr["q"] == pytest.approx(0.01, abs=1e-4)

@@ -1,0 +1,2 @@
+"""`surveil config init`: a site config from the recordings (survey, registration,
+coastline, the commented TOML)."""
