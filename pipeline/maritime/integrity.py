@@ -762,8 +762,16 @@ def check_channels(
                  np.zeros(n_rep, bool), np.zeros(n_rep, bool), np.full((n_rep, 2), np.nan),
                  np.full(n_rep, -1, np.int64))
     used = np.ones(assoc.height, bool)
+    # an epoch without radar rows, AIS references or reports, with no radar group out of
+    # service and no scan down, decides nothing and changes no state: skipped (an hour of
+    # sparse AIS without radar: its ~1,100 epochs cost 0.4 CPU-s, now the few with reports)
+    quiet = ((np.diff(rad.bounds) == 0) & (np.diff(rad.slot_bounds) == 0)
+             & (np.diff(ais.ref_bounds) == 0) & (np.diff(ais.rep_bounds) == 0)
+             & ~scan_down.any(axis=1))
 
     for k in range(K):
+        if quiet[k] and not st.rad_excl.any():
+            continue
         t_k = int(epochs[k])
         a, b = int(rad.bounds[k]), int(rad.bounds[k + 1])
         s0, s1 = int(rad.slot_bounds[k]), int(rad.slot_bounds[k + 1])

@@ -142,7 +142,9 @@ def _decompose(out: pl.DataFrame, sites: Sequence[RadarSite], region: RegionConf
                ) -> pl.DataFrame:
     """Fill the decomposition columns from the helper columns (reference position,
     velocity and covariance trace) and drop those (module docstring)."""
-    if out.height == 0 or "_ref_x" not in out.columns:
+    if out.height == 0:  # whichever reference, nothing scored: the empty table
+        return pl.DataFrame(schema=_ERROR_SCHEMA)
+    if "_ref_x" not in out.columns:
         return out.select(ERROR_COLUMNS).cast(_ERROR_SCHEMA)
     ex, ey = out["error_east_m"].to_numpy(), out["error_north_m"].to_numpy()
     vx, vy = out["_ref_vx"].to_numpy(), out["_ref_vy"].to_numpy()
