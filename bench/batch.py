@@ -92,7 +92,7 @@ CHILD = textwrap.dedent(
             return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
     if what == "prepare":
-        from jobs.ingest import run_ingest
+        from pipeline.ingest.driver import run_ingest
         from jobs.simulate import run_simulate
         files = run_simulate("region", a["duration_s"], a["seed"], Path(a["archive"]), cfg,
                              start_ns=a["start_ns"], ships=a["ships"], radars=a["radars"])

@@ -238,9 +238,9 @@ def main() -> None:
 
     import jobs  # noqa: F401  (polars on one thread, as every surveil command)
     from jobs.common import parse_duration
-    from jobs.ingest import run_ingest
     from pipeline.batch import run_batch
     from pipeline.families import load_config
+    from pipeline.ingest.driver import run_ingest
     from pipeline.reports import list_reports, run_named_report
     from pipeline.warehouse.location import parse_location
 

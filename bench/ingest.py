@@ -18,8 +18,8 @@ Then, each in its own subprocess (so that ``ru_maxrss`` is that measurement's ow
 - ``floor``: read the file and decompress every chunk (summary -> chunk index -> zstd);
 - ``baseline``: ``mcap`` ``iter_decoded_messages`` (json.loads / mcap_protobuf /
   mcap_ros2 decoder) -> one dict per message -> ``pa.Table.from_pylist`` -> Parquet (zstd);
-- ``surveil``: ``jobs.ingest.run_ingest`` into a fresh warehouse (``serial`` and ``process``
-  executors), checked to have written N rows to ``radar_tracks``.
+- ``surveil``: ``pipeline.ingest.driver.run_ingest`` into a fresh warehouse (``serial`` and
+  ``process`` executors), checked to have written N rows to ``radar_tracks``.
 
 The table gives seconds (median of ``--repeat`` runs), messages/s, file MB/s, the speed-up
 over the baseline, the time over the floor, the peak RSS of the measuring process (and its
@@ -291,8 +291,8 @@ def measure_baseline(path: Path, out: Path) -> int:
 
 
 def measure_surveil(path: Path, warehouse: Path, executor: str) -> int:
-    from jobs.ingest import run_ingest
     from pipeline.families import load_config
+    from pipeline.ingest.driver import run_ingest
 
     shutil.rmtree(warehouse, ignore_errors=True)
     summary = run_ingest([path], load_config(), warehouse, executor=executor)
@@ -305,10 +305,11 @@ _IMPORTS = {
     "floor": ["zstandard", "mcap.reader"],
     "baseline": ["pyarrow", "pyarrow.parquet", "mcap.reader", "mcap_protobuf.decoder",
                  "mcap_ros2.decoder"],
-    "surveil": ["jobs.ingest", "pipeline.config"],
+    "surveil": ["pipeline.ingest.driver", "pipeline.config"],
 }  # fmt: skip
 # what a process does once before its first file, timed with the imports: the table
-# schemas (schemas/*.toml; before the ingest context parsed them, jobs.ingest did at import)
+# schemas (schemas/*.toml; before the ingest context parsed them, the ingest driver did at
+# import)
 _PREPARE = {"surveil": ["pipeline.tables:table_specs"]}
 
 

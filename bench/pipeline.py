@@ -39,7 +39,7 @@ STAGE = textwrap.dedent(
                              load_config(), start_ns=args["start_ns"])
         out["files"] = [str(f) for f in files]
     elif stage == "ingest":
-        from jobs.ingest import run_ingest
+        from pipeline.ingest.driver import run_ingest
         from pipeline.families import load_config
         s = run_ingest([Path(f) for f in args["files"]], load_config(), Path(args["warehouse"]),
                        executor=args["executor"])

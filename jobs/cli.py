@@ -352,8 +352,8 @@ def import_command(st: _State, paths, out_dir, base_time, site) -> None:
 @click.pass_obj
 def ingest(st: _State, paths, from_, to, force, site, executor, wait) -> None:
     """Decode MCAP files into the warehouse's raw tables."""
-    from jobs.ingest import expand_paths, run_ingest
     from jobs.progress import terminal_progress
+    from pipeline.ingest.driver import expand_paths, run_ingest
 
     start, end = _window(from_, to, required=False)
     progress = terminal_progress()
@@ -441,7 +441,7 @@ def run_command(st: _State, folders, site, executor, ignore_place, wait) -> None
     Nothing new: does nothing, says so. Exit codes as ingest's; 2 when a site's
     positions lie outside the config's region."""
     from jobs.progress import terminal_progress
-    from jobs.run import run_nightly
+    from pipeline.batch.nightly import run_nightly
 
     progress = terminal_progress()
     with _locked(st, wait), progress or contextlib.nullcontext():
@@ -972,7 +972,7 @@ def config_init(st: _State, sources, out_path, name, site, origin, coastline, fo
     positions, the AIS sources, radar sites and airfield sensors present (positions from
     the data, or estimated against another sensor, marked PROPOSED), own ships, proposed
     sectors over the traffic, the requirement presets commented out (docs/site.md)."""
-    from jobs.config_init import run_config_init
+    from pipeline.siteconfig.init import run_config_init
 
     wh = Path(st.warehouse_option) if st.warehouse_option else None
     result = run_config_init(st.cfg, list(sources), out_path, warehouse=wh, name=name,

@@ -12,10 +12,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from jobs.common import iso
-from jobs.ingest import IngestSummary, run_ingest
 from jobs.simulate import DEFAULT_START_NS, run_simulate
 from pipeline.batch import SitesSummary, run_batch
 from pipeline.config import Config
+from pipeline.ingest.driver import IngestSummary, run_ingest
 from pipeline.render import format_report
 from pipeline.reports import run_named_report
 from pipeline.simulate.scenarios import with_scenario

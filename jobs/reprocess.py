@@ -11,10 +11,10 @@ from pathlib import Path
 from typing import Any
 
 from jobs.common import UsageError
-from jobs.ingest import IngestSummary, run_ingest
 from pipeline.batch import SitesSummary, run_batch, sites_in
 from pipeline.batch.place import check_places
 from pipeline.config import Config
+from pipeline.ingest.driver import IngestSummary, run_ingest
 from pipeline.warehouse.ledger import files_overlapping
 from pipeline.warehouse.location import as_location
 

@@ -46,8 +46,8 @@ def cfg() -> Config:
 @pytest.fixture(scope="session")
 def e2e(tmp_path_factory: pytest.TempPathFactory, cfg: Config) -> E2E:
     from jobs.batch import run_batch
-    from jobs.ingest import run_ingest
     from jobs.simulate import run_simulate
+    from pipeline.ingest.driver import run_ingest
 
     root = tmp_path_factory.mktemp("e2e")
     # the fault-free scenario: the spine's properties (the fault schedule of the default

@@ -2,8 +2,9 @@
 
 The batch kernel, beside the ingest kernel (:mod:`pipeline.ingest`): it runs the
 families' pure stages (:mod:`pipeline.families`) over work units and commits their
-outputs; ``jobs/batch.py``, ``jobs/reprocess.py`` and ``jobs/run.py`` only call it and
-print. Each guarantee is kept in one module:
+outputs; ``jobs/batch.py``, ``jobs/reprocess.py`` and the CLI only call it and print;
+:mod:`~pipeline.batch.nightly` is ``surveil run`` (scan, import, ingest, batch what is
+pending). Each guarantee is kept in one module:
 
 - :mod:`~pipeline.batch.window`: a window bounded before any work (clipped to the data
   the ledger knows; refused, exit 2, when too long or too big for the memory budget);

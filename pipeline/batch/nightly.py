@@ -34,17 +34,18 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from jobs.common import UsageError, iso
-from jobs.ingest import run_ingest
 from pipeline.batch import SitesSummary, resume_continuations, run_batch, sites_in
 from pipeline.batch.driver import retire_window
 from pipeline.batch.pending import pending_by_site, stale_spans, with_spans
 from pipeline.batch.place import PlaceError
 from pipeline.config import Config
+from pipeline.errors import UsageError
 from pipeline.executors import UnitResult
 from pipeline.ingest import IngestSummary
 from pipeline.ingest.archive import ImportResult, import_recordings, scan_folders, settled
+from pipeline.ingest.driver import run_ingest
 from pipeline.ingest.plan import IngestUsageError, expand_paths
+from pipeline.units import iso
 from pipeline.warehouse.delta import read_table
 from pipeline.warehouse.location import as_location
 from pipeline.warehouse.runs import record_run

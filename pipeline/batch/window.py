@@ -17,7 +17,7 @@ A window before 1980 (where the synthetic times of recordings without any time l
 batched as asked, with a note saying why it stays empty: those rows are no batch input
 (:data:`pipeline.batch.worker.TIME_SOURCE`).
 
-Times beyond int64 ns (``--to 9999-01-01``) never get here: :func:`jobs.common.parse_time_ns`
+Times beyond int64 ns (``--to 9999-01-01``) never get here: :func:`pipeline.options.parse_time_ns`
 refuses them.
 """
 

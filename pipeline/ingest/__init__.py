@@ -1,8 +1,8 @@
 """Ingest: MCAP archive files -> raw Delta tables, rejects, ``mcap_index`` and the ledger.
 
 A composition kernel above ``io``, ``decode`` and ``warehouse`` (it imports no sensor
-family and no job); ``jobs/ingest.py`` only plans the units, runs them through an
-executor, commits each manifest and sums up.
+family and no job); :mod:`~pipeline.ingest.driver` plans the units, runs them through an
+executor, commits each manifest and sums up (``jobs/`` and the CLI only call it and print).
 
 - :mod:`~pipeline.ingest.context`: :class:`IngestContext`, what an ingest process holds
   while it runs (buffer pool, helper threads, the views' DuckDB instance, the allocator

@@ -1,4 +1,4 @@
-"""Ingest job: MCAP archive files -> raw Delta tables, rejects, mcap_index and the ledger.
+"""The ingest driver: MCAP archive files -> raw Delta tables, rejects, mcap_index, ledger.
 
 The driver: expand the paths into one :class:`~pipeline.ingest.IngestUnit` per file, run
 :func:`~pipeline.ingest.ingest_file` over them through an executor (serial, process pool,
@@ -20,7 +20,6 @@ import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from jobs.common import iso
 from pipeline.config import Config
 from pipeline.convert.config import import_options
 from pipeline.executors import Executor, UnitResult, make_executor
@@ -28,6 +27,7 @@ from pipeline.ingest import FileManifest, IngestContext, IngestSummary, commit_f
 from pipeline.ingest.plan import IngestUsageError, check_sites, expand_paths, plan_units
 from pipeline.signals import deferred_interrupts
 from pipeline.tables import default_site
+from pipeline.units import iso
 from pipeline.warehouse.ledger import same_content
 from pipeline.warehouse.location import Location, as_location
 from pipeline.warehouse.overlaps import record_overlaps, synthetic_time_channels

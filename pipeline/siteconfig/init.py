@@ -18,9 +18,9 @@ import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from jobs.common import UsageError
 from pipeline.config import Config
 from pipeline.convert.legacy import detect_format
+from pipeline.errors import UsageError
 from pipeline.families import load_config
 from pipeline.siteconfig.propose import propose
 from pipeline.siteconfig.render import render, summary_lines
@@ -154,8 +154,8 @@ def _held(warehouse: Path, site: str | None) -> str:
 
 def _ingest(cfg: Config, sources: list[Path], tmp: Path, wh: Path, base_time_ns: int
             ) -> None:
-    from jobs.ingest import run_ingest
     from pipeline.convert.importer import run_import
+    from pipeline.ingest.driver import run_ingest
 
     mcap, legacy = split_sources(sources)
     if legacy:

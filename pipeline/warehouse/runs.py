@@ -17,7 +17,8 @@ from pipeline.warehouse.delta import replace_window
 
 
 def record_run(warehouse: Path, cfg: Config, s: Any) -> None:
-    """One ``runs`` row (one commit) for ``s``, a run's summary (``jobs.run.RunSummary``)."""
+    """One ``runs`` row (one commit) for ``s``, a run's summary
+    (``pipeline.batch.nightly.RunSummary``)."""
     row = {
         "started_at_ns": s.started_at_ns, "ended_at_ns": s.ended_at_ns,
         "run_id": f"{s.started_at_ns}-{os.getpid()}", "command": s.command,

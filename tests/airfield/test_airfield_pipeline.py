@@ -13,9 +13,9 @@ from mcap.reader import make_reader
 
 from jobs.batch import run_batch
 from jobs.common import UsageError
-from jobs.ingest import run_ingest
 from jobs.simulate import run_simulate
 from pipeline.batch.calibrate import run_calibrate
+from pipeline.ingest.driver import run_ingest
 from pipeline.reports import open_warehouse, run_report
 from pipeline.units import NS
 from pipeline.warehouse.delta import read_table

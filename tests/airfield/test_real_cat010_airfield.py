@@ -12,8 +12,8 @@ import pytest
 from conftest import real_data_dir
 
 from jobs.batch import run_batch
-from jobs.ingest import run_ingest
 from pipeline.convert.asterix import wrap_asterix_file
+from pipeline.ingest.driver import run_ingest
 from pipeline.units import NS
 from pipeline.warehouse.delta import read_table
 

@@ -307,7 +307,7 @@ def test_service_categories_go_to_asterix_service(cat, frns, want):
 
 
 def test_without_the_asterix_extra_one_reject_per_channel_and_exit_1(tmp_path, monkeypatch):
-    from jobs.ingest import run_ingest
+    from pipeline.ingest.driver import run_ingest
     from pipeline.warehouse.delta import read_table
 
     path = write_asterix_mcap(tmp_path / "a.mcap", [
@@ -334,7 +334,7 @@ def test_registry_routes_asterix_channels():
 
 
 def test_ingest_asterix_mcap_into_delta(tmp_path):
-    from jobs.ingest import run_ingest
+    from pipeline.ingest.driver import run_ingest
     from pipeline.warehouse.delta import read_table
 
     msgs = [("/smr", T0 + k * NS, block(10, cat010_record(tod=36_000 + k, xy=(k, -k),

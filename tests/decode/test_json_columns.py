@@ -1024,9 +1024,9 @@ def test_simulated_archive_ingests_the_same_without_the_extension(tmp_path, monk
     """The simulator's radar and truth reports through ``surveil ingest`` with the
     compiled parser and with the polars path (what an install without a C compiler
     runs; forced here) give the same warehouse rows."""
-    from jobs.ingest import run_ingest
     from jobs.simulate import run_simulate
     from pipeline.families import load_config
+    from pipeline.ingest.driver import run_ingest
     from pipeline.warehouse.delta import read_table
 
     cfg = load_config()

@@ -15,7 +15,6 @@ from mcap.writer import Writer
 from mcap_fixtures import NS, T0_NS, dumps, radar_report
 from mcap_ros2._dynamic import generate_dynamic, serialize_dynamic
 
-from jobs.ingest import run_ingest
 from pipeline.config import ValidationConfig
 from pipeline.decode.radar_binary import (
     PROTO_SCHEMA,
@@ -30,6 +29,7 @@ from pipeline.decode.radar_binary import (
     radar_ros2_text,
     ros2_fields,
 )
+from pipeline.ingest.driver import run_ingest
 from pipeline.io.mcap_read import ChannelBatch
 from pipeline.warehouse.delta import read_table
 

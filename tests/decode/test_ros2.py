@@ -344,9 +344,9 @@ def test_navsatfix_decode_rates(tmp_path):
 
     from mcap_ros2._dynamic import serialize_dynamic
 
-    from jobs.ingest import run_ingest
     from pipeline.decode.ros2 import Ros2ChannelDecoder
     from pipeline.families import load_config
+    from pipeline.ingest.driver import run_ingest
 
     name = "sensor_msgs/msg/NavSatFix"
     encode = serialize_dynamic(name, NAVSATFIX)[name]

@@ -9,13 +9,13 @@ from pathlib import Path
 
 import pytest
 
-from jobs.ingest import run_ingest
 from pipeline.config import ConfigError
 from pipeline.convert.ais_csv import CsvOptions, place_columns, read_ais_csv
 from pipeline.convert.config import parse_import_options
 from pipeline.convert.importer import run_import
 from pipeline.convert.legacy import CSV_TOPIC, detect_format, import_file
 from pipeline.families import load_config
+from pipeline.ingest.driver import run_ingest
 from pipeline.io.mcap_read import read_mcap_batches
 from pipeline.units import NS
 from pipeline.warehouse.delta import read_table

@@ -15,7 +15,6 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "decode"))
 from test_asterix import block, cat010_record
 
-from jobs.ingest import run_ingest
 from pipeline.convert.asterix import wrap_asterix
 from pipeline.convert.asterix_framing import (
     detect_framing,
@@ -28,6 +27,7 @@ from pipeline.convert.importer import run_import
 from pipeline.convert.legacy import detect_format
 from pipeline.convert.output import REJECTS_TOPIC
 from pipeline.families import load_config
+from pipeline.ingest.driver import run_ingest
 from pipeline.io.mcap_read import read_mcap_batches
 from pipeline.units import NS
 from pipeline.warehouse.delta import read_table

@@ -18,12 +18,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "decode"))
 from nmea_builders import sentence, tag_block
 
 from jobs.common import UsageError
-from jobs.ingest import run_ingest
 from pipeline.convert.asterix import wrap_asterix_file
 from pipeline.convert.importer import run_import
 from pipeline.convert.legacy import import_file
 from pipeline.convert.output import REJECTS_TOPIC, Message, write_converted
 from pipeline.families import load_config
+from pipeline.ingest.driver import run_ingest
 from pipeline.io.mcap_read import read_mcap_batches
 from pipeline.io.mcap_write import ChannelSpec, LogTimeError, write_mcap_file, write_messages
 from pipeline.units import NS, TIME_MAX_NS

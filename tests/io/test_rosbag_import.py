@@ -18,10 +18,10 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "decode"))
 from nmea_builders import sentence
 
-from jobs.ingest import run_ingest
 from pipeline.convert.importer import run_import
 from pipeline.convert.legacy import detect_format
 from pipeline.families import load_config
+from pipeline.ingest.driver import run_ingest
 from pipeline.io.mcap_read import read_mcap_batches
 from pipeline.units import NS
 from pipeline.warehouse.delta import read_table

@@ -20,11 +20,11 @@ from pyais.encode import encode_dict
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "decode"))
 from nmea_builders import sentence, tag_block
 
-from jobs.ingest import run_ingest
 from pipeline.convert.importer import run_import
 from pipeline.convert.legacy import file_name_date, import_file
 from pipeline.decode.nmea import decode_nmea
 from pipeline.families import load_config
+from pipeline.ingest.driver import run_ingest
 from pipeline.io.mcap_write import ChannelSpec, write_messages
 from pipeline.time_sources import refine_by_utc_second
 from pipeline.units import NS

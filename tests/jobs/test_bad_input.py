@@ -13,8 +13,8 @@ import polars as pl
 from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
 
-from jobs.ingest import run_ingest
 from jobs.simulate import run_simulate
+from pipeline.ingest.driver import run_ingest
 from pipeline.units import NS
 from pipeline.warehouse.delta import read_table
 

@@ -15,10 +15,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from mcap_fixtures import T0_NS, mixed_file
 
 from jobs.common import UsageError, parse_time_ns
-from jobs.ingest import run_ingest
 from pipeline.batch.window import HOUR_NS, bounded_window, largest_unit_rows
 from pipeline.config import ExecutionConfig
 from pipeline.families import family, load_config
+from pipeline.ingest.driver import run_ingest
 
 REPO = Path(__file__).resolve().parents[2]
 

@@ -11,8 +11,8 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from mcap_fixtures import T0_NS, mixed_file, radar_messages, write_mcap
 
-from jobs.ingest import run_ingest
 from pipeline.families import load_config
+from pipeline.ingest.driver import run_ingest
 from pipeline.io.mcap_read import read_mcap_batches
 from pipeline.warehouse.delta import read_table
 

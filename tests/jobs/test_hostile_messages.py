@@ -11,9 +11,9 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from mcap_fixtures import AIS_TYPE1, T0_NS, dumps, radar_messages, radar_report, write_mcap
 
-from jobs.ingest import run_ingest
 from pipeline.decode.registry import MAX_MESSAGE_BYTES
 from pipeline.families import load_config
+from pipeline.ingest.driver import run_ingest
 from pipeline.warehouse.delta import read_table
 
 DEEP = b'{"a":' * 1000 + b"1" + b"}" * 1000  # 2 KB, 1,000 levels

@@ -23,10 +23,10 @@ from mcap_fixtures import (
 
 import pipeline.ingest.worker
 import pipeline.warehouse.staged
-from jobs.ingest import IngestSummary, IngestUsageError, run_ingest
 from pipeline.decode import json_columns
 from pipeline.executors import ExecutorError, UnitQueue, UnitResult, make_executor
 from pipeline.families import load_config
+from pipeline.ingest.driver import IngestSummary, IngestUsageError, run_ingest
 from pipeline.io.mcap_read import read_mcap_batches
 from pipeline.threads import HASHER_NICE, SECOND_PARSER_NICE, WRITER_NICE
 from pipeline.units import NS

@@ -23,11 +23,11 @@ from mcap_fixtures import (
     write_mcap,
 )
 
-from jobs.ingest import run_ingest
 from pipeline.config import ValidationConfig
 from pipeline.decode import registry
 from pipeline.decode.registry import FileDecoder
 from pipeline.ingest import IngestContext, IngestUnit, ingest_file
+from pipeline.ingest.driver import run_ingest
 from pipeline.io.mcap_read import read_mcap_batches
 from pipeline.warehouse.delta import read_table, table_exists, table_path
 
@@ -259,7 +259,7 @@ def test_failed_staged_commit_is_reported_and_ledger_not_written(tmp_path, cfg, 
 _PEAK_SCRIPT = """
 import sys
 from pathlib import Path
-from jobs.ingest import run_ingest
+from pipeline.ingest.driver import run_ingest
 from pipeline.families import load_config
 s = run_ingest([sys.argv[1]], load_config(), Path(sys.argv[2]), executor="serial")
 assert s.exit_code == 0 and s.rows["radar_tracks"] == int(sys.argv[3]), s.render()

@@ -12,11 +12,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from jobs.ingest import run_ingest
 from jobs.simulate import run_simulate
 from pipeline.batch import run_batch
 from pipeline.batch.place import PlaceError, measure, site_place
 from pipeline.families import load_config
+from pipeline.ingest.driver import run_ingest
 from pipeline.units import NS
 from pipeline.warehouse.delta import read_table
 from tests.site_configs import expected_km, moved_config, moved_raw, write_config

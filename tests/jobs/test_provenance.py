@@ -8,16 +8,18 @@ from __future__ import annotations
 
 import subprocess
 import sys
+import tomllib
 from pathlib import Path
 
 import polars as pl
 import pytest
 
-from jobs.run import run_nightly
 from jobs.simulate import run_simulate
 from pipeline.batch import run_batch
+from pipeline.batch.nightly import run_nightly
 from pipeline.batch.provenance import current_digests, family_digest, window_digests
 from pipeline.families import FAMILIES, config_from_mapping, family, load_config
+from pipeline.resources import resource_path
 from pipeline.units import NS
 from pipeline.warehouse.delta import read_table
 from tests.site_configs import demo_raw, write_config
@@ -64,9 +66,13 @@ def test_each_unit_records_the_digest_of_what_its_family_read():
     sect = current_digests(config_from_mapping(with_sections(raw, sectors=moved)))
     assert {k for k in now if sect[k] != now[k]} == {"maritime", "gaps", "nav"}
     # the simulator's fault schedule is read by no batch: no digest changes
-    faults = [dict(f) for f in raw["channel_faults"]]
+    world = tomllib.loads((resource_path("config") / "scenarios" / "channel.toml").read_text())
+    faults = [dict(f) for f in world["channel_faults"]]
+    assert current_digests(config_from_mapping(with_sections(raw, channel_faults=faults),
+                                               scenario=True)) == now
     faults[0]["start_s"] += 60.0
-    assert current_digests(config_from_mapping(with_sections(raw, channel_faults=faults))) == now
+    assert current_digests(config_from_mapping(with_sections(raw, channel_faults=faults),
+                                               scenario=True)) == now
 
 
 def test_the_batch_records_the_digest_and_run_rebatches_a_changed_config(tmp_path, archive):

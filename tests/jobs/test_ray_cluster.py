@@ -19,11 +19,11 @@ cluster_utils = pytest.importorskip("ray.cluster_utils")
 
 import pipeline.batch.driver as driver  # noqa: E402
 from jobs.batch import run_batch  # noqa: E402
-from jobs.ingest import run_ingest  # noqa: E402
 from jobs.simulate import run_simulate  # noqa: E402
 from pipeline.batch.worker import BatchUnit, FinalizeTask  # noqa: E402
 from pipeline.executors import UnitQueue  # noqa: E402
 from pipeline.families import load_config  # noqa: E402
+from pipeline.ingest.driver import run_ingest  # noqa: E402
 from pipeline.maritime.stage import OUTPUTS  # noqa: E402
 from pipeline.units import NS  # noqa: E402
 from pipeline.warehouse.delta import read_table  # noqa: E402

@@ -13,9 +13,9 @@ ray = pytest.importorskip(
 )
 
 from jobs.batch import run_batch  # noqa: E402
-from jobs.ingest import run_ingest  # noqa: E402
 from jobs.simulate import run_simulate  # noqa: E402
 from pipeline.families import load_config  # noqa: E402
+from pipeline.ingest.driver import run_ingest  # noqa: E402
 from pipeline.maritime.stage import OUTPUTS  # noqa: E402
 from pipeline.units import NS  # noqa: E402
 from pipeline.warehouse.delta import read_table  # noqa: E402

@@ -148,7 +148,7 @@ def test_a_job_killed_before_its_chain_leaves_it_to_the_next_batch(e2e, tmp_path
             (seam, e2e.end_ns)]
         assert "a killed job left the units after" in res.render()
     else:  # the nightly run: no file changed, no window pending, the chain is run
-        from jobs.run import run_nightly
+        from pipeline.batch.nightly import run_nightly
         res = run_nightly(strict, wh, folders=[str(Path(e2e.archive[0]).parent)],
                           executor_kind="serial")
         assert res.windows == [(seam, e2e.end_ns)] and not res.files
@@ -163,8 +163,8 @@ def test_a_chain_that_fails_in_a_nightly_run_is_tried_once_in_it(e2e, tmp_path, 
     """Was: ``surveil run`` ran a killed job's chain, and when it failed, ran it again
     inside its batch of each pending window. Now the run tries it once; the record stays
     for the next run, and the pending window is still batched."""
-    import jobs.run
     import pipeline.batch.driver
+    import pipeline.batch.nightly
     import pipeline.batch.worker
     strict, seam, wh, _ = _two_windows_and_a_new_config(e2e, tmp_path)
 
@@ -186,11 +186,12 @@ def test_a_chain_that_fails_in_a_nightly_run_is_tried_once_in_it(e2e, tmp_path, 
 
     monkeypatch.setattr(pipeline.batch.worker, "run_unit", failing_after_the_seam)
     site = pipeline.batch.sites_in(wh, e2e.start_ns, seam)[0]
-    monkeypatch.setattr(jobs.run, "pending_by_site", lambda w: {site: [(e2e.start_ns, seam)]})
+    monkeypatch.setattr(pipeline.batch.nightly, "pending_by_site",
+                        lambda w: {site: [(e2e.start_ns, seam)]})
     # the stricter config would also make every window of the old one pending
     # (tests/jobs/test_provenance.py): the chain alone is under test here
-    monkeypatch.setattr(jobs.run, "stale_spans", lambda w, cfg: [])
-    res = jobs.run.run_nightly(strict, wh, folders=[str(Path(e2e.archive[0]).parent)],
+    monkeypatch.setattr(pipeline.batch.nightly, "stale_spans", lambda w, cfg: [])
+    res = pipeline.batch.nightly.run_nightly(strict, wh, folders=[str(Path(e2e.archive[0]).parent)],
                                executor_kind="serial")
     assert res.exit_code != 0 and any("chain unit fails" in f for f in res.failures)
     assert res.windows == [(seam, e2e.end_ns), (e2e.start_ns, seam)]

@@ -14,10 +14,10 @@ from pathlib import Path
 
 import polars as pl
 
-from jobs.ingest import run_ingest
-from jobs.run import run_nightly
 from jobs.simulate import run_simulate
+from pipeline.batch.nightly import run_nightly
 from pipeline.batch.pending import pending_windows
+from pipeline.ingest.driver import run_ingest
 from pipeline.units import NS
 from pipeline.warehouse.delta import read_table
 

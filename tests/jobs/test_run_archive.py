@@ -18,11 +18,11 @@ import pytest
 from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
 
-from jobs.ingest import run_ingest
-from jobs.run import run_nightly
 from jobs.simulate import run_simulate
+from pipeline.batch.nightly import run_nightly
 from pipeline.families import load_config
 from pipeline.ingest.archive import finished_mcap, imported_path
+from pipeline.ingest.driver import run_ingest
 from pipeline.maritime.config import without_faults
 from pipeline.simulate.channel import simulate_channel
 from pipeline.tables import table_specs

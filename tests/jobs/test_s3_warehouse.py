@@ -152,7 +152,7 @@ def test_an_archive_on_s3_ingests_the_rows_of_the_local_files(e2e, s3, on_s3):
     """`surveil run`'s folders and ingest's paths may be s3:// prefixes: each worker
     reads its object (a local copy), the ledger names it by its URI; the rows are those
     of the same files on disk (their source_file aside)."""
-    from jobs.ingest import run_ingest
+    from pipeline.ingest.driver import run_ingest
 
     bucket, client = on_s3["bucket"], s3.client()
     for f in e2e.archive:

@@ -16,13 +16,13 @@ import polars as pl
 import pytest
 
 from jobs.batch import run_batch
-from jobs.config_init import run_config_init
-from jobs.ingest import run_ingest
 from jobs.simulate import run_simulate
 from pipeline.convert.importer import run_import
 from pipeline.families import declared, load_config
 from pipeline.frames import geodetic_to_enu
+from pipeline.ingest.driver import run_ingest
 from pipeline.requirements import NOT_APPLICABLE, RequirementsConfig, evaluate
+from pipeline.siteconfig.init import run_config_init
 from pipeline.units import NS
 from pipeline.warehouse.delta import read_table
 from tests.realdata.site_walk import REPO, write_cat010_capture

@@ -27,12 +27,12 @@ from polars.testing import assert_frame_equal
 from jobs.batch import run_batch
 from jobs.cli import cli
 from jobs.common import UsageError, refuse_pre_sites
-from jobs.ingest import IngestUsageError, run_ingest
 from jobs.reprocess import run_reprocess
 from jobs.simulate import run_simulate
 from pipeline import tables
 from pipeline.convert.importer import run_import
 from pipeline.families import FAMILIES
+from pipeline.ingest.driver import IngestUsageError, run_ingest
 from pipeline.io.mcap_site import declared_site
 from pipeline.reports import open_warehouse, run_named_report
 from pipeline.warehouse.delta import read_table, table_exists, table_path
@@ -275,7 +275,7 @@ def test_run_batches_each_sites_pending_windows_alone_and_site_limits_it(e2e, tm
     """Was: ``surveil run`` had no --site, and a pending window of one site was batched
     for every site with data in it. Now each site's pending windows are its own, and
     ``run --site`` names the site of bare files and batches only that site."""
-    from jobs.run import run_nightly
+    from pipeline.batch.nightly import run_nightly
     from pipeline.batch.pending import pending_by_site
 
     src = tmp_path / "in" / "bridge.nmea"

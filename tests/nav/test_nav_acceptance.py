@@ -12,8 +12,8 @@ import polars as pl
 import pytest
 
 from jobs.batch import run_batch
-from jobs.ingest import run_ingest
 from jobs.simulate import run_simulate
+from pipeline.ingest.driver import run_ingest
 from pipeline.nav.config import ownship_config
 from pipeline.reports import run_named_report
 from pipeline.simulate.ownship import simulate_ownship

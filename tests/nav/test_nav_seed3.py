@@ -15,8 +15,8 @@ import polars as pl
 import pytest
 
 from jobs.batch import run_batch
-from jobs.ingest import run_ingest
 from jobs.simulate import run_simulate
+from pipeline.ingest.driver import run_ingest
 from pipeline.reports import run_named_report
 from pipeline.units import NS
 from pipeline.warehouse.delta import read_table

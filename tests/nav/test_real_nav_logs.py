@@ -11,8 +11,8 @@ import pytest
 from conftest import real_data_dir
 
 from jobs.batch import run_batch
-from jobs.ingest import run_ingest
 from pipeline.convert.importer import run_import
+from pipeline.ingest.driver import run_ingest
 from pipeline.reports import run_named_report
 from pipeline.warehouse.delta import read_table
 

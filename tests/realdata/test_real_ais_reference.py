@@ -1,10 +1,10 @@
 """Evaluation without truth on a real AIS recording (issue 37): the Stone Soup demo's
 Solent AIS export (../shared/data/real/ais/csv, 91 vessels, 2016-01-12 13:02-14:26 UTC,
 real time stamps) through ``surveil import``, ingest and the batch, with a site config
-whose region is the Solent (the shipped demo region is 2,000 km away; an AIS-only site
-still needs a declared radar today: it is put far off with a 1 km range). Every vessel
-gets a reconstructed reference and the AIS reports are scored against it
-(``reference_quality``: each report against a reference made without it). There is no
+whose region is the Solent (the shipped demo region is 2,000 km away), declared AIS-only
+(no radar sites). Every vessel gets a reconstructed reference and the AIS reports are
+scored against it (``reference_quality``: each report against a reference made without
+it). There is no
 radar in the recording, so the radar accuracy reports have nothing to score."""
 
 from __future__ import annotations
@@ -15,8 +15,8 @@ import polars as pl
 import pytest
 
 from jobs.batch import run_batch
-from jobs.ingest import run_ingest
 from pipeline.convert.importer import run_import
+from pipeline.ingest.driver import run_ingest
 from pipeline.reports import run_named_report
 
 pytestmark = pytest.mark.realdata
@@ -33,13 +33,9 @@ def _solent_config():
     sections = dict(base.sections)
     sections["region"] = {**sections["region"], "name": "solent", "origin_lat_deg": 50.80,
                           "origin_lon_deg": -1.30}
-    sites = []
-    for i, s in enumerate(sections["radar_sites"]):
-        sites.append({**s, "lat_deg": 51.5, "lon_deg": 1.0 + 0.1 * i, "max_range_m": 1000.0})
-    sections["radar_sites"] = sites
+    sections["radar_sites"] = []  # an AIS-only site
     sections["sectors"] = [{"name": "solent", "polygon": [[50.6, -1.7], [50.6, -0.9],
                                                           [51.0, -0.9], [51.0, -1.7]]}]
-    sections["channel_faults"] = []
     return config_from_mapping(sections, "(solent test config)")
 
 

@@ -20,11 +20,11 @@ from pathlib import Path
 import polars as pl
 import pytest
 
-from jobs.ingest import run_ingest
 from pipeline.batch import run_batch
 from pipeline.batch.place import PlaceError
 from pipeline.convert.importer import run_import
 from pipeline.families import load_config
+from pipeline.ingest.driver import run_ingest
 from pipeline.units import NS
 from pipeline.warehouse.delta import read_table
 from tests.conftest import real_data_dir

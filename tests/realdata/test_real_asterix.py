@@ -98,8 +98,8 @@ def expected(path: Path) -> tuple[int, int, Counter, Counter]:
 
 @pytest.fixture(scope="module")
 def ingested(tmp_path_factory):
-    from jobs.ingest import run_ingest
     from pipeline.convert.asterix import wrap_asterix_file
+    from pipeline.ingest.driver import run_ingest
     from pipeline.warehouse.delta import read_table
 
     root = real_data_dir()

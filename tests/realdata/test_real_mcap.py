@@ -49,7 +49,7 @@ def summary_counts(path: Path) -> tuple[Counter, dict[str, int]]:
 
 @pytest.fixture(scope="module")
 def ingested(tmp_path_factory):
-    from jobs.ingest import run_ingest
+    from pipeline.ingest.driver import run_ingest
     from pipeline.warehouse.delta import read_table
 
     files = sorted((real_data_dir() / "mcap").glob("*.mcap"))

@@ -19,8 +19,8 @@ from pathlib import Path
 import polars as pl
 import pytest
 
-from jobs.ingest import run_ingest
 from pipeline.convert.importer import run_import
+from pipeline.ingest.driver import run_ingest
 
 pytestmark = pytest.mark.realdata
 

@@ -121,7 +121,7 @@ def test_archive_has_the_channel_conventions(cfg, scenario, tmp_path):
 def test_whole_chain_writes_gap_forecasts_and_the_reports_read_them(cfg, tmp_path):
     """simulate -> MCAP -> ingest -> Delta -> batch (every family) -> DuckDB reports."""
     from jobs.batch import run_batch
-    from jobs.ingest import run_ingest
+    from pipeline.ingest.driver import run_ingest
     from pipeline.reports import run_named_report
     from pipeline.warehouse.delta import read_table
 

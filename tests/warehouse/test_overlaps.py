@@ -10,8 +10,8 @@ import shutil
 
 import polars as pl
 
-from jobs.ingest import run_ingest
 from jobs.simulate import run_simulate
+from pipeline.ingest.driver import run_ingest
 from pipeline.warehouse.delta import read_table
 
 
