@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import hashlib
 import itertools
-import logging
 from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
@@ -32,7 +31,6 @@ import polars as pl
 from pipeline import tables
 from pipeline.batch.worker import BatchUnit
 from pipeline.config import Config
-from pipeline.errors import UsageError
 from pipeline.families import FAMILIES
 from pipeline.family import Family
 from pipeline.units import NS
@@ -204,55 +202,6 @@ def granted(units: list[BatchUnit], kind: str, workers: int) -> list[BatchUnit]:
         for u in units]
 
 
-def sites_in(warehouse: Path, start_ns: int, end_ns: int) -> list[str]:
-    """The sites the ingest ledger knows files of (ok or partial) overlapping
-    ``[start_ns, end_ns)``, sorted."""
-    ledger = pl.from_arrow(read_table(warehouse, "ingest_ledger", columns=[
-        "site", "status", "start_time_ns", "end_time_ns"]))
-    hit = ledger.filter(pl.col("status").is_in(["ok", "partial"])
-                        & (pl.col("start_time_ns") < end_ns)
-                        & (pl.col("end_time_ns") >= start_ns))
-    return sorted(hit["site"].unique().to_list())
-
-
 def safe_name(site: str) -> str:
     """A site as a folder name part (any site name is a valid string, not a path)."""
     return hashlib.sha256(site.encode()).hexdigest()[:12]
-
-
-def warehouse_sites(warehouse: Path) -> list[str]:
-    """The sites a warehouse holds: of its ingest ledger's files and its committed batch
-    units, sorted."""
-    found: set[str] = set()
-    for table in ("ingest_ledger", "batch_units"):
-        found |= set(pl.from_arrow(read_table(warehouse, table, columns=["site"]))["site"]
-                     .to_list())
-    return sorted(found)
-
-
-def require_site(warehouse: Path, site: str | None) -> str | None:
-    """``site`` when the warehouse holds it (or None); :class:`UsageError` (exit 2)
-    naming the warehouse's sites otherwise: a typo in ``--site`` must not read as a site
-    without data (was: ``report --site nosuch`` exit 0 blaming the gyro signals, ``batch
-    --site nosuch`` committed empty units)."""
-    if site is None:
-        return None
-    known = warehouse_sites(warehouse)
-    if site not in known:
-        raise UsageError(f"no site {site!r} in warehouse {warehouse} (its sites: "
-                         f"{', '.join(known) or 'none: ingest recordings first'})")
-    return site
-
-
-def one_site(warehouse: Path, site: str | None, start_ns: int, end_ns: int) -> str | None:
-    """``site`` as given (None: every site). A command drawing one picture (audit,
-    export) over several sites without ``--site`` warns: their rows are drawn together
-    (each report row keeps its ``site``), fine for sites of different families (the demo's
-    channel, airfield and own ship), confusing for two VTS sites."""
-    if site is None:
-        found = sites_in(warehouse, start_ns, end_ns)
-        if len(found) > 1:
-            logging.getLogger(__name__).warning(
-                "the window holds data of %d sites (%s), drawn together; --site NAME for one",
-                len(found), ", ".join(found))
-    return site
