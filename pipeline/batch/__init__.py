@@ -37,9 +37,9 @@ The walk of one unit: docs/architecture.md, "One batch unit, from plan to commit
 """
 
 from pipeline.batch.driver import resume_continuations, run_batch, run_site
-from pipeline.batch.plan import sites_in
 from pipeline.batch.summary import BatchSummary, SitesSummary
 from pipeline.batch.worker import BatchUnit, UnitManifest, read_inputs, run_unit
+from pipeline.warehouse.sites import sites_in
 
 __all__ = [
     "BatchSummary",

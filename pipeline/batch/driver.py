@@ -33,7 +33,6 @@ from pipeline.batch.plan import (
     owned_window,
     plan_units,
     safe_name,
-    sites_in,
     unit_is_live,
 )
 from pipeline.batch.scope import batch_scope
@@ -47,6 +46,7 @@ from pipeline.family import Family
 from pipeline.signals import deferred_interrupts
 from pipeline.warehouse.crashpoints import crash_point
 from pipeline.warehouse.location import as_location
+from pipeline.warehouse.sites import sites_in
 from pipeline.warehouse.views import rebuild_views_file, warm_up
 
 log = logging.getLogger(__name__)
