@@ -188,7 +188,12 @@ class ChannelIntegrityConfig:
       with its SOG/COG is a jump (another ship sends the MMSI, a position fault);
     - ``ais_sigma_sog_mps``, ``ais_sigma_cog_deg``, ``ais_max_gap_s``: the transponder's
       kinematic self-test (each report against the previous one, at most this old, moved
-      on by their SOG and COG): a stuck position;
+      on by their SOG and COG): a stuck position; ``ais_sigma_report_age_s``: how old a
+      report's position may be at its reception time, for reports without a time stamp
+      (the test then takes the reception time; with one, the fix's second);
+      ``ais_manoeuvre_psd_m2_s3``: white-noise acceleration between two reports
+      (spectral density; q dt^3 / 12 per axis, ``pipeline.maritime.integrity.fix_time``
+      and ``_kinematics``);
     - ``outlier_q``: a radar's per-track NIS above chi2_2(1 - outlier_q) marks the track an
       outlier; outliers fewer than half of the channel's tracks in a sector are left out of
       its test (an AIS fault of one ship, not the radar);
@@ -226,6 +231,8 @@ class ChannelIntegrityConfig:
     ais_sigma_sog_mps: float = positive(0.1)
     ais_sigma_cog_rad: float = positive(1.0, unit="deg")
     ais_max_gap_s: float = positive(60.0)
+    ais_sigma_report_age_s: float = positive(0.5)
+    ais_manoeuvre_psd_m2_s3: float = setting(0.03, ge=0.0)
     outlier_q: float = probability(1e-4)
     coverage_min_targets: int = count(2)
     coverage_miss_share: float = probability(0.5)

@@ -6,10 +6,12 @@
   distance from the data's centre) and ``surveil config init``; ingest warned and kept
   every row;
 - with a config written for the place (tests/site_configs.py: origin at the data's
-  centroid; ``surveil config init`` will write it): the AIS integrity flags fewer reports
-  than in the demo's distorted frame, and two radars declared at the data without any
-  radar data change no decision (a silent radar is no witness): every decision is the
-  kinematic self-test, none an ``ais_unmatched`` test with nis = inf.
+  centroid; ``surveil config init`` will write it), two radars declared at the data
+  without any radar data change no decision (a silent radar is no witness): every
+  decision is the kinematic self-test, none an ``ais_unmatched`` test with nis = inf;
+- and the self-test takes each step on the ellipsoid where the ship is (issue 36, item
+  6), so the demo's distant origin changes no decision either (before, its distorted
+  frame flagged 21.8 % of the reports against 3.5 % with a local origin).
 """
 
 from __future__ import annotations
@@ -72,7 +74,7 @@ def test_the_demo_config_is_refused_naming_the_distance(solent):
     assert read_table(wh, "batch_units").num_rows == 0
 
 
-def test_a_local_config_flags_less_and_silent_radars_change_nothing(solent):
+def test_neither_the_origin_nor_silent_radars_change_an_ais_decision(solent):
     wh, ais, start, end = solent
     lat, lon = centroid(ais["lat_deg"].to_numpy(), ais["lon_deg"].to_numpy())
     shares = {}
@@ -89,7 +91,7 @@ def test_a_local_config_flags_less_and_silent_radars_change_nothing(solent):
         shares[name] = h["eta"].mean()
         decisions[name] = h.sort("time_ns", "channel").select("time_ns", "channel", "check",
                                                                "eta", "excluded")
-    assert shares["local"] < shares["demo"], shares
+    assert decisions["demo"].equals(decisions["local"]), shares
     h = decisions["silent radars"]
     assert set(h["check"].unique()) == {"ais_kinematics"}
     assert h.equals(decisions["local"])
