@@ -19,12 +19,12 @@ from pathlib import Path
 import polars as pl
 import pytest
 
-from jobs.config_init import run_config_init
-from jobs.ingest import run_ingest
 from pipeline.batch import run_batch
 from pipeline.convert.importer import run_import
 from pipeline.families import load_config
+from pipeline.ingest.driver import run_ingest
 from pipeline.maritime.config import maritime_config
+from pipeline.siteconfig.init import run_config_init
 from pipeline.units import NS
 from pipeline.warehouse.delta import read_table
 from tests.conftest import real_data_dir
