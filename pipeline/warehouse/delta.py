@@ -445,13 +445,17 @@ def table_snapshot(warehouse: Path, name: str) -> tuple[list[str], frozenset[str
     return files, frozenset(f.name for f in t.schema().fields)
 
 
-def require_readable(warehouse: Path | Location, names: list[str]) -> None:
+def require_readable(warehouse: Path | Location, names: list[str], *, files: bool = True
+                     ) -> None:
     """:class:`~pipeline.warehouse.damage.DamagedTableError` for the first of ``names``
-    (existing tables) whose log does not read or (locally) whose snapshot lists a
-    missing file: a job checks the tables it reads and writes before any work, so a
-    damaged table stops it before its first commit (~3 ms a table)."""
+    (existing tables) whose log does not read or (locally, with ``files``) whose
+    snapshot lists a missing file: a job checks the tables it reads and writes before
+    any work, so a damaged table stops it before its first commit (~3 ms a table)."""
     for name in dict.fromkeys(names):
-        table_snapshot(warehouse, name)
+        if files:
+            table_snapshot(warehouse, name)
+        else:
+            _reader_table(warehouse, name)
 
 
 def empty_table(name: str) -> pa.Table:

@@ -169,8 +169,8 @@ def view_statements(warehouse: Path, names: Iterable[str] | None = None) -> dict
         try:
             out[name] = _current_view_sql(warehouse, name)
         except DamagedTableError as exc:
-            out[name] = (f"CREATE OR REPLACE VIEW {_ident(name)} AS "
-                         f"SELECT error({sql_literal(str(exc))}) AS damaged")
+            out[name] = (f"CREATE OR REPLACE VIEW {_ident(name)} AS SELECT NULL AS damaged "
+                         f"FROM range(1) WHERE error({sql_literal(str(exc))}) IS NULL")
     return out
 
 

@@ -1,0 +1,110 @@
+"""`surveil doctor [--repair]` on a real warehouse from the simulator (issue 40, item 3):
+each of the four damages is found; the repair of a broken log or a lost derived file
+leaves every derived table row for row as in the undamaged warehouse; a lost raw file
+is named with the `surveil ingest --force` command that brings it back, and doctor
+keeps naming it until it is ingested again (then every raw table is as before too)."""
+
+from __future__ import annotations
+
+import shutil
+
+import pytest
+
+from jobs.doctor import run_doctor
+from jobs.ingest import run_ingest
+from pipeline.decode.registry import RAW_TABLES
+from pipeline.warehouse import pending
+from pipeline.warehouse.doctor import DOCTOR_DIR, examine
+from pipeline.warehouse.views import views_stale
+from tests.warehouse.damage import DAMAGES, DERIVED, rebatched_copy, rows
+
+
+@pytest.fixture(scope="module")
+def clean(e2e, tmp_path_factory):
+    return rebatched_copy(e2e, tmp_path_factory.mktemp("doctor") / "clean")
+
+
+@pytest.fixture(scope="module")
+def clean_rows(clean):
+    return {n: rows(clean, n) for n in [*DERIVED, *RAW_TABLES]}
+
+
+@pytest.fixture
+def warehouse(clean, tmp_path):
+    dst = tmp_path / "wh"
+    shutil.copytree(clean, dst)
+    return dst
+
+
+def _same(a, b) -> bool:
+    return a.height == b.height and (a.height == 0 or a.equals(b))
+
+
+def test_an_undamaged_warehouse_is_healthy(e2e, clean):
+    result = run_doctor(e2e.cfg, clean)
+    assert result.exit_code == 0, result.render()
+    assert result.before.healthy and "is healthy" in result.render()
+
+
+@pytest.mark.parametrize("damage", list(DAMAGES))
+def test_doctor_finds_each_damage(e2e, warehouse, damage):
+    table, make, problem = DAMAGES[damage]
+    what = make(warehouse, table)
+    result = run_doctor(e2e.cfg, warehouse)
+    assert result.exit_code == 1
+    found = [(f.table, f.problem) for f in result.before.findings]
+    assert (table, problem) in found, found
+    assert [f for f in result.before.findings if f.table == table and what in f.detail]
+    text = result.render()
+    assert table in text and problem in text and "--repair" in text
+
+
+@pytest.mark.parametrize("damage", ["truncated_log", "garbage_next_version",
+                                    "derived_file_deleted"])
+def test_repair_gives_back_every_derived_row(e2e, warehouse, clean_rows, damage):
+    table, make, _ = DAMAGES[damage]
+    what = make(warehouse, table)
+    result = run_doctor(e2e.cfg, warehouse, repair=True, executor_kind="serial")
+    assert result.exit_code == 0, result.render()
+    assert result.after is not None and result.after.healthy, result.render()
+    for name in DERIVED:
+        assert _same(rows(warehouse, name), clean_rows[name]), name
+    if damage != "derived_file_deleted":  # the broken entry is kept, moved aside
+        assert list((warehouse / DOCTOR_DIR).glob(f"*/tables/{table}/_delta_log/{what}"))
+        assert result.batches, "the units committed since the good version are re-batched"
+
+
+def test_a_lost_raw_file_is_named_until_ingested_again(e2e, warehouse, clean_rows):
+    make = DAMAGES["raw_file_deleted"][1]
+    make(warehouse, "radar_tracks")
+    result = run_doctor(e2e.cfg, warehouse, repair=True, executor_kind="serial")
+    assert result.exit_code == 1  # something is left to the operator
+    commands = [line for line in result.todo if "surveil ingest --force" in line]
+    assert len(commands) == 1, result.todo
+    fed = [str(f) for f in e2e.archive if f"surveil ingest --force {f}" in commands[0]]
+    assert len(fed) == 1, commands
+    assert result.after is not None
+    assert [f.problem for f in result.after.findings] == ["raw_rows_lost"]
+    again = run_doctor(e2e.cfg, warehouse)  # a later doctor still names it
+    assert again.exit_code == 1 and fed[0] in again.render()
+    ingest = run_ingest(fed, e2e.cfg, warehouse, force=True, executor="serial")
+    assert ingest.exit_code == 0, ingest.render()
+    for name in RAW_TABLES:
+        assert _same(rows(warehouse, name), clean_rows[name]), name
+    assert run_doctor(e2e.cfg, warehouse).exit_code == 0
+
+
+def test_leftovers_of_a_dead_job_are_found_and_removed(e2e, warehouse):
+    (warehouse / "_staging" / "batch-x-1-2").mkdir(parents=True)
+    marker = pending.begin(warehouse, ["track_errors"], job="batch",
+                           window=[e2e.start_ns, e2e.end_ns], site="channel-clean")
+    (warehouse / "tables" / "track_errors" / "_delta_log").touch()  # (mtime: views stale)
+    newest = max((warehouse / "tables" / "track_errors" / "_delta_log").glob("*.json"))
+    newest.touch()
+    found = {f.problem for f in examine(warehouse).findings}
+    assert found == {"orphan_staging", "pending_marker", "views_stale"}
+    result = run_doctor(e2e.cfg, warehouse, repair=True, executor_kind="serial")
+    assert result.exit_code == 0, result.render()
+    assert not (warehouse / "_staging").exists()
+    assert pending.markers(warehouse) == [] and not marker.exists()
+    assert not views_stale(warehouse)
