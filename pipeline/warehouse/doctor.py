@@ -398,6 +398,7 @@ class LostRows:
 
     spans: list[tuple[str, int, int]] = field(default_factory=list)
     archive_files: dict[str, list[str]] = field(default_factory=dict)  # -> raw tables
+    raw_spans: list[tuple[str, int, int]] = field(default_factory=list)  # (site, lo, hi)
     ledgers: list[str] = field(default_factory=list)  # ledger tables that lost entries
 
 
@@ -418,8 +419,11 @@ def lost_rows(warehouse: Path | Location, damaged: Iterable[TableDamage]) -> Los
         elif kind == "raw":
             if ledger is None:
                 ledger = pl.from_arrow(read_table(warehouse, "ingest_ledger"))
-            for f in _feeding_files(ledger, d):
+            fed = _feeding_files(ledger, d)
+            for f in fed["source_file"]:
                 out.archive_files.setdefault(f, []).append(d.name)
+            out.raw_spans += [(r[0], int(r[1]), int(r[2]) + 1) for r in fed.select(
+                SITE, "start_time_ns", "end_time_ns").drop_nulls().iter_rows()]
         else:
             out.ledgers.append(d.name)
     out.spans = sorted(set(out.spans))
@@ -451,9 +455,10 @@ def _owning_units(units: pl.DataFrame, d: TableDamage, time_col: str
     return [(r[0], int(r[1]), int(r[2])) for r in rows.iter_rows()]
 
 
-def _feeding_files(ledger: pl.DataFrame, d: TableDamage) -> list[str]:
+def _feeding_files(ledger: pl.DataFrame, d: TableDamage) -> pl.DataFrame:
+    """The ledger rows of the archive files whose raw rows ``d``'s repair took out."""
     if ledger.height == 0:
-        return []
+        return ledger
     picked = []
     if d.good_at_ns is not None:
         picked.append(ledger.filter(pl.col("ingested_at_ns") > d.good_at_ns))
@@ -462,8 +467,8 @@ def _feeding_files(ledger: pl.DataFrame, d: TableDamage) -> list[str]:
                 & _between(SITE, f.get(f"min.{SITE}"), f.get(f"max.{SITE}")))
         picked.append(ledger.filter(near))
     if not picked:
-        return []
-    return pl.concat(picked)["source_file"].unique().sort().to_list()
+        return ledger.clear()
+    return pl.concat(picked).unique("source_file").sort("source_file")
 
 
 def findings_table(findings: list[Finding]) -> pa.Table:
