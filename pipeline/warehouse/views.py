@@ -139,6 +139,17 @@ def view_sql(name: str, files: list[str], schema: str | None = None,
     return f"CREATE OR REPLACE VIEW {qualified} AS {body}"
 
 
+def _damaged_view_sql(name: str, message: str) -> str:
+    """A view of a damaged table that fails with ``message`` when a query names it: when
+    the query is bound (DuckDB 2.0 on, a deferred view), else when it runs."""
+    error = f"error({sql_literal(message)})"
+    if _DEFER_BINDING:
+        return (f"CREATE OR REPLACE VIEW {_ident(name)}{_DEFER_BINDING} AS "
+                f"SELECT * FROM read_parquet({error})")
+    return (f"CREATE OR REPLACE VIEW {_ident(name)} AS SELECT NULL AS damaged "
+            f"FROM range(1) WHERE {error} IS NULL")
+
+
 def _missing_only(s: pa.Schema, present: Collection[str] | None) -> Collection[str] | None:
     """``present`` when it lacks a column of ``s``, else None (the usual case: the view's
     text stays the same as without it)."""
@@ -169,8 +180,7 @@ def view_statements(warehouse: Path, names: Iterable[str] | None = None) -> dict
         try:
             out[name] = _current_view_sql(warehouse, name)
         except DamagedTableError as exc:
-            out[name] = (f"CREATE OR REPLACE VIEW {_ident(name)} AS SELECT NULL AS damaged "
-                         f"FROM range(1) WHERE error({sql_literal(str(exc))}) IS NULL")
+            out[name] = _damaged_view_sql(name, str(exc))
     return out
 
 

@@ -66,6 +66,8 @@ def test_commands_on_a_damaged_table_exit_2_naming_it(e2e, warehouse, damage):
         assert needs.returncode == 0, needs.stderr
     other = _surveil(warehouse, "report", "ais_traffic")  # reads neither table
     assert other.returncode == 0, other.stderr
+    _named_exit_2(_surveil(warehouse, "sql", f"SELECT count(*) FROM {table}"), table)
+    assert _surveil(warehouse, "sql", "SELECT count(*) FROM ais_reports").returncode == 0
     doctor = _surveil(warehouse, "doctor")
     assert doctor.returncode == 1, doctor.stderr
     assert table in doctor.stdout and problem in doctor.stdout
