@@ -66,6 +66,16 @@ def delete_data_file(warehouse: Path, name: str) -> str:
     return rel
 
 
+def rewrite_data_file(warehouse: Path, name: str) -> str:
+    """Append bytes to the first data file ``name``'s snapshot lists (its size no longer
+    the one the log records); returns its relative path."""
+    table = warehouse / "tables" / name
+    rel = unquote(DeltaTable(str(table)).get_add_actions(flatten=True).column("path")[0].as_py())
+    with open(table / rel, "ab") as f:
+        f.write(b"tampered")
+    return rel
+
+
 DAMAGES = {  # id -> (table, damage, what doctor calls it)
     "truncated_log": ("track_errors", truncate_newest, "log_unreadable"),
     "garbage_next_version": ("track_errors", garbage_next, "log_unreadable"),

@@ -8,9 +8,10 @@ from __future__ import annotations
 
 import shutil
 
+import pyarrow as pa
 import pyarrow.fs as pafs
 import pytest
-from deltalake import DeltaTable
+from deltalake import DeltaTable, write_deltalake
 
 from jobs.doctor import run_doctor
 from jobs.ingest import run_ingest
@@ -19,7 +20,7 @@ from pipeline.warehouse import pending
 from pipeline.warehouse.doctor import DOCTOR_DIR, examine
 from pipeline.warehouse.location import parse_location
 from pipeline.warehouse.views import views_stale
-from tests.warehouse.damage import DAMAGES, DERIVED, rebatched_copy, rows
+from tests.warehouse.damage import DAMAGES, DERIVED, rebatched_copy, rewrite_data_file, rows
 
 
 @pytest.fixture(scope="module")
@@ -62,19 +63,44 @@ def test_doctor_finds_each_damage(e2e, warehouse, damage):
     assert table in text and problem in text and "--repair" in text
 
 
+REWRITTEN = ("track_errors", rewrite_data_file, "file_size")
+
+
 @pytest.mark.parametrize("damage", ["truncated_log", "garbage_next_version",
-                                    "derived_file_deleted"])
+                                    "derived_file_deleted", "derived_file_rewritten"])
 def test_repair_gives_back_every_derived_row(e2e, warehouse, clean_rows, damage):
-    table, make, _ = DAMAGES[damage]
+    table, make, problem = DAMAGES.get(damage, REWRITTEN)
     what = make(warehouse, table)
+    assert (table, problem) in {(f.table, f.problem) for f in examine(warehouse).findings}
     result = run_doctor(e2e.cfg, warehouse, repair=True, executor_kind="serial")
     assert result.exit_code == 0, result.render()
     assert result.after is not None and result.after.healthy, result.render()
     for name in DERIVED:
         assert _same(rows(warehouse, name), clean_rows[name]), name
-    if damage != "derived_file_deleted":  # the broken entry is kept, moved aside
+    if problem == "log_unreadable":  # the broken entry is kept, moved aside
         assert list((warehouse / DOCTOR_DIR).glob(f"*/tables/{table}/_delta_log/{what}"))
         assert result.batches, "the units committed since the good version are re-batched"
+    if problem == "file_size":  # the rewritten file too
+        assert list((warehouse / DOCTOR_DIR).glob(f"*/tables/{table}/{what}"))
+
+
+def test_a_layout_other_than_schemas_is_found_and_left_alone(e2e, warehouse):
+    """A table whose columns are not those ``schemas/`` declares, and a folder of a table
+    it does not declare, are named; --repair leaves them (a rebuild's job)."""
+    odd = pa.table({"start_ns": pa.array(["a"], pa.string()), "extra": [1]})
+    shutil.rmtree(warehouse / "tables" / "fault_truth", ignore_errors=True)
+    write_deltalake(str(warehouse / "tables" / "fault_truth"), odd)
+    write_deltalake(str(warehouse / "tables" / "not_a_table"), odd)
+    result = run_doctor(e2e.cfg, warehouse)
+    details = {(f.table, f.problem, f.detail) for f in result.before.findings}
+    assert ("not_a_table", "unknown_table") in {(t, p) for t, p, _ in details}
+    schema = sorted(d for t, p, d in details if t == "fault_truth" and p == "schema")
+    assert "column extra is not in schemas/" in schema
+    assert any(d.startswith("column start_ns is string, schemas/ declares") for d in schema)
+    assert any("not null) is missing" in d for d in schema)
+    repaired = run_doctor(e2e.cfg, warehouse, repair=True, executor_kind="serial")
+    assert repaired.exit_code == 1 and repaired.after is not None
+    assert {f.problem for f in repaired.after.findings} == {"unknown_table", "schema"}
 
 
 def test_a_lost_raw_file_is_named_until_ingested_again(e2e, warehouse, clean_rows):
