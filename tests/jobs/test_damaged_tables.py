@@ -88,6 +88,22 @@ def test_an_unrelated_ingest_works_beside_a_damaged_table(e2e, warehouse, tmp_pa
     assert "Traceback" not in res.stderr
 
 
+@pytest.mark.parametrize("command", ["ingest", "reprocess"])
+def test_the_archive_replaces_a_lost_raw_file(e2e, warehouse, command):
+    """`ingest --force` (or `reprocess`) of the archive that fed a lost raw data file
+    goes through and leaves the warehouse healthy, also when the views file must be
+    rebuilt first (here: it is gone too; the lock's cleanup rebuilds it, which the code
+    before did over the missing file, and failed before any work)."""
+    DAMAGES["raw_file_deleted"][1](warehouse, "radar_tracks")
+    (warehouse / "surveil.duckdb").unlink()
+    args = (["ingest", "--force", *map(str, e2e.archive)] if command == "ingest" else
+            ["reprocess", "--from", iso(e2e.start_ns), "--to", iso(e2e.end_ns)])
+    res = _surveil(warehouse, *args, "--executor", "serial")
+    assert res.returncode == 0, res.stderr[-2000:]
+    doctor = _surveil(warehouse, "doctor")
+    assert doctor.returncode == 0, doctor.stdout
+
+
 def test_a_full_disk_at_the_views_rebuild_after_the_commit_is_exit_3(e2e, warehouse):
     window = ["--from", iso(e2e.start_ns), "--to", iso(e2e.end_ns)]
     res = _surveil(warehouse, "batch", *window, "--executor", "serial",

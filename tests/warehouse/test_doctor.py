@@ -166,3 +166,4 @@ def test_doctor_on_object_storage_finds_and_repairs(e2e, clean, clean_rows, s3):
     assert not result.batches and any("after the ingest" in t for t in result.todo)
     for name in DERIVED:
         assert _same(rows(wh, name), clean_rows[name]), name
+
