@@ -46,6 +46,6 @@ def missing_error(table: str, files: list[str]) -> DamagedTableError:
 def require_local_files(table: str, files: Iterable[str]) -> None:
     """:class:`DamagedTableError` when one of the local ``files`` (a snapshot's) is gone:
     a stat each (~2 us), before DuckDB or Arrow is handed the list."""
-    missing = [f for f in files if not os.path.exists(f)]
+    missing = [f for f in files if not os.path.exists(f.removeprefix("file://"))]
     if missing:
         raise missing_error(table, missing)

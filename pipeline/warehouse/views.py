@@ -289,9 +289,10 @@ class ViewsEngine:
         spending while the job works)."""
         new_file = (warehouse is not None and as_location(warehouse).is_local
                     and not (Path(warehouse) / VIEWS_FILE).exists())
-        # not a daemon: a job that stops early (a damaged table, exit 2) waits for it at
-        # exit; a daemon thread still inside DuckDB then aborts the interpreter (SIGABRT,
-        # "terminate called after throwing an instance of ''", exit 134)
+        # not a daemon: the interpreter waits for it at exit. A job that stops early (a
+        # damaged table: exit 2) would otherwise exit with a daemon thread still inside
+        # DuckDB, which aborts the process (SIGABRT, "terminate called after throwing an
+        # instance of ''", exit 134)
         self._warming = threading.Thread(
             target=self._warm, args=(new_file,), name="duckdb-warm-up", daemon=False
         )
