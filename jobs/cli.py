@@ -9,8 +9,11 @@ Shell completion (click): ``eval "$(_SURVEIL_COMPLETE=bash_source surveil)"`` (z
 ``zsh_source``, fish: ``fish_source``); report names, sectors and table names complete.
 
 Exit codes: 0 ok (everything read was used), 1 some units/files failed, some file was
-partial or some row was rejected (re-runnable), 2 usage or config error, 130 interrupted
-(SIGINT), 143 terminated (SIGTERM).
+partial or some row was rejected (re-runnable), 2 usage or config error (a damaged table:
+one line naming it and `surveil doctor`), 3 committed but the views file could not be
+rebuilt after (a full disk: the next command or `surveil doctor --repair` rebuilds it),
+130 interrupted (SIGINT), 143 terminated (SIGTERM); `surveil doctor`: 0 healthy, 1
+problems found.
 """
 
 from __future__ import annotations
@@ -701,6 +704,26 @@ def schema(table, fmt) -> None:
         raise UsageError(f"no table {table!r}; tables: {', '.join(table_specs())}")
     click.echo(format_report(schema_table(table), fmt, title=table or "warehouse tables"),
                nl=fmt != "table")
+
+
+@cli.command()
+@click.option("--repair", is_flag=True,
+              help="repair what it can (under the writer lock): broken log entries moved "
+                   "aside (backed up in _doctor/), references to missing files removed and "
+                   "their units batched again, views rebuilt, dead jobs' leftovers removed")
+@_EXECUTOR
+@click.pass_obj
+def doctor(st: _State, repair, executor) -> None:
+    """Check every warehouse table (log readable, every data file present with its
+    recorded size, schema as schemas/ declares), the views file and dead jobs' leftovers;
+    print a table of findings. Exit 0 healthy, 1 problems found (after --repair: some
+    remain or a command is left to run), 2 usage error."""
+    from jobs.doctor import run_doctor
+
+    result = run_doctor(st.cfg, st.existing_warehouse, repair=repair, executor_kind=executor,
+                        command=" ".join(["surveil", *sys.argv[1:]]))
+    click.echo(result.render())
+    sys.exit(result.exit_code)
 
 
 # --- calibration ----------------------------------------------------------------------------

@@ -45,6 +45,7 @@ from pipeline.families import FAMILIES, family
 from pipeline.family import Family
 from pipeline.signals import deferred_interrupts
 from pipeline.warehouse.crashpoints import crash_point
+from pipeline.warehouse.delta import require_readable
 from pipeline.warehouse.location import as_location
 from pipeline.warehouse.sites import sites_in
 from pipeline.warehouse.views import rebuild_views_file, warm_up
@@ -77,9 +78,15 @@ def run_batch(
     (``surveil run``: a chain that failed there is not tried again in the same job).
     Before any work, every site's positions are checked against the config's region
     (:func:`~pipeline.batch.place.check_places`: :class:`PlaceError`, exit 2, when most
-    lie outside it), unless ``ignore_place``."""
+    lie outside it), unless ``ignore_place``. A damaged table the batch reads or writes
+    stops it before any work (:class:`~pipeline.warehouse.damage.DamagedTableError`,
+    exit 2)."""
     if end_ns <= start_ns:
         raise ValueError("--to must be after --from")
+    fams = FAMILIES if families is None else tuple(family(name) for name in families)
+    require_readable(warehouse, [*(i.table for f in fams for i in f.inputs(cfg)),
+                                 *(n for f in fams for n in f.outputs),
+                                 "rejects", "batch_units", "ingest_ledger"])
     sites = [site] if site is not None else sites_in(warehouse, start_ns, end_ns)
     if not ignore_place:
         check_places(warehouse, cfg, sites, start_ns, end_ns)
@@ -94,7 +101,11 @@ def run_batch(
         out.by_site[name] = summary
         _continue(cfg, warehouse, summary, executor_kind, progress)
     with deferred_interrupts():
-        rebuild_views_file(warehouse)
+        try:
+            rebuild_views_file(warehouse)
+        except OSError as exc:  # a full disk after the commits: they stand, the file is stale
+            log.error("views file not rebuilt after the batch: %s", exc)
+            out.views_error = f"{type(exc).__name__}: {exc}"
     return out
 
 

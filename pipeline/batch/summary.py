@@ -77,6 +77,8 @@ class SitesSummary:
     asked_end_ns: int
     # chains a killed job left undone (``_continue/``), run before the window
     resumed: list[BatchSummary] = field(default_factory=list)
+    # the views file's rebuild after the commits failed (a full disk): why, else None
+    views_error: str | None = None
 
     @property
     def start_ns(self) -> int:
@@ -124,8 +126,10 @@ class SitesSummary:
 
     @property
     def exit_code(self) -> int:
-        return max((b.exit_code for b in [*self.by_site.values(), *self.resumed]),
-                   default=0)
+        """The sites' worst; :data:`EXIT_VIEWS_STALE` (3) when every window committed but
+        the views file could not be rebuilt after."""
+        code = max((b.exit_code for b in [*self.by_site.values(), *self.resumed]), default=0)
+        return EXIT_VIEWS_STALE if code == 0 and self.views_error else code
 
     def render(self) -> str:
         lines = []
@@ -136,7 +140,23 @@ class SitesSummary:
         if not self.by_site and not self.resumed:
             lines.append(f"batch window [{iso_s(self.asked_start_ns)}, "
                          f"{iso_s(self.asked_end_ns)}): no site has data in it; nothing written")
-        return "\n".join([*lines, *(b.render() for b in self.by_site.values())])
+        lines += [b.render() for b in self.by_site.values()]
+        if self.views_error:
+            lines.append(views_stale_note(self.views_error))
+        return "\n".join(lines)
+
+
+EXIT_VIEWS_STALE = 3
+"""Exit code of a job whose commits are all made but whose views file (``surveil.duckdb``)
+could not be rebuilt after them (a full disk)."""
+
+
+def views_stale_note(error: str) -> str:
+    """What a job whose commits are made says when its views rebuild failed (``error``)."""
+    return (f"the batch is committed, but the views file surveil.duckdb could not be rebuilt "
+            f"({error}): its views are stale (the tables, `surveil report` and `surveil sql` "
+            "are up to date); `surveil doctor --repair` or the next writing command rebuilds "
+            f"it (exit code {EXIT_VIEWS_STALE})")
 
 
 def iso_s(t_ns: int) -> str:

@@ -22,13 +22,16 @@ from pathlib import Path
 
 from pipeline.config import Config
 from pipeline.convert.config import import_options
+from pipeline.decode.registry import RAW_TABLES
 from pipeline.executors import Executor, UnitResult, make_executor
 from pipeline.ingest import FileManifest, IngestContext, IngestSummary, commit_file, ingest_file
 from pipeline.ingest.plan import IngestUsageError, check_sites, expand_paths, plan_units
 from pipeline.signals import deferred_interrupts
 from pipeline.tables import default_site
 from pipeline.units import iso
-from pipeline.warehouse.ledger import same_content
+from pipeline.warehouse.damage import DamagedTableError
+from pipeline.warehouse.delta import require_readable
+from pipeline.warehouse.ledger import LEDGER, same_content
 from pipeline.warehouse.location import Location, as_location
 from pipeline.warehouse.overlaps import record_overlaps, synthetic_time_channels
 from pipeline.warehouse.views import rebuild_views_file
@@ -69,6 +72,9 @@ def run_ingest(
         site=site,
     )  # fmt: skip
     check_sites(units)
+    if units:  # every file's commit replaces its rows in each: exit 2 when a log is broken
+        # (a missing data file is not read: `ingest --force` of its source replaces it)
+        require_readable(warehouse, [*RAW_TABLES, "mcap_index", LEDGER], files=False)
     ex = _executor(executor, cfg, len(units))
     summary = IngestSummary(files_total=len(units))
     if start_ns is not None:
@@ -188,6 +194,8 @@ def _handle(
             seen[m.sha256] = m.source_file
     try:
         commit_file(warehouse, m, start_ns=start_ns, end_ns=end_ns)
+    except DamagedTableError:  # every file needs the table: exit 2 naming it
+        raise
     except Exception as exc:  # the file stays re-runnable: its ledger row was not written
         summary.failed.append((m.source_file, f"commit failed: {type(exc).__name__}: {exc}"))
         return True

@@ -30,10 +30,11 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.dataset as pds
 from deltalake import DeltaTable, WriterProperties, write_deltalake
-from deltalake.exceptions import TableNotFoundError
+from deltalake.exceptions import DeltaError, TableNotFoundError
 
 from pipeline.tables import conform, empty, spec
 from pipeline.units import NS
+from pipeline.warehouse.damage import log_error, missing_error, require_local_files
 from pipeline.warehouse.location import Location, as_location
 from pipeline.warehouse.pending import pinned_versions
 
@@ -55,8 +56,16 @@ def table_location(warehouse: Path | Location, name: str) -> Location:
 
 def open_delta(table: Location, version: int | None = None) -> DeltaTable:
     """The Delta table at ``table`` (its latest version, or ``version``), through the
-    location's storage options."""
-    return DeltaTable(table.uri, version=version, storage_options=table.storage_options or None)
+    location's storage options. A log that does not read (an entry cut short, a garbage
+    next version) is :class:`~pipeline.warehouse.damage.DamagedTableError` naming the
+    table (exit 2); a missing table is deltalake's ``TableNotFoundError``."""
+    try:
+        return DeltaTable(table.uri, version=version,
+                          storage_options=table.storage_options or None)
+    except TableNotFoundError:
+        raise
+    except DeltaError as exc:
+        raise log_error(table.name, exc) from None
 
 
 def table_exists(warehouse: Path | Location, name: str) -> bool:
@@ -217,7 +226,10 @@ def read_table(
         expr = predicate if expr is None else expr & predicate
     dataset = _snapshot_dataset(delta_table, table_location(warehouse, name), spec(name).schema)
     have = set(dataset.schema.names)
-    table = dataset.to_table(columns=[c for c in target.names if c in have], filter=expr)
+    try:
+        table = dataset.to_table(columns=[c for c in target.names if c in have], filter=expr)
+    except FileNotFoundError as exc:  # (object storage: a file gone since the log listed it)
+        raise missing_error(name, [str(exc)]) from None
     for i, f in enumerate(target):  # a nullable column added to the schema after the table
         if f.name not in have:
             table = table.add_column(i, f, pa.nulls(table.num_rows, f.type))
@@ -277,8 +289,12 @@ def _snapshot_dataset(snapshot: DeltaTable, path: Location, schema: pa.Schema,
         pds.partitioning(pa.schema([schema.field(p) for p in parts]), flavor="hive")
         if parts else None
     )  # fmt: skip
-    return pds.dataset(files, schema=keep, format=fmt, partitioning=partitioning,
-                       partition_base_dir=str(path))  # fmt: skip
+    try:  # (Arrow stats every file here: a missing one is named, not a traceback)
+        return pds.dataset(files, schema=keep, format=fmt, partitioning=partitioning,
+                           partition_base_dir=str(path))  # fmt: skip
+    except FileNotFoundError:
+        require_local_files(path.name, files)
+        raise
 
 
 def _object_store_dataset(snapshot: DeltaTable, path: Location, keep: pa.Schema,
@@ -424,7 +440,22 @@ def table_snapshot(warehouse: Path, name: str) -> tuple[list[str], frozenset[str
         return [], frozenset()
     files = [unquote(u.removeprefix("file://")) for u in t.file_uris()]  # %23 -> '#'...
     # (an object store's: s3://bucket/key, unquoted alike)
+    if table_location(warehouse, name).is_local:  # DuckDB would fail on a missing one
+        require_local_files(name, files)
     return files, frozenset(f.name for f in t.schema().fields)
+
+
+def require_readable(warehouse: Path | Location, names: list[str], *, files: bool = True
+                     ) -> None:
+    """:class:`~pipeline.warehouse.damage.DamagedTableError` for the first of ``names``
+    (existing tables) whose log does not read or (locally, with ``files``) whose
+    snapshot lists a missing file: a job checks the tables it reads and writes before
+    any work, so a damaged table stops it before its first commit (~3 ms a table)."""
+    for name in dict.fromkeys(names):
+        if files:
+            table_snapshot(warehouse, name)
+        else:
+            _reader_table(warehouse, name)
 
 
 def empty_table(name: str) -> pa.Table:

@@ -419,8 +419,12 @@ def refuse_pre_sites(warehouse: Path | Location) -> None:
     if not (table / "_delta_log").is_dir():
         return
     from deltalake import DeltaTable
+    from deltalake.exceptions import DeltaError
 
-    dt = DeltaTable(table.uri, storage_options=table.storage_options or None)
+    try:
+        dt = DeltaTable(table.uri, storage_options=table.storage_options or None)
+    except DeltaError:  # a damaged ledger: the command that reads it says so (exit 2)
+        return
     names = {f.name for f in dt.schema().fields}
     if "site" not in names:
         raise UsageError(

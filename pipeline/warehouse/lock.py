@@ -70,6 +70,36 @@ def holder(warehouse: Path | Location) -> dict:
         return {}
 
 
+def held_by(warehouse: Path | Location) -> dict | None:
+    """What :func:`holder` says when a job holds the warehouse now, else None: locally a
+    non-blocking ``flock`` tried (and let go at once), on object storage the lease read
+    (held unless released or expired). For a reader that must not take the lock
+    (``surveil doctor`` without ``--repair``) yet must not call a running job's staging
+    a dead one's."""
+    loc = as_location(warehouse)
+    if not loc.is_local:
+        try:
+            doc = json.loads((loc / LOCK_FILE).read_text() or "{}")
+        except (OSError, ValueError):
+            return None
+        renewed = doc.get("renewed_at_ns", 0) / 1e9
+        expired = time.time() - renewed > doc.get("lease_s", LEASE_S)
+        return None if doc.get("released") or expired or _dead_here(doc) else doc
+    if fcntl is None:
+        return None
+    try:
+        fd = os.open(loc.path / LOCK_FILE, os.O_RDONLY)
+    except FileNotFoundError:
+        return None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return holder(warehouse) or {"pid": "?"}
+    finally:
+        os.close(fd)  # (releases a lock it got)
+    return None
+
+
 def recover(warehouse: Path | Location) -> None:
     """What a dead job left, cleaned up by the next job holding the lock: everything
     under ``<warehouse>/_staging/`` (every job that stages holds the lock, so none is

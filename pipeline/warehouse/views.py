@@ -48,6 +48,7 @@ from __future__ import annotations
 import contextlib
 import functools
 import hashlib
+import logging
 import os
 import re
 import shutil
@@ -61,9 +62,12 @@ import pyarrow as pa
 
 from pipeline.tables import column_comment, spec, table_specs
 from pipeline.warehouse.crashpoints import crash_point
+from pipeline.warehouse.damage import DamagedTableError
 from pipeline.warehouse.delta import sql_literal, table_path, table_snapshot
 from pipeline.warehouse.location import Location, as_location
 from pipeline.warehouse.pending import pinned_versions
+
+log = logging.getLogger(__name__)
 
 VIEWS_FILE = "surveil.duckdb"
 STORAGE_VERSION = "v1.0.0"  # the oldest storage format of DuckDB 1.x: every 1.x reads it
@@ -135,6 +139,17 @@ def view_sql(name: str, files: list[str], schema: str | None = None,
     return f"CREATE OR REPLACE VIEW {qualified} AS {body}"
 
 
+def _damaged_view_sql(name: str, message: str) -> str:
+    """A view of a damaged table that fails with ``message`` when a query names it: when
+    the query is bound (DuckDB 2.0 on, a deferred view), else when it runs."""
+    error = f"error({sql_literal(message)})"
+    if _DEFER_BINDING:
+        return (f"CREATE OR REPLACE VIEW {_ident(name)}{_DEFER_BINDING} AS "
+                f"SELECT * FROM read_parquet({error})")
+    return (f"CREATE OR REPLACE VIEW {_ident(name)} AS SELECT NULL AS damaged "
+            f"FROM range(1) WHERE {error} IS NULL")
+
+
 def _missing_only(s: pa.Schema, present: Collection[str] | None) -> Collection[str] | None:
     """``present`` when it lacks a column of ``s``, else None (the usual case: the view's
     text stays the same as without it)."""
@@ -155,9 +170,18 @@ _DEFER_BINDING = _defer_binding_clause(duckdb.__version__)
 
 def view_statements(warehouse: Path, names: Iterable[str] | None = None) -> dict[str, str]:
     """Table name -> its ``CREATE OR REPLACE VIEW`` over the current snapshot (all
-    canonical tables when ``names`` is None)."""
-    selected = list(names) if names is not None else list(table_specs())
-    return {name: _current_view_sql(warehouse, name) for name in selected}
+    canonical tables when ``names`` is None: then a damaged table's view fails when it is
+    queried, naming the table and ``surveil doctor``, and the other views work; a table
+    named in ``names`` must read: :class:`DamagedTableError`)."""
+    if names is not None:
+        return {name: _current_view_sql(warehouse, name) for name in names}
+    out = {}
+    for name in table_specs():
+        try:
+            out[name] = _current_view_sql(warehouse, name)
+        except DamagedTableError as exc:
+            out[name] = _damaged_view_sql(name, str(exc))
+    return out
 
 
 def _current_view_sql(warehouse: Path, name: str, schema: str | None = None,
@@ -265,8 +289,12 @@ class ViewsEngine:
         spending while the job works)."""
         new_file = (warehouse is not None and as_location(warehouse).is_local
                     and not (Path(warehouse) / VIEWS_FILE).exists())
+        # not a daemon: the interpreter waits for it at exit. A job that stops early (a
+        # damaged table: exit 2) would otherwise exit with a daemon thread still inside
+        # DuckDB, which aborts the process (SIGABRT, "terminate called after throwing an
+        # instance of ''", exit 134)
         self._warming = threading.Thread(
-            target=self._warm, args=(new_file,), name="duckdb-warm-up", daemon=True
+            target=self._warm, args=(new_file,), name="duckdb-warm-up", daemon=False
         )
         self._warming.start()
 
@@ -378,10 +406,9 @@ def _rebuild(engine: ViewsEngine, warehouse: Path | Location) -> Path | None:
                 docs_changed = _macro_comment(con) != docs_digest
                 # a view whose comment names the snapshot readers see now is up to date:
                 # only the others' statements are made (~3 ms each: the Delta log read)
-                statements = {
-                    n: _current_view_sql(warehouse, n, SNAPSHOT_SCHEMA, root=warehouse)
-                    for n in names
-                    if keys[n] is None or written.get(n, "").partition(" ")[2] != keys[n]}
+                statements = _changed_statements(
+                    warehouse, [n for n in names if keys[n] is None
+                                or written.get(n, "").partition(" ")[2] != keys[n]])
                 digests = {n: _digest(sql) + (f" {keys[n]}" if keys[n] else "")
                            for n, sql in statements.items()}
                 changed = [n for n in statements if written.get(n) != digests[n]]
@@ -424,6 +451,19 @@ def _rebuild(engine: ViewsEngine, warehouse: Path | Location) -> Path | None:
     finally:
         _remove_db_files(tmp)
     return target
+
+
+def _changed_statements(warehouse: Path, names: list[str]) -> dict[str, str]:
+    """The snapshot views of ``names`` (relative paths); a damaged table is left out, so
+    its view stays as the file had it (its last good snapshot, or typed and empty in a
+    new file) and the other tables' views are brought up to date."""
+    out = {}
+    for n in names:
+        try:
+            out[n] = _current_view_sql(warehouse, n, SNAPSHOT_SCHEMA, root=warehouse)
+        except DamagedTableError as exc:
+            log.warning("views file: %s (its view is left as it was)", exc)
+    return out
 
 
 def views_stale(warehouse: Path) -> bool:

@@ -25,6 +25,8 @@ READERS = {
     "export": ("export", *WINDOW, "--out", "OUT.mcap"),
     "calibrate": ("calibrate", *WINDOW),
     "calibrate-radars": ("calibrate-radars", *WINDOW),
+    "doctor": ("doctor",),
+    "doctor-repair": ("doctor", "--repair"),
 }
 
 
