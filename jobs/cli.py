@@ -34,6 +34,7 @@ from jobs.common import (
     checked_site,
     checked_warehouse,
     parse_duration,
+    parse_origin,
     parse_time_ns,
     refuse_pre_sites,
     require_site,
@@ -566,17 +567,10 @@ def _provenance(st: _State, tables: list[str], start: int | None, end: int | Non
 
 
 def _list_reports(dirs: tuple[Path, ...]) -> None:
-    from pipeline.reports import ReportError, list_reports, load_report
+    from pipeline.reports import report_listing
 
-    width = max((len(n) for n in list_reports(dirs)), default=20) + 2
-    for n in list_reports(dirs):
-        try:
-            r = load_report(n, dirs)
-            text = r.description
-            origin = "" if r.shipped else f"  [{r.origin}]"
-        except ReportError as exc:
-            text, origin = f"(unusable: {exc})", ""
-        click.echo(f"{n:<{width}}{text[:110]}{'...' if len(text) > 110 else ''}{origin}")
+    for line in report_listing(dirs):
+        click.echo(line)
 
 
 def _params(items: tuple[str, ...]) -> dict[str, str]:
@@ -718,7 +712,7 @@ def doctor(st: _State, repair, executor) -> None:
     recorded size, schema as schemas/ declares), the views file and dead jobs' leftovers;
     print a table of findings. Exit 0 healthy, 1 problems found (after --repair: some
     remain or a command is left to run), 2 usage error."""
-    from jobs.doctor import run_doctor
+    from pipeline.batch.doctor import run_doctor
 
     result = run_doctor(st.cfg, st.existing_warehouse, repair=repair, executor_kind=executor,
                         command=" ".join(["surveil", *sys.argv[1:]]))
@@ -957,16 +951,10 @@ def config_check(st: _State, file: str | None) -> None:
 
 def _origin(_ctx: click.Context, _param: click.Parameter, value: str | None
             ) -> tuple[float, float] | None:
-    if value is None:
-        return None
     try:
-        lat, lon = (float(x) for x in value.replace(" ", "").split(","))
-    except ValueError:
-        raise click.BadParameter(f"{value!r}: give LAT,LON in degrees, e.g. 41.297,2.083"
-                                 ) from None
-    if not (-90 <= lat <= 90 and -180 <= lon <= 180):
-        raise click.BadParameter(f"{value!r}: latitude in [-90, 90], longitude in [-180, 180]")
-    return lat, lon
+        return None if value is None else parse_origin(value)
+    except UsageError as exc:
+        raise click.BadParameter(str(exc)) from None
 
 
 @config_group.command("init")

@@ -68,3 +68,14 @@ def parse_duration(text: str) -> float:
     if not seconds > 0 or seconds == float("inf"):
         raise ValueError(f"invalid duration {text!r}: must be positive and finite")
     return seconds
+
+
+def parse_origin(text: str) -> tuple[float, float]:
+    """``LAT,LON`` in degrees (``--origin 41.297,2.083``); :class:`UsageError` otherwise."""
+    try:
+        lat, lon = (float(x) for x in text.replace(" ", "").split(","))
+    except ValueError:
+        raise UsageError(f"{text!r}: give LAT,LON in degrees, e.g. 41.297,2.083") from None
+    if not (-90 <= lat <= 90 and -180 <= lon <= 180):
+        raise UsageError(f"{text!r}: latitude in [-90, 90], longitude in [-180, 180]")
+    return lat, lon

@@ -444,3 +444,19 @@ def write_csv(reader: pa.RecordBatchReader, sink: BinaryIO) -> int:
             writer.write_batch(batch)
             rows += batch.num_rows
     return rows
+
+
+def report_listing(dirs: tuple[Path, ...]) -> list[str]:
+    """``surveil report --list``: one line per report, its name and description (and
+    where it comes from when it is not shipped); an unusable one says why."""
+    names = list_reports(dirs)
+    width = max((len(n) for n in names), default=20) + 2
+    lines = []
+    for n in names:
+        try:
+            r = load_report(n, dirs)
+            text, origin = r.description, "" if r.shipped else f"  [{r.origin}]"
+        except ReportError as exc:
+            text, origin = f"(unusable: {exc})", ""
+        lines.append(f"{n:<{width}}{text[:110]}{'...' if len(text) > 110 else ''}{origin}")
+    return lines

@@ -1,5 +1,5 @@
 """``surveil doctor``: what is damaged in a warehouse, and the repairs the warehouse can
-make itself (``jobs.doctor`` composes them with the batch that re-computes lost rows).
+make itself (``pipeline.batch.doctor`` composes them with the batch that re-computes lost rows).
 
 :func:`examine` checks every table under ``<warehouse>/tables/`` (reads only; on
 object storage too, through :class:`~pipeline.warehouse.location.Location`):
@@ -17,7 +17,7 @@ object storage too, through :class:`~pipeline.warehouse.location.Location`):
   (ingest and batch staging, rewrites), temporary views files, pending markers
   (``pipeline.warehouse.pending``: a crashed job's tables read as before it).
 
-The repairs here (``jobs.doctor`` runs them under the writer lock): :func:`restore_log`
+The repairs here (``pipeline.batch.doctor`` runs them under the writer lock): :func:`restore_log`
 moves the broken log entries aside (backed up under ``<warehouse>/_doctor/<time>/``), so
 the table reads as at its last good version; :func:`forget_files` moves data files of the
 wrong size aside and removes the references to missing ones (deltalake's FSCK,

@@ -13,7 +13,7 @@ import pyarrow.fs as pafs
 import pytest
 from deltalake import DeltaTable, write_deltalake
 
-from jobs.doctor import run_doctor
+from pipeline.batch.doctor import run_doctor
 from pipeline.decode.registry import RAW_TABLES
 from pipeline.ingest.driver import run_ingest
 from pipeline.warehouse import pending

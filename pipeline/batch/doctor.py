@@ -1,4 +1,4 @@
-"""`surveil doctor [--repair]`: find what is damaged in a warehouse, repair what can be.
+"""`surveil doctor [--repair]` with the batch: find what is damaged, repair what can be.
 
 The checks and the warehouse's own repairs are :mod:`pipeline.warehouse.doctor`; this
 composes them with the batch: under the writer lock, ``--repair`` moves broken log
