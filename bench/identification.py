@@ -10,7 +10,8 @@ Simulates the ``channel`` scenario with the demo site's fault schedule (what
 one window, which the batch's units reproduce row for row), and prints per sector: the
 shares of track time with the correct / a wrong / no MMSI for ships with and without
 AIS, under both judges, and the time to the first identification of each track that
-follows a ship with AIS. Seeded: the same figures on every run.
+follows a ship with AIS, and the test's outcomes per candidate pair (same ship or not,
+confirmed or not). Seeded: the same figures on every run.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ from pipeline.experiments.identification import (
     first_identification_delay,
     identification_shares,
     judged_points,
+    pair_outcomes,
 )
 from pipeline.families import load_config
 from pipeline.family import Window
@@ -49,6 +51,8 @@ def main() -> None:
             print(identification_shares(points, ["sector"], judge))
         print("time to the first identification (tracks following a ship with AIS)")
         print(first_identification_delay(points, ["sector"]))
+        print("candidate pairs (track, MMSI matched at least once): outcomes of the test")
+        print(pair_outcomes(points, out["identifications"]))
 
 
 if __name__ == "__main__":

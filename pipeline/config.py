@@ -87,8 +87,8 @@ class AisConfig:
     max_report_age_s: float = positive(30.0)
     sigma_position_m: float = positive(10.0)
     sigma_sog_mps: float = positive(0.3)
-    # the identity's sequential test (pipeline.maritime.identity): its history carried
-    # over a unit cut (the units' lead-in and look-ahead, pipeline.maritime.stage)
+    # the history the identity test carries over a unit cut (the units' lead-in; also
+    # their look-ahead, for the smoothed reference: pipeline.maritime.stage)
     identity_window_s: float = positive(300.0)
     # the false-identification budget alpha: the chance a pair that is not one ship is
     # confirmed; beta: the chance a ship's own AIS pair is rejected (Wald's boundaries)

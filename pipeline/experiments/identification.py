@@ -98,3 +98,24 @@ def first_identification_delay(points: pl.DataFrame, by: list[str]) -> pl.DataFr
         pl.col("delay_s").quantile(0.9, "nearest").alias("p90_s"),
         pl.col("delay_s").max().alias("max_s"),
     ).sort(by)
+
+
+def pair_outcomes(points: pl.DataFrame, identifications: pl.DataFrame) -> pl.DataFrame:
+    """The sequential test's outcomes per candidate pair (a system track and an MMSI that
+    matched it at least once): ``same_ship`` when the MMSI is that of the ship the track
+    follows in most of its points, ``confirmed`` when the track ever carried it. Counts
+    per (same_ship, confirmed): the empirical rates to set beside the test's alpha
+    (a pair of two ships confirmed) and beta (a ship's own pair never confirmed)."""
+    followed = points.filter(pl.col("followed_mmsi").is_not_null()).group_by(
+        "system_track_id", "followed_mmsi").len().sort("len", descending=True).unique(
+        "system_track_id", keep="first").select("system_track_id", "followed_mmsi")
+    carried = points.filter(pl.col("mmsi").is_not_null()).select(
+        "system_track_id", "mmsi").unique().with_columns(confirmed=pl.lit(True))
+    pairs = identifications.group_by("system_track_id", "mmsi").agg(
+        pl.len().alias("matches"))
+    return pairs.join(followed, on="system_track_id", how="left").join(
+        carried, on=["system_track_id", "mmsi"], how="left").with_columns(
+        same_ship=(pl.col("mmsi") == pl.col("followed_mmsi")).fill_null(False),
+        confirmed=pl.col("confirmed").fill_null(False)).group_by(
+        "same_ship", "confirmed").agg(pl.len().alias("pairs"),
+                                      pl.col("matches").sum()).sort("same_ship", "confirmed")
