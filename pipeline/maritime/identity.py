@@ -37,9 +37,9 @@ log-likelihood ratio
 - a match under H1 is Gaussian, N(D; 0, S) (two-radar paper eq. 10, the density whose
   exponent is the association's d^2);
   under H0 a stray AIS point is uniform over the gate, whose area is
-  pi gamma sqrt(det S): the density ratio is (gamma / 2) exp(-d^2 / 2) (the track score
-  of Sittler 1964 / Blackman & Popoli 1999, sec. 6.2, with the gate as the clutter
-  volume);
+  pi gamma sqrt(det S): the density ratio is (gamma / 2) exp(-d^2 / 2) (the
+  log-likelihood track score of Sittler 1964, as in Blackman & Popoli 1999, with the
+  gate as the clutter volume);
 - H0 is composite: m may instead be another track s' in its gate. The generalised
   likelihood ratio takes the likelier alternative, so l is at most
   (q_alt - q) / 2 with q = d^2 + ln det S of the pair and q_alt the smallest q of m
@@ -47,11 +47,12 @@ log-likelihood ratio
   give almost no evidence for either.
 
 The sum is held within Wald's boundaries B = ln(beta / (1 - alpha)),
-A = ln((1 - beta) / alpha), alpha = ``false_identification_probability`` (the budget:
-the chance a pair that is not one ship is ever confirmed from a fresh start, by Ville's
-inequality on the likelihood ratio under H0), beta = ``missed_identification_
-probability``. The track takes m when the sum reaches A and keeps it until the sum falls
-to B: it drops a confirmed MMSI on the same test (evidence e^(A-B) against it). A track
+A = ln((1 - beta) / alpha), with the budget alpha =
+``false_identification_probability`` (the chance a pair that is not one ship is ever
+confirmed from a fresh start, by Ville's inequality on the likelihood ratio under H0)
+and beta = ``missed_identification_probability``. The track takes m when the sum
+reaches A and keeps it until the sum falls to B: it drops a confirmed MMSI on the same
+test (evidence e^(A-B) against it). A track
 with several confirmed MMSIs at an epoch shows the one with the largest sum (then the
 smaller MMSI). The test is causal: a track is named from the epoch of its confirmation,
 never before.
