@@ -52,10 +52,9 @@ A = ln((1 - beta) / alpha), with the budget alpha =
 confirmed from a fresh start, by Ville's inequality on the likelihood ratio under H0)
 and beta = ``missed_identification_probability``. The track takes m when the sum
 reaches A and keeps it until the sum falls to B: it drops a confirmed MMSI on the same
-test (evidence e^(A-B) against it). A track
-with several confirmed MMSIs at an epoch shows the one with the largest sum (then the
-smaller MMSI). The test is causal: a track is named from the epoch of its confirmation,
-never before.
+test (evidence e^(A-B) against it). A track with several confirmed MMSIs at an epoch
+shows the one with the largest sum (then the smaller MMSI). The test is causal: a track
+is named from the epoch of its confirmation, never before.
 """
 
 from __future__ import annotations
