@@ -835,7 +835,9 @@ def channel_faults(st: _State, runs, first_seed, executor, fmt, out_path) -> Non
     """Seeded Monte Carlo of channel integrity (issue 22): every radar and AIS fault kind
     in a compressed channel scene, a GNSS outage and jump on the own ship; per kind the
     share detected within 3 scans / reports / fixes, the delay, fused accuracy with
-    exclusion on and off; the fault-free false-alarm share against q."""
+    exclusion on and off, the false-identification share (time of ships without AIS
+    carrying an MMSI) and the correct share of ships with AIS; the fault-free
+    false-alarm share against q."""
     from pipeline.experiments.channel_montecarlo import run_montecarlo, summarise
     from pipeline.render import format_report
 

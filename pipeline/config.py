@@ -87,8 +87,17 @@ class AisConfig:
     max_report_age_s: float = positive(30.0)
     sigma_position_m: float = positive(10.0)
     sigma_sog_mps: float = positive(0.3)
+    # the history the identity test carries over a unit cut (the units' lead-in; also
+    # their look-ahead, for the smoothed reference: pipeline.maritime.stage)
     identity_window_s: float = positive(300.0)
-    min_identity_matches: int = count(3)
+    # the false-identification budget alpha: the chance a pair that is not one ship is
+    # confirmed; beta: the chance a ship's own AIS pair is rejected (Wald's boundaries)
+    false_identification_probability: float = probability(0.001)
+    missed_identification_probability: float = probability(0.01)
+    # per epoch: the chance a ship's own AIS is assigned to its track (P_M), and that
+    # another ship's AIS is (P_S < P_M)
+    match_probability: float = probability(0.95)
+    stray_match_probability: float = probability(0.05)
 
 
 @dataclass(frozen=True)
@@ -356,6 +365,18 @@ def config_from_mapping(raw: Mapping[str, Any], source: str,
     return replace(cfg, scenario_files=("(in memory)",)) if scenario else cfg
 
 
+def _check_identity_test(doc: Document, ais: AisConfig) -> None:
+    """``[ais]``: Wald's boundaries need alpha + beta < 1; a stray match must be less
+    likely than a ship's own (else a match would be evidence against the identity)."""
+    if ais.false_identification_probability + ais.missed_identification_probability >= 1.0:
+        doc.problem(("ais", "missed_identification_probability"),
+                    "false_identification_probability + missed_identification_probability "
+                    "must be below 1")
+    if ais.stray_match_probability >= ais.match_probability:
+        doc.problem(("ais", "stray_match_probability"),
+                    f"must be below match_probability ({ais.match_probability})")
+
+
 def _read(doc: Document, families: Sequence[FamilySections]) -> Config | None:
     """The core sections, then every family's (each reports its problems to ``doc``);
     then the keys nobody read (``doc.finish``, by the caller)."""
@@ -366,6 +387,7 @@ def _read(doc: Document, families: Sequence[FamilySections]) -> Config | None:
         core = replace(core, radar_sites=tuple(
             replace(s, sigmas_default=not any(k in g for k in sigmas))
             for s, g in zip(core.radar_sites, given, strict=True)))
+        _check_identity_test(doc, core.ais)
         for i, leg in enumerate(core.fairway_legs):
             if (leg.start_lat_deg, leg.start_lon_deg) == (leg.end_lat_deg, leg.end_lon_deg):
                 doc.problem(("fairway_legs", i, "end"), "equals start (a leg needs two points)")

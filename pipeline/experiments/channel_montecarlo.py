@@ -22,7 +22,11 @@ Per injected fault (one row per affected channel: a swap is two):
   error against truth with exclusion on and off and their mean NEES (2 when the fused
   sigmas are honest), and, from the fault-free run, the RMS of the fused picture and of
   each radar alone on the same points (the best of them is the goal for a radar bias
-  jump).
+  jump);
+- identification during the fault: the share of the track time of ships without AIS
+  that carries an MMSI (false identification) and the correct share of ships with AIS,
+  judged by the ship each track follows (and by the nearest ship, as the report does;
+  ``pipeline.experiments.identification``), beside the fault-free run's.
 
 Fault-free runs give the share of decisions flagged per sensor kind (against radar_q,
 ais_q; the GNSS position test against ``gnss_q`` and the filter's gate against its 3-sigma
@@ -43,6 +47,7 @@ from pipeline.config import Config
 from pipeline.decode.ais import decode_ais_sentences
 from pipeline.decode.nmea import decode_nmea_sentences
 from pipeline.executors import make_executor
+from pipeline.experiments.identification import judged_points
 from pipeline.family import Window
 from pipeline.filters.integrity import chi2_thresholds
 from pipeline.maritime.config import ChannelFault, maritime_config, with_faults, without_faults
@@ -50,7 +55,7 @@ from pipeline.maritime.stage import stage as maritime_stage
 from pipeline.nav.config import ownship_config
 from pipeline.nav.solution import nav_window
 from pipeline.simulate import DEFAULT_START_NS
-from pipeline.simulate.channel import simulate_channel
+from pipeline.simulate.channel import ChannelScenario, simulate_channel
 from pipeline.simulate.ownship import (
     gnss_sentences,
     hdt_sentences,
@@ -106,8 +111,10 @@ class McUnit:
     start_ns: int = DEFAULT_START_NS
 
 
-def _maritime_inputs(cfg: Config, seed: int, start_ns: int, duration_s: float
-                     ) -> tuple[dict[str, pl.DataFrame], pl.DataFrame]:
+def maritime_inputs(cfg: Config, seed: int, start_ns: int, duration_s: float
+                    ) -> tuple[dict[str, pl.DataFrame], ChannelScenario]:
+    """The stage's inputs (radar_tracks, ais_reports, truth) of the channel scenario
+    simulated with ``cfg``, and the scenario (its fault and radar-track truth)."""
     sc = simulate_channel(cfg, start_ns=start_ns, duration_s=duration_s, seed=seed)
     radar = sc.radar_reports.rename(
         {"track_id": "local_track_id", "x_m": "x_site_m", "y_m": "y_site_m"}
@@ -116,8 +123,7 @@ def _maritime_inputs(cfg: Config, seed: int, start_ns: int, duration_s: float
     ais, _, _ = decode_ais_sentences([x.encode() for x in s["sentence"].to_list()],
                                      s["log_time_ns"].to_numpy(), source_file="simulated",
                                      topic="/ais/nmea")
-    return {"radar_tracks": radar, "ais_reports": pl.from_arrow(ais), "truth": sc.truth}, \
-        sc.fault_truth
+    return {"radar_tracks": radar, "ais_reports": pl.from_arrow(ais), "truth": sc.truth}, sc
 
 
 def _with_exclusion(cfg: Config, on: bool) -> Config:
@@ -133,17 +139,46 @@ def run_seed(unit: McUnit) -> dict[str, pl.DataFrame]:
     cfg = with_faults(unit.cfg, mc_faults(unit.cfg))
     duration = scene_duration_s(unit.cfg)
     window = Window(unit.start_ns, unit.start_ns + round(duration * NS))
-    inputs, truth = _maritime_inputs(cfg, unit.seed, unit.start_ns, duration)
+    inputs, sc = maritime_inputs(cfg, unit.seed, unit.start_ns, duration)
+    truth = sc.fault_truth
     on = maritime_stage(inputs, window, _with_exclusion(cfg, True))
     off = maritime_stage(inputs, window, _with_exclusion(cfg, False))
-    clean_inputs, _ = _maritime_inputs(without_faults(cfg), unit.seed, unit.start_ns, duration)
+    clean_inputs, clean_sc = maritime_inputs(without_faults(cfg), unit.seed, unit.start_ns,
+                                             duration)
     clean = maritime_stage(clean_inputs, window, _with_exclusion(cfg, True))
     rows = _fault_rows(cfg, truth, on, off, clean, inputs["ais_reports"])
+    rows = rows.hstack(_identification_rows(
+        truth, judged_points(on, sc.radar_track_truth, sc.vessels),
+        judged_points(clean, clean_sc.radar_track_truth, clean_sc.vessels)))
     fa = _false_alarms(clean["maritime_channel_health"], "sensor_kind")
     g_faults, g_fa = _gnss_seed(unit)
     seed = pl.lit(unit.seed).alias("seed")
     return {"faults": pl.concat([rows, g_faults], how="diagonal_relaxed").with_columns(seed),
             "false_alarms": pl.concat([fa, g_fa]).with_columns(seed)}
+
+
+def _identification_rows(truth: pl.DataFrame, on: pl.DataFrame, clean: pl.DataFrame
+                         ) -> pl.DataFrame:
+    """Per injected fault (rows of ``truth``): over the fault, the fused points of ships
+    without AIS and of those with AIS (judged by the ship each track follows, and by the
+    nearest ship: :mod:`pipeline.experiments.identification`), with a wrong MMSI or
+    the correct one, with exclusion on and in the fault-free run at the same time."""
+    rows = []
+    for f in truth.iter_rows(named=True):
+        row = {}
+        for run, points in (("", on), ("clean_", clean)):
+            p = points.filter(pl.col("time_ns").is_between(f["start_ns"], f["end_ns"],
+                                                           closed="left"))
+            for judge in ("followed", "nearest"):
+                ais, verdict = pl.col(f"{judge}_ais"), pl.col(f"{judge}_verdict")
+                row[f"{run}no_ais_points_{judge}"] = p.filter(~ais).height
+                row[f"{run}false_id_points_{judge}"] = p.filter(~ais & (verdict == "wrong")
+                                                                ).height
+                row[f"{run}ais_points_{judge}"] = p.filter(ais).height
+                row[f"{run}correct_points_{judge}"] = p.filter(ais & (verdict == "correct")
+                                                               ).height
+        rows.append(row)
+    return pl.DataFrame(rows)
 
 
 def _false_alarms(health: pl.DataFrame, key: str) -> pl.DataFrame:
@@ -307,11 +342,34 @@ def run_montecarlo(cfg: Config, *, seeds: range | list[int], executor: str = "pr
     return {k: pl.concat(v, how="diagonal_relaxed") for k, v in parts.items()}
 
 
+def _identification_shares(f: pl.DataFrame) -> list[pl.Expr]:
+    """Pooled over the runs of a fault kind, during the fault: the share of the track
+    time of ships without AIS carrying an MMSI (``false_id_share``; judged by the ship
+    each track follows; ``_nearest``: by the nearest ship, as
+    ``identification_by_sector``), the fault-free run's at the same time
+    (``clean_false_id_share``), and the correct share of ships with AIS."""
+    if "false_id_points_followed" not in f.columns:  # GNSS rows only
+        return []
+
+    def share(num: str, den: str) -> pl.Expr:
+        return pl.col(num).sum() / pl.col(den).sum()
+
+    return [
+        share("false_id_points_followed", "no_ais_points_followed").alias("false_id_share"),
+        share("false_id_points_nearest", "no_ais_points_nearest").alias(
+            "false_id_share_nearest"),
+        share("clean_false_id_points_followed", "clean_no_ais_points_followed").alias(
+            "clean_false_id_share"),
+        share("correct_points_followed", "ais_points_followed").alias("ais_correct_share"),
+    ]
+
+
 def summarise(res: dict[str, pl.DataFrame]) -> pl.DataFrame:
     """One row per fault kind: channels faulted (runs), share detected within 3 scans /
     reports / fixes, share detected during the fault, median and worst delay, fused RMS
     during the fault (median over runs) with exclusion on and off, fault-free fused and
-    best single radar; then one row per sensor kind of the fault-free false alarms."""
+    best single radar, the false-identification shares (:func:`_identification_shares`);
+    then one row per sensor kind of the fault-free false alarms."""
     f = res["faults"]
     faults = f.group_by("kind", "sensor_kind").agg(
         pl.len().alias("runs"),
@@ -328,6 +386,7 @@ def summarise(res: dict[str, pl.DataFrame]) -> pl.DataFrame:
         pl.col("fused_nees_off").median().alias("fused_nees_off"),
         (pl.col("fused_rms_on_m") <= pl.col("clean_best_radar_rms_m")).mean().alias(
             "share_on_le_best_radar"),
+        *_identification_shares(f),
     ).with_columns(pl.lit(None, pl.Float64).alias("false_alarm_share"),
                    pl.lit(None, pl.Float64).alias("q"))
     fa = res["false_alarms"].group_by("sensor_kind").agg(

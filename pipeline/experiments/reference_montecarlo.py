@@ -29,7 +29,7 @@ import polars as pl
 from pipeline.airfield.stage import airfield_stage
 from pipeline.config import Config
 from pipeline.executors import make_executor
-from pipeline.experiments.channel_montecarlo import _maritime_inputs
+from pipeline.experiments.channel_montecarlo import maritime_inputs
 from pipeline.family import Window
 from pipeline.maritime.config import without_faults
 from pipeline.maritime.stage import stage as maritime_stage
@@ -75,7 +75,7 @@ def _report(con: duckdb.DuckDBPyConnection, name: str, w: Window, cfg: Config) -
 def _maritime(unit: McUnit) -> list[dict]:
     cfg = without_faults(unit.cfg) if unit.clean else unit.cfg
     w = Window(unit.start_ns, unit.start_ns + round(unit.duration_s * NS))
-    inputs, _ = _maritime_inputs(cfg, unit.seed, unit.start_ns, unit.duration_s)
+    inputs, _ = maritime_inputs(cfg, unit.seed, unit.start_ns, unit.duration_s)
     out = {}
     for kind, tables in (("truth", inputs),
                          ("reference", {k: v for k, v in inputs.items() if k != "truth"})):

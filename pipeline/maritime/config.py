@@ -209,15 +209,16 @@ class ChannelIntegrityConfig:
       sector it does not see, is out of service there, not evidence against every
       transponder in its range (issue 35). At most the unit's lead-in (``unit_settle_s +
       identity_window_s``) for results that do not depend on where units are cut;
-    - ``unit_settle_s``: how long a batch work unit tracks before its window (besides the
-      identity vote's window) so that the pairings, the exclusions and the AIS reference
-      tracks enter the window as they would in one pass: the batch's results then do not
-      depend on where its units are cut, unless a channel fault's effects outlast it
+    - ``unit_settle_s``: how long a batch work unit tracks before its window (besides
+      the identity test's ``identity_window_s``) so that the pairings, the exclusions and
+      the AIS reference tracks enter the window as they would in one pass: the batch's
+      results then do not depend on where its units are cut, unless a channel fault's
+      effects outlast it
       (``pipeline.maritime.stage``; tests/maritime/test_unit_seams.py cuts units inside
       five faults). Each unit tracks ``unit_settle_s + 2 identity_window_s`` more than
       its window: the price of that independence. 0: no overlap but the minute the
       stitch compares (faster, ~3x on a regional day's dense units; the state, the
-      identity votes and SIAP's continuity then start afresh at every unit seam)."""
+      identity tests and SIAP's continuity then start afresh at every unit seam)."""
 
     radar_q: float = probability(0.001)
     ais_q: float = probability(0.01)

@@ -1,4 +1,5 @@
-"""AIS identification of fused system tracks: gated AIS-to-track matches and an MMSI vote.
+"""AIS identification of fused system tracks: gated AIS-to-track matches, then a
+sequential test that confirms (and withdraws) each track's MMSI.
 
 Per synchronised epoch (the same test as track-to-track association, two-radar
 identification paper eq. 7-16 with AIS as the second "radar"):
@@ -12,21 +13,59 @@ identification paper eq. 7-16 with AIS as the second "radar"):
 
    (GNSS position sigma_position_m, plus the along-track effect of the SOG error; COG
    error and AIS latency are ignored). A report without SOG or COG is not extrapolated.
-2. gate: d^2 = D^T (P_fused + P_AIS)^-1 D < chi2.ppf(gate_probability, 2);
+2. gate: d^2 = D^T S^-1 D < gamma = chi2.ppf(gate_probability, 2), S = P_fused + P_AIS
+   (the exponent of two-radar paper eq. 10);
 3. one-to-one per epoch: least summed d^2 (``linear_sum_assignment``, gate as the cost
-   of leaving a track unmatched).
+   of leaving a track unmatched; two-radar paper eq. 16).
 
-Identity of a fused point (track s, time t): the MMSI with the most matches on track s
-within [t - identity_window_s, t + identity_window_s]; ties go to the smaller summed
-d^2 (then the smaller MMSI); null when the track has no match in the window.
+**Confirmed identity** (:func:`confirmed_identity`). Every (track s, MMSI m) pair that
+matched at least once is a hypothesis H1 "AIS target m is ship s" against H0 "m is
+another ship, or none": Wald's (1945) sequential probability ratio test
+(:mod:`pipeline.filters.sequential`) on the epochs where both exist, with per-epoch
+log-likelihood ratio
+
+.. math::
+    l = \\begin{cases}
+      \\min\\bigl(\\ln\\frac{P_M}{P_S} + \\ln\\frac{\\gamma}{2} - \\frac{d^2}{2},\\;
+                 \\frac{q_{alt} - q}{2}\\bigr) & \\text{m assigned to s (d}^2\\text{)}\\\\
+      \\ln\\frac{1 - P_M}{1 - P_S} & \\text{m reported, not assigned to s}\\\\
+      0 & \\text{no AIS picture of m at the epoch}
+    \\end{cases}
+
+- P_M = ``match_probability``: the chance a ship's own AIS is assigned to its track at
+  an epoch; P_S = ``stray_match_probability``: the chance another ship's AIS is;
+- a match under H1 is Gaussian, N(D; 0, S) (two-radar paper eq. 10, the density whose
+  exponent is the association's d^2);
+  under H0 a stray AIS point is uniform over the gate, whose area is
+  pi gamma sqrt(det S): the density ratio is (gamma / 2) exp(-d^2 / 2) (the
+  log-likelihood track score of Sittler 1964, as in Blackman & Popoli 1999, with the
+  gate as the clutter volume);
+- H0 is composite: m may instead be another track s' in its gate. The generalised
+  likelihood ratio takes the likelier alternative, so l is at most
+  (q_alt - q) / 2 with q = d^2 + ln det S of the pair and q_alt the smallest q of m
+  with any other track at the epoch: two tracks a few metres apart, both in m's gate,
+  give almost no evidence for either.
+
+The sum is held within Wald's boundaries B = ln(beta / (1 - alpha)),
+A = ln((1 - beta) / alpha), with the budget alpha =
+``false_identification_probability`` (the chance a pair that is not one ship is ever
+confirmed from a fresh start, by Ville's inequality on the likelihood ratio under H0)
+and beta = ``missed_identification_probability``. The track takes m when the sum
+reaches A and keeps it until the sum falls to B: it drops a confirmed MMSI on the same
+test (evidence e^(A-B) against it). A track with several confirmed MMSIs at an epoch
+shows the one with the largest sum (then the smaller MMSI). The test is causal: a track
+is named from the epoch of its confirmation, never before.
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 import polars as pl
 
 from pipeline.config import AisConfig, RegionConfig
+from pipeline.filters.sequential import held_cumsum, held_decision, wald_boundaries
 from pipeline.frames import geodetic_to_enu
 from pipeline.geometry import position_covariance
 from pipeline.maritime.associate import assign, assign_grouped, gate_threshold
@@ -100,37 +139,39 @@ def identify(
     cfg: AisConfig,
     region: RegionConfig,
 ) -> tuple[pl.DataFrame, pl.DataFrame]:
-    """Match AIS reports to fused tracks and vote each fused point's identity.
+    """Match AIS reports to fused tracks and give each fused point its confirmed identity.
 
     Consumes system_tracks: time_ns, system_track_id, x_enu_m, y_enu_m, sigma_x_m,
     sigma_y_m, cov_xy_m2 (or P_xx, P_yy, P_xy); ais_reports as in :func:`ais_at_epochs`.
 
     Returns ``(identifications, system_tracks)``: identifications rows (time_ns,
     system_track_id, mmsi, ais_time_ns, mahalanobis_d2), and system_tracks with an
-    ``mmsi`` column (int64, null when no identity).
+    ``mmsi`` column (int64, null when no identity is confirmed).
     """
     epochs = system_tracks["time_ns"].unique().sort().to_numpy()
     ais = ais_at_epochs(ais_reports, epochs, cfg=cfg, region=region)
     tracks = system_tracks.sort("time_ns", "system_track_id")
-    matches = _match(tracks, ais, gate_threshold(cfg.gate_probability))
-    mmsi = vote_identity_rows(
-        tracks["time_ns"].to_numpy(),
-        tracks["system_track_id"].to_numpy(),
-        matches,
-        cfg.identity_window_s,
-        cfg.min_identity_matches,
-    )
+    gate = gate_threshold(cfg.gate_probability)
+    pairs = _gated_pairs(tracks, ais, gate)
+    matches, rival = _assign(tracks, ais, pairs, gate)
+    mmsi = confirmed_identity(tracks, ais, matches.with_columns(rival_llr=rival), cfg, gate)
     out = tracks.drop("mmsi", strict=False).with_columns(mmsi)
     return matches, out
 
 
 def _match(tracks: pl.DataFrame, ais: pl.DataFrame, gate: float) -> pl.DataFrame:
-    """One-to-one gated matches per epoch, vectorised over all epochs: the AIS points
-    that can pass the gate are found by a grid join (``pipeline.spatial``; |D|^2 <=
-    d^2 lambda_max(P_t + P_a) bounds the distance of a gated pair), their d^2 computed
-    pair by pair, then :func:`~pipeline.maritime.associate.assign_grouped` makes the
-    assignment of every epoch (lone pairs at once, a linear_sum_assignment only where
-    gates overlap). Same matches as :func:`_match_reference` (dense matrix per epoch)."""
+    """One-to-one gated matches per epoch, vectorised over all epochs (the same matches
+    as :func:`_match_reference`, a dense matrix per epoch)."""
+    return _assign(tracks, ais, _gated_pairs(tracks, ais, gate), gate)[0]
+
+
+def _gated_pairs(tracks: pl.DataFrame, ais: pl.DataFrame, gate: float
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Every (track row i, AIS row j) of one epoch with d^2 < gate: (i, j, d^2, ln det S).
+
+    The AIS points that can pass the gate are found by a grid join (``pipeline.spatial``;
+    |D|^2 <= d^2 lambda_max(P_t + P_a) bounds the distance of a gated pair), their d^2
+    computed pair by pair."""
     tt, at = tracks["time_ns"].to_numpy(), ais["time_ns"].to_numpy()
     epochs = np.intersect1d(tt, at)
     tP, aP = position_covariance(tracks), position_covariance(ais)
@@ -147,13 +188,43 @@ def _match(tracks: pl.DataFrame, ais: pl.DataFrame, gate: float) -> pl.DataFrame
     dx = tx[i] - ax[j]
     dy = ty[i] - ay[j]
     sxx, syy, sxy = (tP[k][i] + aP[k][j] for k in range(3))
-    d2 = (syy * dx * dx - 2.0 * sxy * dx * dy + sxx * dy * dy) / (sxx * syy - sxy * sxy)
+    det = sxx * syy - sxy * sxy
+    d2 = (syy * dx * dx - 2.0 * sxy * dx * dy + sxx * dy * dy) / det
     keep = d2 < gate
-    i, j, d2 = i[keep], j[keep], d2[keep]
-    group = np.searchsorted(epochs, tt)
-    r, c = assign_grouped(i, j, d2, np.full(tt.size, gate), group, at.size)
+    return i[keep], j[keep], d2[keep], np.log(det[keep])
+
+
+def _assign(tracks: pl.DataFrame, ais: pl.DataFrame,
+            pairs: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray], gate: float
+            ) -> tuple[pl.DataFrame, np.ndarray]:
+    """The matches of every epoch from its gated pairs
+    (:func:`~pipeline.maritime.associate.assign_grouped`: lone pairs at once, a
+    linear_sum_assignment only where gates overlap), and per match the rival term of the
+    identity test, (q_alt - q) / 2 with q = d^2 + ln det S (+inf: no other track in the
+    AIS point's gate)."""
+    i, j, d2, logdet = pairs
+    tt = tracks["time_ns"].to_numpy()
+    group = np.searchsorted(np.unique(tt), tt)
+    r, c = assign_grouped(i, j, d2, np.full(tt.size, gate), group, ais.height)
     pair_d2 = _pair_lookup(i, j, d2, r, c)
-    return _matches_frame(tracks, ais, r, c, pair_d2)
+    return _matches_frame(tracks, ais, r, c, pair_d2), _rival_llr(i, j, d2 + logdet, r, c)
+
+
+def _rival_llr(i: np.ndarray, j: np.ndarray, q: np.ndarray, r: np.ndarray, c: np.ndarray
+               ) -> np.ndarray:
+    """(q of AIS row c with its best other track - q of the match (r, c)) / 2 per match."""
+    if r.size == 0:
+        return np.empty(0)
+    order = np.lexsort((q, j))  # per AIS row, its gated tracks from the likeliest
+    i, j, q = i[order], j[order], q[order]
+    first = np.searchsorted(j, c, "left")
+    n_gated = np.searchsorted(j, c, "right") - first
+    best_is_match = i[first] == r
+    second = np.where(n_gated > 1, first + 1, first)
+    q_best, q_second = q[first], q[second]
+    q_match = np.where(best_is_match, q_best, _pair_lookup(i, j, q, r, c))
+    q_alt = np.where(best_is_match, np.where(n_gated > 1, q_second, np.inf), q_best)
+    return 0.5 * (q_alt - q_match)
 
 
 def _in_epochs(t: np.ndarray, epochs: np.ndarray) -> np.ndarray:
@@ -234,172 +305,58 @@ def _match_reference(tracks: pl.DataFrame, ais: pl.DataFrame, gate: float) -> pl
                           np.concatenate(d2_all) if d2_all else np.empty(0))
 
 
-def vote_identity_rows(
-    t: np.ndarray, sid: np.ndarray, matches: pl.DataFrame, window_s: float,
-    min_matches: int = 3,
-) -> pl.Series:
-    """:func:`vote_identity` for points (t, sid) sorted by (t, sid), as an ``mmsi``
-    Series aligned with the points (null: no identity); the same votes, on arrays.
+def identity_evidence(tracks: pl.DataFrame, ais: pl.DataFrame, matches: pl.DataFrame,
+                      cfg: AisConfig, gate: float) -> pl.DataFrame:
+    """The per-epoch log-likelihood ratio ``llr`` of every candidate pair (module
+    docstring): one row per point of a track and MMSI that matched it at least once,
+    sorted by (system_track_id, mmsi, time_ns).
 
-    Counts and d^2 sums of each (track, MMSI) run of matches are read at t + W and just
-    before t - W by ``searchsorted`` on one integer key (run rank, time offset) instead of
-    two ``join_asof``; each run's d^2 is summed in order, as polars' ``cum_sum``."""
-    n = t.size
-    out = pl.Series("mmsi", np.zeros(n, np.int64)).set(pl.Series(np.ones(n, bool)), None)
-    if n == 0 or matches.height == 0:
-        return out
-    w = round(window_s * NS)
-    mt = matches["time_ns"].to_numpy()
-    ms = matches["system_track_id"].to_numpy()
-    mm = matches["mmsi"].to_numpy()
-    md2 = matches["mahalanobis_d2"].to_numpy()
-    base = int(min(mt.min(), t.min())) - w - 2
-    span = int(max(mt.max(), t.max())) + w + 2 - base
-    bits = span.bit_length()
-    # runs of (track, MMSI) in time order; per run: counts and d^2 sums in order
-    o = np.lexsort((mt, mm, ms))
-    rs, rm, rt, rd2 = ms[o], mm[o], mt[o], md2[o]
-    new = np.r_[True, (rs[1:] != rs[:-1]) | (rm[1:] != rm[:-1])]
-    starts = np.flatnonzero(new)
-    if starts.size >= 1 << (62 - bits):  # pragma: no cover - keys would overflow
-        return _vote_via_frames(t, sid, matches, window_s, min_matches)
-    run = np.cumsum(new) - 1
-    size = np.diff(np.r_[starts, rs.size])
-    cum = np.empty(rs.size)
-    cum[starts] = rd2[starts]
-    for k in range(1, int(size.max())):
-        idx = starts[size > k] + k
-        cum[idx] = cum[idx - 1] + rd2[idx]
-    run_key = (run << bits) + (rt - base)
-    # queries: each point x each MMSI matched on its track
-    run_sid = rs[starts]
-    lo = np.searchsorted(run_sid, sid, "left")
-    hi = np.searchsorted(run_sid, sid, "right")
-    p, r = expand_ranges(lo, hi)
-    if p.size == 0:
-        return out
-    tp = t[p]
-
-    def upto(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(matches of run r with time <= q, their d^2 sum)."""
-        k = np.searchsorted(run_key, (r << bits) + (q - base), "right")
-        cnt = k - starts[r]
-        d2 = np.where(cnt > 0, cum[np.maximum(k - 1, 0)], 0.0)
-        return cnt, d2
-
-    n_hi, d_hi = upto(tp + w)
-    n_lo, d_lo = upto(tp - w - 1)
-    count = n_hi - n_lo
-    d2sum = d_hi - d_lo
-    # each MMSI's matches on any track within the window
-    om = np.lexsort((mt, mm))
-    mm_sorted, mt_sorted = mm[om], mt[om]
-    m_new = np.r_[True, mm_sorted[1:] != mm_sorted[:-1]]
-    m_rank = np.cumsum(m_new) - 1
-    m_key = (m_rank << bits) + (mt_sorted - base)
-    mmsi_of_run = rm[starts][r]
-    qr = np.searchsorted(mm_sorted[m_new], mmsi_of_run)
-    total = (np.searchsorted(m_key, (qr << bits) + (tp + w - base), "right")
-             - np.searchsorted(m_key, (qr << bits) + (tp - w - 1 - base), "right"))
-    ok = (count >= min_matches) & (2 * count > total) & (count > 0)
-    p, count, d2sum, mmsi_c = p[ok], count[ok], d2sum[ok], mmsi_of_run[ok]
-    best = np.lexsort((mmsi_c, d2sum, -count, p))
-    first = best[np.r_[True, p[best][1:] != p[best][:-1]]] if best.size else best
-    values = np.zeros(n, np.int64)
-    has = np.zeros(n, bool)
-    values[p[first]] = mmsi_c[first]
-    has[p[first]] = True
-    return pl.Series("mmsi", values).set(pl.Series(~has), None)
-
-
-def _vote_via_frames(t: np.ndarray, sid: np.ndarray, matches: pl.DataFrame, window_s: float,
-                     min_matches: int) -> pl.Series:
-    points = pl.DataFrame({"time_ns": t, "system_track_id": sid})
-    voted = vote_identity(points, matches, window_s, min_matches)
-    return points.join(voted, on=["time_ns", "system_track_id"], how="left")["mmsi"]
-
-
-def vote_identity(
-    points: pl.DataFrame, matches: pl.DataFrame, window_s: float, min_matches: int = 3
-) -> pl.DataFrame:
-    """Identity of each (time_ns, system_track_id) point: most matches within +-window_s
-    on the same track, ties -> smaller summed d^2, then smaller MMSI.
-
-    Mutual support: an MMSI is a candidate only when this track holds the majority of
-    that MMSI's matches in the window (it is the MMSI's main track) and at least
-    ``min_matches`` of them; otherwise a ship without AIS sailing in the lane
-    of an AIS ship inherits its MMSI from one stray gated match.
-
-    Vectorised: cumulative match counts / d^2 per (track, MMSI) are read at t + W and
-    just before t - W with two ``join_asof`` calls. Returns time_ns, system_track_id,
-    mmsi for the points that have an identity.
-    """
-    w = round(window_s * NS)
-    key = ["system_track_id", "mmsi"]
-    cum = (
-        matches.sort(*key, "time_ns")
-        .with_columns(
-            pl.int_range(1, pl.len() + 1).over(key).alias("n"),
-            pl.col("mahalanobis_d2").cum_sum().over(key).alias("d2"),
-        )
-        .select(*key, "time_ns", "n", "d2")
-        .sort("time_ns")
-    )
-    queries = points.join(matches.select(key).unique(), on="system_track_id", how="inner")
-
-    def cum_at(t: pl.Expr) -> pl.DataFrame:
-        q = queries.with_columns(t.alias("_t")).sort("_t")
-        return q.join_asof(
-            cum.rename({"time_ns": "_t"}),
-            on="_t",
-            by=key,
-            strategy="backward",
-            check_sortedness=False,
-        ).select("time_ns", *key, pl.col("n").fill_null(0), pl.col("d2").fill_null(0.0))
-
-    hi = cum_at(pl.col("time_ns") + w)
-    lo = cum_at(pl.col("time_ns") - w - 1)
-    counts = hi.join(lo, on=["time_ns", *key], suffix="_lo").select(
-        "time_ns",
-        *key,
-        (pl.col("n") - pl.col("n_lo")).alias("count"),
-        (pl.col("d2") - pl.col("d2_lo")).alias("d2sum"),
-    )
-    totals = _mmsi_totals(counts.select("time_ns", "mmsi").unique(), matches, w)
-    counts = counts.join(totals, on=["time_ns", "mmsi"], how="left").filter(
-        (pl.col("count") >= min_matches) & (2 * pl.col("count") > pl.col("total"))
-    )
+    Consumes tracks: time_ns, system_track_id; ais (the AIS picture, :func:`ais_at_epochs`):
+    time_ns, mmsi; matches: time_ns, system_track_id, mmsi, mahalanobis_d2, rival_llr."""
+    key = ["time_ns", "system_track_id", "mmsi"]
+    match_llr = (math.log(cfg.match_probability / cfg.stray_match_probability)
+                 + math.log(gate / 2.0))
+    miss_llr = math.log((1.0 - cfg.match_probability) / (1.0 - cfg.stray_match_probability))
+    candidates = matches.select("system_track_id", "mmsi").unique()
+    reported = ais.select("time_ns", "mmsi").unique().with_columns(reported=pl.lit(True))
+    matched = matches.select(*key, llr_match=pl.min_horizontal(
+        match_llr - 0.5 * pl.col("mahalanobis_d2"), pl.col("rival_llr")))
     return (
-        counts.filter(pl.col("count") > 0)
-        .sort(
-            ["time_ns", "system_track_id", "count", "d2sum", "mmsi"],
-            descending=[False, False, True, False, False],
-        )
-        .unique(["time_ns", "system_track_id"], keep="first", maintain_order=True)
-        .select("time_ns", "system_track_id", "mmsi")
+        tracks.select("time_ns", "system_track_id")
+        .join(candidates, on="system_track_id")
+        .join(reported, on=["time_ns", "mmsi"], how="left")
+        .join(matched, on=key, how="left")
+        .select(*key, llr=pl.when(pl.col("llr_match").is_not_null()).then("llr_match")
+                .when(pl.col("reported")).then(pl.lit(miss_llr))
+                .otherwise(pl.lit(0.0)))
+        .sort("system_track_id", "mmsi", "time_ns")
     )
 
 
-def _mmsi_totals(queries: pl.DataFrame, matches: pl.DataFrame, w: int) -> pl.DataFrame:
-    """Matches of each MMSI to any track within +-w ns of each queried (time_ns, mmsi)."""
-    cum = (
-        matches.sort("mmsi", "time_ns")
-        .with_columns(pl.int_range(1, pl.len() + 1).over("mmsi").alias("n"))
-        .select("mmsi", "time_ns", "n")
-        .sort("time_ns")
-    )
+def confirmed_identity(tracks: pl.DataFrame, ais: pl.DataFrame, matches: pl.DataFrame,
+                       cfg: AisConfig, gate: float) -> pl.Series:
+    """The confirmed MMSI of each point of ``tracks`` (sorted by time_ns,
+    system_track_id), as an ``mmsi`` Series aligned with it (null: none confirmed).
 
-    def at(t: pl.Expr) -> pl.DataFrame:
-        q = queries.with_columns(t.alias("_t")).sort("_t")
-        return q.join_asof(
-            cum.rename({"time_ns": "_t"}),
-            on="_t",
-            by="mmsi",
-            strategy="backward",
-            check_sortedness=False,
-        ).select("time_ns", "mmsi", pl.col("n").fill_null(0))
-
-    hi, lo = at(pl.col("time_ns") + w), at(pl.col("time_ns") - w - 1)
-    return hi.join(lo, on=["time_ns", "mmsi"], suffix="_lo").select(
-        "time_ns", "mmsi", (pl.col("n") - pl.col("n_lo")).alias("total")
+    Each pair's test is :func:`~pipeline.filters.sequential.held_cumsum` over its rows of
+    :func:`identity_evidence`; all pairs in one scan (segments), no loop over tracks."""
+    lo, hi = wald_boundaries(cfg.false_identification_probability,
+                             cfg.missed_identification_probability)
+    ev = identity_evidence(tracks, ais, matches, cfg, gate)
+    sid, mmsi = ev["system_track_id"].to_numpy(), ev["mmsi"].to_numpy()
+    start = np.r_[True, (sid[1:] != sid[:-1]) | (mmsi[1:] != mmsi[:-1])] if ev.height \
+        else np.empty(0, bool)
+    s = held_cumsum(ev["llr"].to_numpy(), start, lo, hi)
+    confirmed = held_decision(s, start, lo, hi)
+    # several confirmed MMSIs on a track: the largest sum (rounded: the scan's sums
+    # differ in the last bits with the rows before them), then the smaller MMSI
+    best = (
+        ev.select("time_ns", "system_track_id", "mmsi")
+        .with_columns(score=np.round(s, 6))
+        .filter(pl.Series(confirmed))
+        .sort("score", "mmsi", descending=[True, False])
+        .unique(["time_ns", "system_track_id"], keep="first")
     )
+    return tracks.select("time_ns", "system_track_id").join(
+        best.select("time_ns", "system_track_id", "mmsi"),
+        on=["time_ns", "system_track_id"], how="left", maintain_order="left")["mmsi"]

@@ -10,11 +10,11 @@ against truth (or AIS), SIAP per sector and cross-track error per leg.
 
 **Continuity across work units.** The batch cuts a window into units that run
 independently; the steps carry state from epoch to epoch (the association's pairings,
-the integrity's exclusions and reference tracks) and the identity of a fused point is a
-vote over +-``identity_window_s`` around it. So a unit runs the tracking steps over its
-window widened by :func:`continuity_margins_s` (a lead-in that lets that state settle
-and gathers the votes before the unit, a look-ahead for the votes after it) and keeps
-the epochs of its own window; the system track ids of the lead-in are handed to
+the integrity's exclusions and reference tracks, the identity test's held sums) and the
+reconstructed AIS reference is smoothed over the reports on both sides of an epoch. So
+a unit runs the tracking steps over its window widened by :func:`continuity_margins_s`
+(a lead-in that lets that state settle, a look-ahead for the smoother) and keeps the
+epochs of its own window; the system track ids of the lead-in are handed to
 :mod:`pipeline.maritime.stitch`, which continues the ids of the unit before. Results
 then do not depend on where units are cut (tests/jobs/test_unit_cuts.py).
 """
@@ -61,10 +61,11 @@ OUTPUTS = DERIVED_TABLES + AUDIT_TABLES + INTEGRITY_TABLES
 
 
 def continuity_margins_s(cfg: Config) -> tuple[float, float]:
-    """(lead-in, look-ahead) a unit tracks beyond its window, s: the identity vote's
-    window on either side, plus ``[channel_integrity] unit_settle_s`` before (at least
-    the seam the stitch compares, ``SEAM_S``); with ``unit_settle_s = 0`` that seam
-    alone (no continuity but the ids')."""
+    """(lead-in, look-ahead) a unit tracks beyond its window, s: ``[ais]
+    identity_window_s`` on either side (the identity test's history before; the
+    smoothed reference's reports after), plus ``[channel_integrity] unit_settle_s``
+    before (at least the seam the stitch compares, ``SEAM_S``); with ``unit_settle_s =
+    0`` that seam alone (no continuity but the ids')."""
     settle_s = maritime_config(cfg).integrity.unit_settle_s
     if settle_s == 0:
         return SEAM_S, 0.0

@@ -197,7 +197,7 @@ def region_config(layout: RegionLayout) -> dict:
                         "max_speed_difference_mps": 2.5, "course_gate_min_speed_mps": 1.0,
                         "track_timeout_s": 30.0},
         "ais": {"gate_probability": 0.999, "max_report_age_s": 30.0, "sigma_position_m": 10.0,
-                "sigma_sog_mps": 0.3, "identity_window_s": 300.0, "min_identity_matches": 3},
+                "sigma_sog_mps": 0.3, "identity_window_s": 300.0},
         "validation": {"max_speed_mps": 40.0, "max_range_m": max(60000.0, max_range * 1.5)},
         "fairway_legs": [
             {"leg_id": leg_id, "start": list(layout.lat_lon(*a)), "end": list(layout.lat_lon(*b))}

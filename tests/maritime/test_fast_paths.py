@@ -208,23 +208,6 @@ def test_stage_siap_pairs_and_cross_track_equal_references() -> None:
     assert_frame_equal(got.drop("_i", "_j"), want, check_exact=True, check_dtypes=False)
 
 
-@pytest.mark.parametrize(("window_s", "min_matches"), [(300.0, 3), (20.0, 1), (60.0, 2)])
-def test_vote_identity_rows_equal_join_asof_reference(window_s: float, min_matches: int) -> None:
-    tracks, ais = _crowd(7, n_epochs=40, n=60)
-    # a few MMSIs on two tracks, two MMSIs on one track: contested votes
-    ais = ais.with_columns(pl.when(pl.col("mmsi") % 7 == 0).then(pl.col("mmsi") + 1)
-                           .otherwise(pl.col("mmsi")).alias("mmsi"))
-    matches = identity._match(tracks, ais, gate_threshold(0.9999))
-    points = tracks.select("time_ns", "system_track_id")
-    ref = points.join(identity.vote_identity(points, matches, window_s, min_matches),
-                      on=["time_ns", "system_track_id"], how="left")["mmsi"]
-    got = identity.vote_identity_rows(points["time_ns"].to_numpy(),
-                                      points["system_track_id"].to_numpy(), matches,
-                                      window_s, min_matches)
-    assert ref.is_not_null().sum() > 100
-    assert got.to_list() == ref.to_list()
-
-
 @pytest.mark.parametrize("seed", range(4))
 def test_nearest_slots_equal_dense_reference_in_the_gate(seed: int) -> None:
     """Grid-gated AIS -> slot candidates: every gated candidate (d2 < gate) as the dense

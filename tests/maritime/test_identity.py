@@ -1,4 +1,5 @@
-"""AIS identification: AIS picture at epochs, gated one-to-one matches, the MMSI vote."""
+"""AIS identification: AIS picture at epochs, gated one-to-one matches, the confirmed
+identity (Wald's sequential test per track and MMSI)."""
 
 from __future__ import annotations
 
@@ -8,15 +9,11 @@ import pytest
 from batch_builders import NS, T0_NS, Ship, ais_reports, lane_ships, run_chain, vessel_of
 
 from pipeline import frames
-from pipeline.config import AisConfig, Config
+from pipeline.config import AisConfig, Config, ConfigError
 from pipeline.families import load_config
+from pipeline.filters.sequential import held_cumsum_reference, wald_boundaries
 from pipeline.maritime.associate import gate_threshold
-from pipeline.maritime.identity import (
-    IDENTIFICATION_COLUMNS,
-    ais_at_epochs,
-    identify,
-    vote_identity,
-)
+from pipeline.maritime.identity import IDENTIFICATION_COLUMNS, ais_at_epochs, identify
 
 
 @pytest.fixture(scope="module")
@@ -30,13 +27,14 @@ def chain(cfg):
     return run_chain(ships, cfg, seed=72, duration_s=600.0)
 
 
-def _ais(cfg: Config, rows: list[tuple[float, float, float, float | None, float | None]]):
-    """(t_s, x_m, y_m, sog, cog) rows of MMSI 1 as ais_reports."""
+def _ais(cfg: Config, rows: list[tuple[float, float, float, float | None, float | None]],
+         mmsi: int = 1):
+    """(t_s, x_m, y_m, sog, cog) rows of ``mmsi`` as ais_reports."""
     t, x, y, sog, cog = zip(*rows, strict=True)
     lat, lon = frames.enu_to_geodetic(np.array(x), np.array(y), cfg.region.origin_lat_deg,
                                       cfg.region.origin_lon_deg)
     return pl.DataFrame({
-        "time_ns": [T0_NS + int(v * NS) for v in t], "mmsi": 1, "lat_deg": lat,
+        "time_ns": [T0_NS + int(v * NS) for v in t], "mmsi": mmsi, "lat_deg": lat,
         "lon_deg": lon, "sog_mps": list(sog), "cog_rad": list(cog),
     }, schema_overrides={"mmsi": pl.Int64, "sog_mps": pl.Float64, "cog_rad": pl.Float64})
 
@@ -59,27 +57,6 @@ def test_ais_picture_latest_report_extrapolated_with_simple_covariance(cfg):
     assert got[4]["P_xy"] == pytest.approx(0.0, abs=1e-12)
     assert got[64]["x_enu_m"] == pytest.approx(0.0, abs=0.01)  # no SOG/COG: not moved
     assert got[64]["P_xx"] == pytest.approx(sp**2)
-
-
-def test_vote_most_matches_in_window_ties_to_smaller_d2():
-    t = [T0_NS + k * 4 * NS for k in range(6)]
-    matches = pl.DataFrame({
-        "time_ns": [t[0], t[1], t[2], t[3], t[4], t[4]],
-        "system_track_id": [1, 1, 1, 1, 1, 2],
-        "mmsi": [10, 10, 20, 20, 30, 30],
-        "mahalanobis_d2": [1.0, 1.0, 0.5, 0.5, 9.0, 1.0],
-    })
-    points = pl.DataFrame({"time_ns": [*t, t[5] + 100 * NS], "system_track_id": [1] * 7})
-    got = vote_identity(points, matches, window_s=4.0, min_matches=1)
-    ident = dict(zip(got["time_ns"], got["mmsi"], strict=True))
-    assert ident[t[0]] == 10  # window [t0-4, t0+4]: 10 x2
-    assert ident[t[1]] == 10  # 10 x2, 20 x1
-    assert ident[t[2]] == 20  # 10 x1 (t1), 20 x2 (t2, t3)
-    assert ident[t[3]] == 20  # 20 x2, 30 x1
-    assert ident[t[4]] == 20  # 20 x1 (d2 0.5) vs 30 x1 (d2 9): tie -> smaller d2
-    assert t[5] + 100 * NS not in ident  # no match in the window: no identity
-    wide = vote_identity(points, matches, window_s=100.0, min_matches=1)
-    assert set(wide["mmsi"]) == {20}  # 10 x2 (d2 2) vs 20 x2 (d2 1)
 
 
 def test_identity_right_for_95_percent_of_points(chain):
@@ -119,24 +96,6 @@ def test_ais_only_ship_far_away_is_never_matched(cfg):
     assert fused.height == c.fused.height and "mmsi" in fused.columns
 
 
-def test_vote_needs_mutual_support():
-    """A track that caught one stray match of an MMSI whose main track is another one
-    gets no identity from it (a ship without AIS in the lane of an AIS ship)."""
-    t = [T0_NS + k * 4 * NS for k in range(10)]
-    matches = pl.DataFrame({
-        "time_ns": [*t, t[5]],
-        "system_track_id": [1] * 10 + [2],
-        "mmsi": [10] * 11,
-        "mahalanobis_d2": [1.0] * 11,
-    })
-    points = pl.DataFrame({"time_ns": t + t, "system_track_id": [1] * 10 + [2] * 10})
-    got = vote_identity(points, matches, window_s=300.0, min_matches=1)
-    assert set(got.filter(pl.col("system_track_id") == 1)["mmsi"]) == {10}
-    assert got.filter(pl.col("system_track_id") == 2).height == 0
-    few = vote_identity(points, matches.head(2), window_s=300.0, min_matches=3)
-    assert few.height == 0
-
-
 def test_in_epochs_without_any_epoch():
     """Radar tracks and no AIS in the window: no epoch to match (an IndexError failed
     the whole maritime unit before; found by bench/hostile.py)."""
@@ -145,3 +104,93 @@ def test_in_epochs_without_any_epoch():
     from pipeline.maritime.identity import _in_epochs
 
     assert _in_epochs(np.array([5, 6], dtype=np.int64), np.empty(0, dtype=np.int64)).size == 0
+
+
+EPOCH_S = 4.0
+SIGMA_TRACK_M = 20.0
+
+
+def _tracks(positions: dict[int, list[tuple[float, float]]]) -> pl.DataFrame:
+    """Fused points of stationary tracks: {system_track_id: [(x_m, y_m) per epoch]}."""
+    rows = [(T0_NS + round(k * EPOCH_S * NS), sid, x, y)
+            for sid, xy in positions.items() for k, (x, y) in enumerate(xy)]
+    t, sid, x, y = zip(*rows, strict=True)
+    return pl.DataFrame({"time_ns": t, "system_track_id": sid, "x_enu_m": x, "y_enu_m": y,
+                         "sigma_x_m": SIGMA_TRACK_M, "sigma_y_m": SIGMA_TRACK_M,
+                         "cov_xy_m2": 0.0}).sort("time_ns", "system_track_id")
+
+
+def _identity(cfg: Config, tracks: pl.DataFrame, ais: pl.DataFrame, sid: int) -> list:
+    _, fused = identify(tracks, ais, cfg=cfg.ais, region=cfg.region)
+    return fused.filter(pl.col("system_track_id") == sid).sort("time_ns")["mmsi"].to_list()
+
+
+def test_identity_confirmed_by_the_test_and_dropped_the_same_way(cfg):
+    """AIS next to the track for 20 epochs, then reported 3 km away: the MMSI is taken
+    at the first epoch the held sum of log-likelihood ratios reaches Wald's A (not
+    before: the test is causal) and dropped when it falls to B (the old +-300 s vote
+    named all 60 epochs)."""
+    n, near = 60, 20
+    tracks = _tracks({7: [(0.0, 0.0)] * n})
+    ais = _ais(cfg, [(k * EPOCH_S, 10.0 if k < near else 3000.0, 0.0, None, None)
+                     for k in range(n)], mmsi=555)
+    a = cfg.ais
+    lo, hi = wald_boundaries(a.false_identification_probability,
+                             a.missed_identification_probability)
+    d2 = 10.0**2 / (SIGMA_TRACK_M**2 + a.sigma_position_m**2)
+    hit = (np.log(a.match_probability / a.stray_match_probability)
+           + np.log(gate_threshold(a.gate_probability) / 2) - d2 / 2)
+    miss = np.log((1 - a.match_probability) / (1 - a.stray_match_probability))
+    s = held_cumsum_reference([hit] * near + [miss] * (n - near), [True] + [False] * (n - 1),
+                              lo, hi)
+    first, last = int(np.argmax(s >= hi)), int(np.argmax(s <= lo)) - 1
+    assert 0 < first < near < last < n - 1
+    got = _identity(cfg, tracks, ais, 7)
+    assert got == [None] * first + [555] * (last + 1 - first) + [None] * (n - 1 - last)
+
+
+def test_stray_matches_never_name_a_ship_without_ais(cfg):
+    """A ship without AIS whose neighbour's AIS (no radar track of its own) falls in
+    its gate one epoch in three: the old vote named it (it held every match of that
+    MMSI); the test sees two misses per match and never confirms."""
+    n = 90
+    tracks = _tracks({3: [(0.0, 0.0)] * n})
+    ais = _ais(cfg, [(k * EPOCH_S, 10.0 if k % 3 == 0 else 3000.0, 0.0, None, None)
+                     for k in range(n)], mmsi=777)
+    ids, _ = identify(tracks, ais, cfg=cfg.ais, region=cfg.region)
+    assert ids.height == n // 3  # the stray matches are there
+    assert _identity(cfg, tracks, ais, 3) == [None] * n
+
+
+def test_two_tracks_in_one_gate_give_no_identity(cfg):
+    """Two tracks 8 m apart, the AIS point between them: the assignment picks one or the
+    other, but the rival term (q_alt - q) / 2 leaves no evidence for either (the old
+    vote named the one with most matches)."""
+    n = 60
+    rng = np.random.default_rng(5)
+    tracks = _tracks({1: [(0.0, 0.0)] * n, 2: [(8.0, 0.0)] * n})
+    ais = _ais(cfg, [(k * EPOCH_S, 4.0 + rng.normal(0, 3), 0.0, None, None)
+                     for k in range(n)], mmsi=999)
+    ids, _ = identify(tracks, ais, cfg=cfg.ais, region=cfg.region)
+    assert ids.height == n
+    assert _identity(cfg, tracks, ais, 1) == [None] * n
+    assert _identity(cfg, tracks, ais, 2) == [None] * n
+
+
+@pytest.mark.parametrize(("key", "value", "message"), [
+    ("stray_match_probability", 0.96, "must be below match_probability"),
+    ("missed_identification_probability", 0.9995, "must be below 1"),
+])
+def test_identity_test_parameters_are_checked(tmp_path, key, value, message):
+    """The cross-field checks of the [ais] test parameters (each alone is in (0, 1))."""
+    import re
+
+    from pipeline.resources import resource_path
+
+    text = (resource_path("config") / "surveil.toml").read_text(encoding="utf-8")
+    text, n = re.subn(rf"^{key} = [0-9.]+", f"{key} = {value}", text, flags=re.M)
+    assert n == 1
+    path = tmp_path / "site.toml"
+    path.write_text(text, encoding="utf-8")
+    with pytest.raises(ConfigError, match=message):
+        load_config(path)
