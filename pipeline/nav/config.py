@@ -13,10 +13,10 @@ from pipeline.config import Config
 from pipeline.configspec import (
     Document,
     count,
+    false_alarm,
     latitude,
     longitude,
     positive,
-    probability,
     setting,
     text,
 )
@@ -84,11 +84,15 @@ class OwnshipScenarioConfig:
 class NavSettings:
     """Batch, mode and dead-reckoning settings (SI), from ``[ownship]``."""
 
-    filter_step_s: float = positive(1.0)
+    filter_step_s: float = setting(1.0, ge=0.01, le=60.0, why=(
+        "the gyro and GNSS report at 1-100 Hz: the filter steps at most 100 times a "
+        "second and at least once a minute"))
     warmup_s: float = setting(900.0, ge=0.0)
     convergence_s: float = setting(600.0, ge=0.0)
     max_gap_s: float = positive(600.0)
-    gnss_timeout_s: float = positive(2.5)
+    gnss_timeout_s: float = setting(2.5, gt=0.0, le=600.0, why=(
+        "a receiver gives a fix every 0.1-1 s: seconds without one are an outage, 10 "
+        "minutes is far past it"))
     gnss_position_sigma_m: float = positive(
         2.9e-5, key="gnss_position_sigma_deg",
         convert=lambda deg: math.radians(deg) * EARTH_RADIUS_M)
@@ -96,7 +100,7 @@ class NavSettings:
     dr_bound_n_sigma: float = positive(3.0)
     # the GNSS position test (pipeline/nav/integrity.py, issue 22)
     gnss_position_tau_s: float = positive(60.0)  # correlation time of the position error
-    gnss_q: float = probability(0.001)  # false-alarm probability of one fix
+    gnss_q: float = false_alarm(0.001)  # false-alarm probability of one fix
     gnss_readmit_run: int = count(5)  # fixes in a row that pass before it is used again
     gnss_exclusion: bool = setting(True)  # false: test every fix, use them anyway
 
