@@ -1,0 +1,309 @@
+"""Every report in sql/ on a warehouse where it has rows (tests/sql/conftest.py: four
+scenarios, four sites), its figures compared with an independent computation in polars
+over the same tables (read with ``pipeline.warehouse.delta.read_table``), issue 40 item 7.
+
+Each oracle is written from the report's header and column comments, not from its SQL:
+quantiles are linear (DuckDB's ``quantile_cont``), figures compared to the report's
+rounding."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import polars as pl
+import pytest
+
+from pipeline.reports import list_reports, run_named_report
+from pipeline.units import NS
+from pipeline.warehouse.delta import read_table
+
+OUTSIDE = "(outside sectors)"
+TESTED: set[str] = set()  # the reports with a value test below (checked at the end)
+
+
+def covers(*names: str):
+    TESTED.update(names)
+    return lambda f: f
+
+
+def report(world, name: str, **kw) -> pl.DataFrame:
+    t = pl.from_arrow(run_named_report(world.warehouse, name, start_ns=world.start_ns,
+                                       end_ns=world.end_ns, **kw))
+    assert t.height > 0, f"{name} has no rows on the test warehouse"
+    return t
+
+
+def table(world, name: str, *, window: bool = True) -> pl.DataFrame:
+    kw = {"start_ns": world.start_ns, "end_ns": world.end_ns} if window else {}
+    return pl.from_arrow(read_table(world.warehouse, name, **kw))
+
+
+def utc_us(col: pl.Expr) -> pl.Expr:
+    """int64 ns -> the reports' TIMESTAMP (microseconds, no zone)."""
+    return pl.from_epoch(col // 1000, time_unit="us")
+
+
+def same(got: pl.DataFrame, want: pl.DataFrame, keys: list[str], atol: float = 0.0051,
+         **atols: float) -> None:
+    """The report's rows equal the oracle's: the same keys, every column of ``want``
+    within ``atol`` (numbers; a column's own in ``atols``: the report's rounding) or
+    equal (the rest)."""
+    g = got.select(want.columns).sort(keys, nulls_last=True)
+    w = want.sort(keys, nulls_last=True)
+    assert g.height == w.height, (g.height, w.height)
+    for c in want.columns:
+        a, b = g[c], w[c]
+        if a.dtype.is_float() or b.dtype.is_float():
+            x, y = a.cast(pl.Float64).to_numpy(), b.cast(pl.Float64).to_numpy()
+            np.testing.assert_allclose(x, y, atol=atols.get(c, atol), rtol=0, equal_nan=True,
+                                       err_msg=c)
+        else:
+            assert a.cast(b.dtype).to_list() == b.to_list(), c
+
+
+def rms(col: str) -> pl.Expr:
+    return (pl.col(col) ** 2).mean().sqrt()
+
+
+def p95(col: str) -> pl.Expr:
+    return pl.col(col).quantile(0.95, interpolation="linear")
+
+
+# --- accuracy -------------------------------------------------------------------------------
+
+
+@covers("accuracy_by_sector")
+def test_accuracy_by_sector(world):
+    e = table(world, "track_errors").with_columns(pl.col("sector").fill_null(OUTSIDE))
+    want = e.group_by("site", "sector", "source", "reference").agg(
+        pl.len().alias("samples"), rms("error_m").alias("rms_error_m"),
+        p95("error_m").alias("p95_error_m"), pl.col("error_m").max().alias("max_error_m"),
+        pl.col("nees").mean().alias("mean_nees"),
+        pl.col("reference_p95_m").mean().alias("reference_p95_m"))
+    assert want.height >= 6 and set(want["source"]) >= {"fused", "R1", "R2"}
+    same(report(world, "accuracy_by_sector"), want, ["site", "sector", "source", "reference"])
+
+
+@covers("accuracy_over_time")
+def test_accuracy_over_time(world):
+    e = table(world, "track_errors").with_columns(
+        utc_us(pl.col("time_ns") // (60 * NS) * (60 * NS)).alias("minute_utc"))
+    want = e.group_by("site", "minute_utc", "source").agg(
+        pl.len().alias("samples"), p95("error_m").alias("p95_error_m"),
+        rms("error_m").alias("rms_error_m"))
+    assert want["minute_utc"].n_unique() >= 14
+    same(report(world, "accuracy_over_time"), want, ["site", "minute_utc", "source"])
+    # a sector's minutes are that sector's points only
+    sector = e["sector"].drop_nulls().mode()[0]
+    one = e.filter(pl.col("sector") == sector).group_by("site", "minute_utc", "source").agg(
+        pl.len().alias("samples"))
+    same(report(world, "accuracy_over_time", sector=sector), one,
+         ["site", "minute_utc", "source"])
+
+
+@covers("accuracy_by_class")
+def test_accuracy_by_class(world):
+    e = table(world, "track_errors")
+    cls = (pl.from_arrow(read_table(world.warehouse, "ais_reports",
+                                    start_ns=world.start_ns - 3600 * NS, end_ns=world.end_ns))
+           .group_by("site", "mmsi").agg(pl.col("ais_class").drop_nulls().mode().first()))
+    typ = (table(world, "ais_static", window=False).drop_nulls("ship_type")
+           .group_by("site", "mmsi").agg(pl.col("ship_type").mode().first()))
+    j = (e.join(cls, left_on=["site", "reference_mmsi"], right_on=["site", "mmsi"], how="left")
+         .join(typ, left_on=["site", "reference_mmsi"], right_on=["site", "mmsi"], how="left")
+         .with_columns(
+             pl.when(pl.col("reference_mmsi").is_null()).then(pl.lit("no AIS"))
+             .otherwise(pl.col("ais_class").fill_null("(unknown)")).alias("ais_class"),
+             pl.when(pl.col("reference_mmsi").is_null() | pl.col("ship_type").is_null())
+             .then(pl.lit("(no static data)"))
+             .otherwise(pl.format("{}-{}", pl.col("ship_type") // 10 * 10,
+                                  pl.col("ship_type") // 10 * 10 + 9))
+             .alias("ship_type_group")))
+    want = j.group_by("site", "source", "reference", "ais_class", "ship_type_group").agg(
+        pl.col("reference_mmsi").drop_nulls().n_unique().alias("vessels"),
+        pl.len().alias("samples"), rms("error_m").alias("rms_error_m"),
+        p95("error_m").alias("p95_error_m"),
+        pl.col("reference_p95_m").mean().alias("reference_p95_m"))
+    assert want.filter(pl.col("ais_class") == "A").height > 0
+    same(report(world, "accuracy_by_class"), want,
+         ["site", "source", "reference", "ais_class", "ship_type_group"])
+
+
+# --- cross-track ----------------------------------------------------------------------------
+
+
+@covers("cross_track_along_leg")
+def test_cross_track_along_leg(world):
+    x = table(world, "cross_track_by_leg").with_columns(
+        ((pl.col("along_track_m") / 500.0).floor() * 0.5 + 0.25).alias("along_track_km"))
+    want = x.group_by("site", "leg_id", "source", "along_track_km").agg(
+        pl.len().alias("samples"), pl.col("rms_error_60s_m").mean().alias("mean_rms_60s_m"),
+        p95("rms_error_60s_m").alias("p95_rms_60s_m"),
+        rms("sigma_cross_track_m").alias("rms_sigma_m"),
+        pl.col("aspect_deg").mean().alias("mean_aspect_deg"))
+    assert want.height > 100
+    same(report(world, "cross_track_along_leg"), want,
+         ["site", "leg_id", "source", "along_track_km"], atol=0.051)
+
+
+@covers("cross_track_by_leg")
+def test_cross_track_by_leg(world):
+    x = table(world, "cross_track_by_leg")
+    per = x.group_by("site", "time_ns", "system_track_id", "leg_id").agg(
+        pl.col("rms_error_60s_m").filter(pl.col("source") == "fused").max().alias("fused"),
+        pl.col("rms_error_60s_m").filter(pl.col("source") != "fused").min().alias("best"),
+        pl.col("n_sources").filter(pl.col("source") == "fused").max().alias("n_fused"),
+        (pl.col("source") != "fused").sum().alias("n_radars"))
+    share = (per.filter(pl.col("fused").is_not_null() & (pl.col("n_radars") >= 2)
+                        & (pl.col("n_fused") == pl.col("n_radars")))
+             .group_by("site", "leg_id")
+             .agg((pl.col("fused") <= pl.col("best")).cast(pl.Float64).mean().alias("share")))
+    want = (x.group_by("site", "leg_id", "source").agg(
+        pl.len().alias("samples"), rms("cross_track_error_m").alias("rms_error_m"),
+        pl.col("rms_error_60s_m").mean().alias("mean_rms_60s_m"),
+        p95("rms_error_60s_m").alias("p95_rms_60s_m"),
+        pl.col("rms_error_60s_m").max().alias("max_rms_60s_m"),
+        rms("sigma_cross_track_m").alias("rms_sigma_m"),
+        pl.col("range_m").min().round(0).alias("min_range_m"),
+        pl.col("range_m").max().round(0).alias("max_range_m"))
+        .join(share, on=["site", "leg_id"], how="left")
+        .with_columns(pl.when(pl.col("source") == "fused").then(pl.col("share"))
+                      .alias("fused_not_worse_share")).drop("share"))
+    assert want["fused_not_worse_share"].drop_nulls().len() > 0
+    same(report(world, "cross_track_by_leg"), want, ["site", "leg_id", "source"], atol=0.51)
+    same(report(world, "cross_track_by_leg"), want.select(
+        "site", "leg_id", "source", "rms_error_m", "fused_not_worse_share"),
+        ["site", "leg_id", "source"], atol=0.0051)
+
+
+# --- own ship -------------------------------------------------------------------------------
+
+
+@covers("nav_heading_error")
+def test_nav_heading_error(world):
+    s = table(world, "nav_solution").with_columns(
+        utc_us(pl.col("time_ns") // (10 * NS) * (10 * NS)).alias("time_utc"))
+    deg = 180.0 / math.pi
+    want = s.group_by("site", "platform_id", "time_utc").agg(
+        (pl.col("heading_error_rad").mean() * deg).alias("heading_error_deg"),
+        (pl.col("gyro_heading_error_rad").mean() * deg).alias("gyro_error_deg"),
+        (pl.col("sigma_heading_rad").mean() * deg).alias("sigma_heading_deg"),
+        (pl.col("mode") == "emergency").cast(pl.Float64).mean().alias("emergency_share"),
+        pl.col("converged").all().alias("converged"))
+    assert want["converged"].any() and not want["converged"].all()
+    assert want["emergency_share"].max() == 1.0  # the outage at 960-990 s
+    got = report(world, "nav_heading_error")
+    same(got.drop("emergency_share"), want.drop("emergency_share"),
+         ["site", "platform_id", "time_utc"], atol=0.00051)
+    same(got, want.select("site", "platform_id", "time_utc", "emergency_share"),
+         ["site", "platform_id", "time_utc"], atol=0.0051)
+
+
+@covers("nav_quality")
+def test_nav_quality(world):
+    s = table(world, "nav_solution").with_columns(pl.col("sector").fill_null(OUTSIDE))
+    deg = 180.0 / math.pi
+    conv, passed = pl.col("converged"), pl.col("gate") == "pass"
+    z = pl.col("w_innovation_mps2") / pl.col("w_innovation_sigma_mps2")
+    v = s.group_by("site", "platform_id", "sector").agg(
+        pl.len().alias("steps"), conv.sum().alias("converged_steps"),
+        ((pl.col("heading_error_rad").filter(conv) ** 2).mean().sqrt() * deg)
+        .alias("heading_rms_deg"),
+        (pl.col("heading_error_rad").filter(conv).abs().max() * deg).alias("heading_max_deg"),
+        (rms("gyro_heading_error_rad") * deg).alias("gyro_rms_deg"),
+        (pl.col("gyro_heading_error_rad").abs().max() * deg).alias("gyro_max_deg"),
+        z.filter(passed).mean().alias("w_innovation_mean"),
+        (z.filter(passed) ** 2).mean().alias("w_innovation_nis"),
+        pl.col("nis").mean().alias("mean_nis"),
+        passed.sum().alias("gate_pass"), (pl.col("gate") == "reject").sum().alias("gate_reject"),
+        (pl.col("mode") == "emergency").mean().alias("emergency_share"))
+    o = (table(world, "nav_outages", window=False)
+         .filter(pl.col("start_ns").is_between(world.start_ns, world.end_ns, closed="left"))
+         .with_columns(pl.col("sector").fill_null(OUTSIDE))
+         .group_by("site", "platform_id", "sector").agg(
+             pl.len().alias("outages"), pl.col("duration_s").sum().alias("outage_total_s"),
+             pl.col("duration_s").max().alias("outage_longest_s"),
+             pl.col("dr_error_m").max().alias("worst_dr_error_m"),
+             (pl.col("dr_error_m") / pl.col("dr_bound_m")).max()
+             .alias("worst_dr_error_to_bound")))
+    want = v.join(o, on=["site", "platform_id", "sector"], how="full", coalesce=True)
+    assert want["outages"].sum() >= 1 and want["gate_reject"].sum() >= 1
+    same(report(world, "nav_quality"), want, ["site", "platform_id", "sector"], atol=0.00051,
+         heading_rms_deg=5.1e-5, heading_max_deg=5.1e-5, worst_dr_error_m=0.0051,
+         outage_total_s=0.051, outage_longest_s=0.051, emergency_share=5.1e-5)
+
+
+# --- radar biases ---------------------------------------------------------------------------
+
+
+@covers("radar_bias_by_site")
+def test_radar_bias_by_site(world):
+    b = table(world, "radar_bias_by_site")
+    want = b.select(
+        "site", "site_id", utc_us(pl.col("time_ns")).alias("window_start_utc"),
+        utc_us(pl.col("end_time_ns")).alias("window_end_utc"), "reports_used",
+        "reports_rejected", pl.col("ships_used").alias("ais_ships"), "range_bias_m",
+        pl.col("range_bias_ci_low_m").alias("range_ci_low_m"),
+        pl.col("range_bias_ci_high_m").alias("range_ci_high_m"), "azimuth_bias_deg",
+        "time_offset_s", "reduced_chi2")
+    assert sorted(want["site_id"]) == ["R1", "R2"]
+    got = report(world, "radar_bias_by_site")
+    same(got, want, ["site", "site_id"], atol=0.0051)
+    # the window calibrate-radars was given (the channel scene's 15 minutes)
+    assert (got["window_end_utc"] - got["window_start_utc"]).dt.total_seconds().to_list() \
+        == [900, 900]
+
+
+# --- channel faults -------------------------------------------------------------------------
+
+
+def _episodes(health: pl.DataFrame, step_ns: int) -> pl.DataFrame:
+    """Runs of epochs where most of a channel's checks excluded it (an epoch further than
+    one filter step from the previous one starts a new run)."""
+    per = (health.group_by("site", "channel", "time_ns")
+           .agg(pl.col("sensor_kind").first(), (pl.col("excluded").mean() >= 0.5).alias("down"))
+           .sort("site", "channel", "time_ns"))
+    out = []
+    for (site, channel), g in per.group_by("site", "channel", maintain_order=True):
+        t, down, kind = g["time_ns"].to_list(), g["down"].to_list(), g["sensor_kind"][0]
+        start = None
+        for i, (ti, d) in enumerate(zip(t, down, strict=True)):
+            joined = start is not None and down[i - 1] and ti - t[i - 1] <= step_ns
+            if d and not joined:
+                if start is not None:
+                    out.append((site, channel, f"{kind} channel excluded", start, last + step_ns))
+                start = ti
+            if d:
+                last = ti
+            elif start is not None:
+                out.append((site, channel, f"{kind} channel excluded", start, last + step_ns))
+                start = None
+        if start is not None:
+            out.append((site, channel, f"{kind} channel excluded", start, last + step_ns))
+    return pl.DataFrame(out, schema=["site", "lane", "kind", "start_ns", "end_ns"], orient="row")
+
+
+@covers("fault_timeline")
+def test_fault_timeline(world):
+    h = table(world, "channel_health")
+    steps = (h.select("site", "channel", "time_ns").unique().sort("time_ns")
+             .with_columns(pl.col("time_ns").diff().over("site", "channel").alias("dt")))
+    step_ns = int(steps.filter(pl.col("dt") > 0)["dt"].min())
+    assert step_ns == NS  # the airfield filter's 1-s epoch
+    ep = _episodes(h, step_ns)
+    o = (table(world, "nav_outages", window=False)
+         .filter((pl.col("start_ns") < world.end_ns) & (pl.col("end_ns") >= world.start_ns))
+         .select("site", pl.format("GNSS {}", "platform_id").alias("lane"),
+                 pl.format("gnss outage ({})", "kind").alias("kind"), "start_ns", "end_ns"))
+    want = pl.concat([ep, o.cast(ep.schema)]).select(
+        "site", "lane", "kind", utc_us(pl.col("start_ns")).alias("start_utc"),
+        utc_us(pl.col("end_ns")).alias("end_utc"),
+        ((pl.col("end_ns") - pl.col("start_ns")) / NS).alias("duration_s"))
+    assert ep.height >= 3 and o.height >= 1
+    same(report(world, "fault_timeline"), want, ["site", "lane", "start_utc"], atol=0.051)
+
+
+def test_every_report_has_a_value_test():
+    """(runs last in this file)"""
+    assert sorted(set(list_reports()) - TESTED) == []
