@@ -130,6 +130,187 @@ def test_accuracy_by_class(world):
          ["site", "source", "reference", "ais_class", "ship_type_group"])
 
 
+@covers("identification_by_sector")
+def test_identification_by_sector(world):
+    st = table(world, "system_tracks").with_columns(pl.col("sector").fill_null(OUTSIDE))
+    e = table(world, "track_errors").filter(pl.col("source") == "fused").select(
+        "site", "time_ns", "system_track_id", "reference", "reference_mmsi")
+    f = st.join(e, on=["site", "time_ns", "system_track_id"])
+    major = (f.drop_nulls("mmsi").group_by("site", "system_track_id")
+             .agg(pl.col("mmsi").mode().first().alias("majority")))
+    f = f.join(major, on=["site", "system_track_id"], how="left")
+    ref, mmsi, rm = pl.col("reference"), pl.col("mmsi"), pl.col("reference_mmsi")
+    verdict = (pl.when((ref == "truth") & rm.is_null())
+               .then(pl.when(mmsi.is_null()).then(pl.lit("correct")).otherwise(pl.lit("wrong")))
+               .when(mmsi.is_null()).then(pl.lit("none"))
+               .when(ref.is_in(["truth", "reconstructed"]) & (mmsi == rm)).then(pl.lit("correct"))
+               .when((ref == "ais") & (mmsi == pl.col("majority"))).then(pl.lit("correct"))
+               .otherwise(pl.lit("wrong")))
+    vessel = (pl.when(ref == "ais").then(pl.lit("ais-identified (no truth)"))
+              .when(rm.is_null()).then(pl.lit("no AIS aboard")).otherwise(pl.lit("AIS aboard")))
+    j = f.with_columns(verdict.alias("verdict"), vessel.alias("vessel_class"))
+    want = j.group_by("site", "sector", "vessel_class", "reference").agg(
+        pl.len().alias("samples"),
+        *[(pl.col("verdict") == v).mean().alias(f"{v}_share") for v in ("correct", "wrong",
+                                                                         "none")])
+    assert want["correct_share"].max() > 0.5 and want["samples"].sum() > 1000
+    same(report(world, "identification_by_sector"), want,
+         ["site", "sector", "vessel_class", "reference"], atol=5.1e-5)
+
+
+@covers("siap_by_sector")
+def test_siap_by_sector(world):
+    r = table(world, "siap_by_sector").with_columns(
+        pl.col("reference").fill_null("truth"), pl.col("sector").fill_null(OUTSIDE))
+    sums = [pl.col(c).sum().alias(c) for c in (
+        "truth_epochs", "tracked_truth_epochs", "track_epochs", "associated_track_epochs",
+        "spurious_track_epochs", "sum_position_error_m", "sum_velocity_error_mps",
+        "track_number_changes", "track_swaps", "tracked_time_s", "truth_time_s",
+        "longest_segment_s", "id_truth_epochs", "id_unknown_epochs", "id_correct_epochs",
+        "id_ambiguous_epochs")]
+    per = r.group_by("site", "reference", "sector").agg(sums)
+    every = r.group_by("site", "reference").agg(sums).with_columns(
+        pl.lit("(all sectors)").alias("sector"))
+    g = pl.concat([per, every.select(per.columns)])
+
+    def ratio(a: str, b: str) -> pl.Expr:
+        return pl.col(a) / pl.when(pl.col(b) != 0).then(pl.col(b))
+
+    want = g.select(
+        "site", "sector", "reference", "truth_epochs",
+        ratio("tracked_truth_epochs", "truth_epochs").alias("completeness"),
+        ratio("associated_track_epochs", "tracked_truth_epochs").alias("ambiguity"),
+        ratio("spurious_track_epochs", "track_epochs").alias("spuriousness"),
+        ratio("sum_position_error_m", "associated_track_epochs").alias("position_accuracy_m"),
+        ratio("sum_velocity_error_mps", "associated_track_epochs")
+        .alias("velocity_accuracy_mps"),
+        "track_number_changes",
+        (pl.col("track_number_changes") * 3600.0
+         / pl.when(pl.col("tracked_time_s") != 0).then(pl.col("tracked_time_s")))
+        .alias("changes_per_h"),
+        "track_swaps", ratio("longest_segment_s", "truth_time_s").alias("longest_segment"),
+        ((pl.col("id_truth_epochs") - pl.col("id_unknown_epochs"))
+         / pl.when(pl.col("id_truth_epochs") != 0).then(pl.col("id_truth_epochs")))
+        .alias("id_completeness"),
+        ratio("id_correct_epochs", "id_truth_epochs").alias("id_correctness"),
+        ratio("id_ambiguous_epochs", "id_truth_epochs").alias("id_ambiguity"))
+    assert want.filter(pl.col("sector") == "(all sectors)").height >= 2
+    same(report(world, "siap_by_sector"), want, ["site", "reference", "sector"], atol=5.1e-5,
+         position_accuracy_m=0.0051, velocity_accuracy_mps=5.1e-4, changes_per_h=5.1e-4)
+
+
+# --- airfield -------------------------------------------------------------------------------
+
+AREA_OUT = "(outside areas)"
+
+
+def _surface_updates(world) -> pl.DataFrame:
+    """One row per update of a target by a channel or by the fusion, and the gap before
+    it (s) among the same source's updates of that target."""
+    cols = ["site", "area", "source", "track_id", "time_ns", "error_m", "identity_correct",
+            "cooperative", "reference", "corr", "reference_p95_m", "error_model"]
+    h = (table(world, "channel_health").filter(pl.col("report_x_m").is_not_null())
+         .with_columns(pl.col("channel").alias("source"), pl.lit(None, pl.Boolean)
+                       .alias("identity_correct"), pl.lit(None, pl.Boolean).alias("cooperative"),
+                       pl.col("error_model").fill_null("config")))
+    f = (table(world, "airfield_tracks").filter(pl.col("n_channels") > 0)
+         .with_columns(pl.lit("fused").alias("source"), pl.lit(None, pl.String)
+                       .alias("error_model")))
+    u = pl.concat([x.with_columns(pl.col("reference_correction_m2").fill_null(0.0).alias("corr"))
+                   .select(cols) for x in (h, f)], how="vertical_relaxed")
+    return u.with_columns(pl.col("area").fill_null(AREA_OUT)).sort("time_ns").with_columns(
+        (pl.col("time_ns").diff().over("site", "source", "track_id") / NS).alias("gap_s"))
+
+
+@covers("surface_accuracy_by_area")
+def test_surface_accuracy_by_area(world):
+    from pipeline.requirements import requirements_config
+
+    req = requirements_config(world.cfg)
+    u = _surface_updates(world).with_columns(pl.col("reference").fill_null("(none)"))
+    scored = pl.col("error_m").is_not_null()
+    ided = pl.col("cooperative") & pl.col("identity_correct").is_not_null()
+    gap = pl.col("gap_s").drop_nulls()
+    want = u.group_by("site", "area", "source", "reference").agg(
+        pl.len().alias("updates"), scored.sum().alias("scored"),
+        p95("error_m").alias("p95_vs_reference_m"), rms("error_m").alias("rms_vs_reference_m"),
+        (pl.col("error_m") ** 2 + pl.col("corr")).filter(scored).mean().clip(0.0).sqrt()
+        .alias("rms_error_m"),
+        pl.col("reference_p95_m").mean().alias("reference_p95_m"),
+        pl.col("identity_correct").filter(ided).cast(pl.Float64).mean()
+        .alias("p_identification"), ided.sum().alias("id_samples"),
+        ((gap >= 3) & (gap <= 5)).mean().alias("gap_3_5s_share"),
+        (gap > 5).mean().alias("gap_over_5s_share"))
+    want = want.with_columns(pl.col("area").replace_strict(
+        req.ed87_position_p95_m, default=None, return_dtype=pl.Float64).alias("ed87_p95_req_m"))
+    assert set(want["area"]) >= {"manoeuvring", "apron_taxiway"}
+    assert want["p_identification"].drop_nulls().len() > 0
+    got = report(world, "surface_accuracy_by_area")
+    same(got, want, ["site", "area", "source", "reference"], atol=0.0051,
+         p_identification=5.1e-6, gap_3_5s_share=5.1e-6, gap_over_5s_share=5.1e-6)
+    # the 95th percentile of the true error: |e + reference error| over the reference's
+    # posterior (variance corr, isotropic), integrated with the report's 32-point rule
+    r = np.array([0.367193, 0.884754, 1.314174, 1.870075])
+    d = np.array([0.465719, 0.775248, 1.102269, 1.701814])
+    u = np.concatenate([np.stack([[x, 0], [0, x], [-x, 0], [0, -x], [y, y], [-y, y], [-y, -y],
+                                  [y, -y]]) for x, y in zip(r, d, strict=True)])
+    draws = pl.DataFrame({"u1": u[:, 0], "u2": u[:, 1]})
+    half = pl.col("corr").clip(0.0) / 2.0
+    post = _surface_updates(world).filter(scored)
+    post = (post.with_columns(pl.col("reference").fill_null("(none)")).join(draws, how="cross")
+            .with_columns(((pl.col("error_m") + half.sqrt() * pl.col("u1")) ** 2
+                           + half * pl.col("u2") ** 2).sqrt().alias("e"))
+            .group_by("site", "area", "source", "reference").agg(p95("e").alias("p95_error_m")))
+    assert post.height > 0
+    same(got, post, ["site", "area", "source", "reference"], atol=0.0051)
+    assert (got["meets_ed87"] == (got["p95_error_m"] <= got["ed87_p95_req_m"])).all()
+
+
+@covers("surface_detection_by_area")
+def test_surface_detection_by_area(world):
+    from pipeline.requirements import requirements_config
+
+    req = requirements_config(world.cfg)
+    period = {a: getattr(req.ed87_update_period_s, a) for a in
+              ("manoeuvring", "apron_taxiway", "stand")}
+    t = table(world, "airfield_tracks").with_columns(
+        pl.col("area").replace_strict(period, default=1.0, return_dtype=pl.Float64)
+        .alias("update_s"), pl.col("area").fill_null(AREA_OUT))
+    t = t.with_columns((pl.col("time_ns") // (pl.col("update_s") * 1e9).round(0)
+                        .cast(pl.Int64)).alias("slot"))
+    slots = t.sort("time_ns").group_by("site", "track_id", "slot").agg(
+        pl.col("area").first(), pl.col("target_address").is_not_null().any().alias("addressed"),
+        ((pl.col("vx_mps") ** 2 + pl.col("vy_mps") ** 2).sqrt() >= 0.5).any().alias("moving"),
+        (pl.col("n_channels") > 0).any().alias("fused_update"))
+    h = table(world, "channel_health")
+    chan = h.select("site", "channel", "sensor_kind").unique()
+    kind = pl.col("sensor_kind")
+    expected = pl.concat([
+        slots.join(chan, on="site").filter(
+            (kind == "smr") | ((kind == "mlat") & pl.col("addressed"))
+            | ((kind == "vasn") & pl.col("moving")))
+        .select("site", "area", pl.col("channel").alias("source"), "track_id", "slot"),
+        slots.select("site", "area", pl.lit("fused").alias("source"), "track_id", "slot")])
+    got_ = pl.concat([
+        h.filter(pl.col("report_x_m").is_not_null())
+        .join(t.select("site", "track_id", "time_ns", "slot"),
+              on=["site", "track_id", "time_ns"])
+        .select("site", pl.col("channel").alias("source"), "track_id", "slot").unique(),
+        slots.filter("fused_update").select("site", pl.lit("fused").alias("source"),
+                                            "track_id", "slot")]).with_columns(
+        pl.lit(True).alias("reported"))
+    want = (expected.join(got_, on=["site", "source", "track_id", "slot"], how="left")
+            .group_by("site", "area", "source").agg(
+                pl.col("track_id").n_unique().alias("targets"),
+                pl.len().alias("expected_intervals"),
+                pl.col("reported").sum().alias("reported_intervals"))
+            .with_columns((pl.col("reported_intervals") / pl.col("expected_intervals"))
+                          .alias("pd")))
+    assert want.filter(pl.col("source") == "fused").height >= 2
+    same(report(world, "surface_detection_by_area"), want, ["site", "area", "source"],
+         atol=5.1e-6)
+
+
 # --- cross-track ----------------------------------------------------------------------------
 
 
