@@ -311,6 +311,119 @@ def test_surface_detection_by_area(world):
          atol=5.1e-6)
 
 
+# --- targets --------------------------------------------------------------------------------
+
+
+def _fused_errors(world) -> pl.DataFrame:
+    return table(world, "track_errors").filter(pl.col("source") == "fused")
+
+
+@covers("target_points")
+def test_target_points(world):
+    """The 5 worst targets (fused 95th percentile) per site, thinned to one point (the
+    first) per 20 s."""
+    st = table(world, "system_tracks").select("site", "time_ns", "system_track_id", "x_enu_m",
+                                              "y_enu_m")
+    e = _fused_errors(world).join(st, on=["site", "time_ns", "system_track_id"])
+    worst = (e.group_by("site", "reference", "reference_id").agg(p95("error_m").alias("p95"))
+             .sort(["site", "p95", "reference_id"], descending=[False, True, False])
+             .with_columns(pl.int_range(1, pl.len() + 1).over("site").alias("rank"))
+             .filter(pl.col("rank") <= 5))
+    want = (e.join(worst, on=["site", "reference", "reference_id"]).sort("time_ns")
+            .with_columns((pl.col("time_ns") // (20 * NS)).alias("slot"))
+            .group_by("site", "rank", "reference_id", "slot").agg(
+                pl.col("time_ns").first(),
+                (pl.col("x_enu_m") - pl.col("error_east_m")).first().alias("reference_x_m"),
+                (pl.col("y_enu_m") - pl.col("error_north_m")).first().alias("reference_y_m"),
+                pl.col("x_enu_m").first().alias("fused_x_m"),
+                pl.col("y_enu_m").first().alias("fused_y_m"), pl.col("error_m").first())
+            .drop("slot"))
+    assert want["rank"].max() == 5
+    same(report(world, "target_points"), want, ["site", "rank", "time_ns"], atol=1e-6)
+
+
+@covers("target_drilldown")
+def test_target_drilldown(world):
+    e = table(world, "track_errors").with_columns(pl.col("sector").fill_null(OUTSIDE))
+    key = ["site", "reference", "reference_id"]
+    fused = e.filter(pl.col("source") == "fused").group_by(key).agg(
+        pl.col("sector").mode().first(), pl.len().alias("fused_points"),
+        rms("error_m").alias("rms_error_m"), p95("error_m").alias("p95_error_m"),
+        pl.col("error_m").max().alias("max_error_m"),
+        (pl.col("system_track_id").n_unique() - 1).alias("extra_track_numbers"))
+    radar = e.filter(pl.col("source") != "fused").group_by(key).agg(
+        pl.len().alias("radar_points"))
+    det = table(world, "radar_detection").group_by(key).agg(
+        pl.col("expected_scans").sum(), pl.col("detected_scans").sum())
+    want = (fused.join(radar, on=key, how="left").join(det, on=key, how="left")
+            .with_columns(pl.col("radar_points").fill_null(0),
+                          (pl.col("expected_scans") - pl.col("detected_scans"))
+                          .alias("missed_scans"),
+                          (pl.col("detected_scans") / pl.col("expected_scans")).alias("pd"))
+            .sort(["site", "p95_error_m", "missed_scans", "reference_id"],
+                  descending=[False, True, True, False], nulls_last=True)
+            .with_columns(pl.int_range(1, pl.len() + 1).over("site").alias("rank"))
+            .filter(pl.col("rank") <= 20).drop("expected_scans", "detected_scans"))
+    assert want.height == 20 and want["missed_scans"].sum() > 0
+    got = report(world, "target_drilldown")
+    same(got, want.drop("sector"), ["site", "rank"], atol=0.0051, pd=5.1e-5)
+    # the most frequent sector (a tie may go either way)
+    assert (got["sector"] == want.sort("site", "rank")["sector"]).mean() > 0.8
+
+
+# --- gap forecasts --------------------------------------------------------------------------
+
+
+def _forecasts(world) -> pl.DataFrame:
+    return table(world, "gap_forecasts", window=False).filter(
+        pl.col("forecast_time_ns").is_between(world.start_ns, world.end_ns, closed="left"))
+
+
+@covers("gap_forecasts")
+def test_gap_forecasts(world):
+    f = _forecasts(world)
+    # the sigma ellipse's semi-axes: the eigenvalues of the 2x2 covariance
+    cov = np.stack([np.stack([f["sigma_x_m"] ** 2, f["cov_xy_m2"]], -1),
+                    np.stack([f["cov_xy_m2"], f["sigma_y_m"] ** 2], -1)], -2)
+    eig = np.linalg.eigvalsh(cov)
+    want = f.select(
+        "site", "mmsi", utc_us(pl.col("forecast_time_ns")).alias("forecast_utc"),
+        utc_us(pl.col("gap_start_ns")).alias("gap_start_utc"), "forecast_kind",
+        (pl.col("lead_s") / 60.0).alias("lead_min"),
+        pl.col("sector").fill_null(OUTSIDE), "lat_deg", "lon_deg",
+        pl.Series("sigma_major_m", np.sqrt(eig[:, 1])),
+        pl.Series("sigma_minor_m", np.sqrt(np.clip(eig[:, 0], 0.0, None))),
+        (pl.col("region_area_m2") / 1e6).alias("region90_area_km2"), "most_likely_zone",
+        pl.col("true_in_region").alias("true_in_region90"), "reference",
+        pl.col("error_m"))
+    assert want.height >= 5 and want["reference"].drop_nulls().len() > 0
+    same(report(world, "gap_forecasts"), want,
+         ["site", "forecast_utc", "mmsi", "gap_start_utc", "forecast_kind"], atol=0.051,
+         lat_deg=5.1e-7, lon_deg=5.1e-7, region90_area_km2=5.1e-4)
+
+
+@covers("gap_forecast_calibration")
+def test_gap_forecast_calibration(world):
+    f = _forecasts(world).drop_nulls("reference")
+    band = (pl.when(pl.col("lead_s") <= 600).then(pl.lit("00-10 min"))
+            .when(pl.col("lead_s") <= 1200).then(pl.lit("10-20 min"))
+            .when(pl.col("lead_s") <= 1800).then(pl.lit("20-30 min"))
+            .when(pl.col("lead_s") <= 2700).then(pl.lit("30-45 min")).otherwise(pl.lit("45+ min")))
+    want = f.with_columns(band.alias("lead_band")).group_by("site", "lead_band", "reference").agg(
+        pl.len().alias("forecasts"), pl.struct("mmsi", "gap_start_ns").n_unique().alias("gaps"),
+        pl.col("true_in_region").cast(pl.Float64).mean().alias("in_region90_share"),
+        pl.col("error_m").median().alias("error_median_m"), rms("error_m").alias("error_rms_m"),
+        p95("error_m").alias("error_p95_m"),
+        pl.col("region_radius_m").median().alias("region90_radius_median_m"),
+        pl.col("true_zone_probability").mean().alias("true_zone_p_mean"),
+        (pl.col("most_likely_zone") == pl.col("true_zone")).fill_null(False).cast(pl.Float64)
+        .mean().alias("most_likely_zone_hit"))
+    assert want["forecasts"].sum() >= 5
+    same(report(world, "gap_forecast_calibration"), want, ["site", "lead_band", "reference"],
+         atol=0.051, in_region90_share=5.1e-4, true_zone_p_mean=5.1e-4,
+         most_likely_zone_hit=5.1e-4)
+
+
 # --- cross-track ----------------------------------------------------------------------------
 
 
