@@ -12,7 +12,6 @@ import math
 
 import numpy as np
 import polars as pl
-import pytest
 
 from pipeline.reports import list_reports, run_named_report
 from pipeline.units import NS
@@ -424,6 +423,112 @@ def test_gap_forecast_calibration(world):
          most_likely_zone_hit=5.1e-4)
 
 
+# --- radar detection, false tracks, error components ---------------------------------------
+
+
+@covers("detection_by_sector")
+def test_detection_by_sector(world):
+    from pipeline.requirements import requirements_config
+
+    d = table(world, "radar_detection").with_columns(
+        pl.col("sector").fill_null(OUTSIDE), pl.col("target_class").fill_null("(unknown)"))
+    keys = ["site", "sector", "site_id", "reference"]
+    agg = [pl.col("reference_id").n_unique().alias("targets"),
+           pl.col("expected_scans").sum().alias("expected_scans"),
+           pl.col("detected_scans").sum().alias("detected")]
+    g = pl.concat([d.group_by(*keys, "target_class").agg(agg),
+                   d.group_by(keys).agg(agg).with_columns(
+                       pl.lit("(all classes)").alias("target_class"))], how="diagonal")
+    pd_req = requirements_config(world.cfg).vts.radar_detection
+    want = g.select(
+        "site", "sector", pl.col("site_id").alias("radar"), "reference", "target_class",
+        "targets", "expected_scans",
+        (pl.col("expected_scans") - pl.col("detected")).alias("missed_scans"),
+        (pl.col("detected") / pl.col("expected_scans")).alias("pd"),
+        (pl.col("detected") / pl.col("expected_scans") >= pd_req).alias("meets_vts"))
+    assert want["missed_scans"].sum() > 0 and want["meets_vts"].any()
+    same(report(world, "detection_by_sector"), want,
+         ["site", "sector", "radar", "reference", "target_class"], atol=5.1e-6)
+
+
+@covers("radar_coverage")
+def test_radar_coverage(world):
+    d = table(world, "radar_detection")
+    want = d.group_by("site", "site_id", "reference", "range_bin_m", "azimuth_bin_deg").agg(
+        pl.col("reference_id").n_unique().alias("targets"), pl.col("expected_scans").sum(),
+        pl.col("detected_scans").sum()).with_columns(
+        (pl.col("detected_scans") / pl.col("expected_scans")).alias("pd")).with_columns(
+        ((pl.col("expected_scans") >= 20) & (pl.col("pd") < 0.5)).alias("hole")).rename(
+        {"site_id": "radar", "range_bin_m": "range_from_m", "azimuth_bin_deg": "azimuth_from_deg"})
+    assert want.height > 100
+    same(report(world, "radar_coverage"), want,
+         ["site", "radar", "reference", "range_from_m", "azimuth_from_deg"], atol=5.1e-5)
+
+
+@covers("false_tracks")
+def test_false_tracks(world):
+    st = table(world, "system_tracks").with_columns(pl.col("sector").fill_null(OUTSIDE))
+    scored = _fused_errors(world).select("site", "time_ns", "system_track_id",
+                                         "reference").unique()
+    kind = scored.group_by("site").agg(pl.col("reference").mode().first())
+    marked = st.join(scored.select("site", "time_ns", "system_track_id").unique()
+                     .with_columns(pl.lit(True).alias("scored")),
+                     on=["site", "time_ns", "system_track_id"], how="left")
+    per = marked.group_by("site", "system_track_id").agg(
+        pl.col("sector").mode().first(), pl.len().alias("epochs"),
+        pl.col("scored").sum().alias("scored_epochs"))
+    want = (per.group_by("site", "sector").agg(
+        pl.len().alias("tracks"), (pl.col("scored_epochs") == 0).sum()
+        .alias("tracks_without_reference"),
+        (pl.col("scored_epochs") == 0).mean().alias("false_track_share"),
+        pl.col("epochs").sum().alias("track_epochs"),
+        (1.0 - pl.col("scored_epochs").sum() / pl.col("epochs").sum())
+        .alias("unreferenced_epoch_share"))
+        .join(kind, on="site", how="left")
+        .with_columns(pl.col("reference").fill_null("(none)")))
+    assert want["tracks"].sum() > 10
+    got = report(world, "false_tracks")
+    # a track's most frequent sector: on a tie either may be taken, so compare per site
+    same(got.group_by("site").agg(pl.col("tracks", "tracks_without_reference",
+                                         "track_epochs").sum(), pl.col("reference").first()),
+         want.group_by("site").agg(pl.col("tracks", "tracks_without_reference",
+                                          "track_epochs").sum(), pl.col("reference").first()),
+         ["site"])
+    same(got, want.select("site", "sector", "tracks", "false_track_share",
+                          "unreferenced_epoch_share"), ["site", "sector"], atol=5.1e-5)
+
+
+@covers("error_decomposition")
+def test_error_decomposition(world):
+    from pipeline.requirements import requirements_config
+
+    req = requirements_config(world.cfg)
+    e = table(world, "track_errors").with_columns(
+        pl.col("sector").fill_null(OUTSIDE), (pl.col("azimuth_error_rad") * 180 / math.pi)
+        .alias("ae"))
+    within = pl.col("range_error_m").abs() <= pl.max_horizontal(
+        pl.lit(req.vts.radar_range_p95_m),
+        req.vts.radar_range_p95_share * pl.col("reference_range_m"))
+    want = e.group_by("site", "sector", "source", "reference").agg(
+        pl.len().alias("samples"), pl.col("along_track_error_m").count().alias("moving_samples"),
+        pl.col("along_track_error_m").mean().alias("along_mean_m"),
+        rms("along_track_error_m").alias("along_rms_m"),
+        pl.col("across_track_error_m").mean().alias("across_mean_m"),
+        rms("across_track_error_m").alias("across_rms_m"),
+        pl.col("range_error_m").mean().alias("range_mean_m"),
+        rms("range_error_m").alias("range_rms_m"),
+        pl.col("range_error_m").abs().quantile(0.95, interpolation="linear")
+        .alias("range_p95_m"),
+        within.filter(pl.col("range_error_m").is_not_null()).cast(pl.Float64).mean()
+        .alias("range_within_vts_share"),
+        pl.col("ae").mean().alias("azimuth_mean_deg"), rms("ae").alias("azimuth_rms_deg"),
+        pl.col("ae").abs().quantile(0.95, interpolation="linear").alias("azimuth_p95_deg"))
+    assert want["range_rms_m"].drop_nulls().len() >= 4
+    same(report(world, "error_decomposition"), want, ["site", "sector", "source", "reference"],
+         atol=0.0051, range_within_vts_share=5.1e-5, azimuth_mean_deg=5.1e-5,
+         azimuth_rms_deg=5.1e-5, azimuth_p95_deg=5.1e-5)
+
+
 # --- cross-track ----------------------------------------------------------------------------
 
 
@@ -560,21 +665,17 @@ def _episodes(health: pl.DataFrame, step_ns: int) -> pl.DataFrame:
            .sort("site", "channel", "time_ns"))
     out = []
     for (site, channel), g in per.group_by("site", "channel", maintain_order=True):
-        t, down, kind = g["time_ns"].to_list(), g["down"].to_list(), g["sensor_kind"][0]
-        start = None
-        for i, (ti, d) in enumerate(zip(t, down, strict=True)):
-            joined = start is not None and down[i - 1] and ti - t[i - 1] <= step_ns
-            if d and not joined:
-                if start is not None:
-                    out.append((site, channel, f"{kind} channel excluded", start, last + step_ns))
-                start = ti
-            if d:
+        kind = f"{g['sensor_kind'][0]} channel excluded"
+        start = last = None  # the open run: its first and last epoch
+        for ti, down in zip(g["time_ns"].to_list(), g["down"].to_list(), strict=True):
+            if down and start is not None and ti - last <= step_ns:
                 last = ti
-            elif start is not None:
-                out.append((site, channel, f"{kind} channel excluded", start, last + step_ns))
-                start = None
+                continue
+            if start is not None:
+                out.append((site, channel, kind, start, last + step_ns))
+            start = last = ti if down else None
         if start is not None:
-            out.append((site, channel, f"{kind} channel excluded", start, last + step_ns))
+            out.append((site, channel, kind, start, last + step_ns))
     return pl.DataFrame(out, schema=["site", "lane", "kind", "start_ns", "end_ns"], orient="row")
 
 
