@@ -529,6 +529,108 @@ def test_error_decomposition(world):
          azimuth_rms_deg=5.1e-5, azimuth_p95_deg=5.1e-5)
 
 
+@covers("dubious_tracks")
+def test_dubious_tracks(world):
+    """Tracks faster than 25 m/s, accelerating above 1 m/s^2 or turning above 10 deg/s
+    (above 1 m/s) at some step."""
+    st = (table(world, "system_tracks").with_columns(pl.col("sector").fill_null(OUTSIDE))
+          .sort("site", "system_track_id", "time_ns"))
+    g = ["site", "system_track_id"]
+    dt = pl.col("time_ns").diff().over(g) / NS
+    dv = pl.col("speed_mps").diff().over(g)
+    dc = pl.col("course_rad").diff().over(g)
+    slow = (pl.col("speed_mps") < 1) | (pl.col("speed_mps").shift().over(g) < 1)
+    k = st.with_columns(dt.alias("dt"), (dv / dt).abs().alias("accel"),
+                        pl.when(slow).then(None).otherwise(
+                            ((dc + 3 * math.pi) % (2 * math.pi) - math.pi).abs() * 180 / math.pi
+                            / dt).alias("turn"))
+    ok = pl.col("dt") > 0
+    per = k.group_by(g).agg(pl.col("sector").mode().first(), pl.col("speed_mps").max()
+                            .alias("v"), pl.col("accel").filter(ok).max().alias("a"),
+                            pl.col("turn").filter(ok).max().alias("t"))
+    bad = (pl.col("v") > 25) | (pl.col("a") > 1) | (pl.col("t") > 10)
+    want = per.group_by("site", "sector").agg(
+        pl.len().alias("tracks"), bad.fill_null(False).sum().alias("dubious_tracks"),
+        (pl.col("v") > 25).sum().alias("over_speed"), (pl.col("a") > 1).sum()
+        .alias("over_acceleration"), (pl.col("t") > 10).sum().alias("over_turn_rate"),
+        pl.col("v").max().alias("max_speed_mps"), pl.col("a").max().alias("max_accel_mps2"),
+        pl.col("t").max().alias("max_turn_rate_deg_s"))
+    assert want["tracks"].sum() > 10
+    got = report(world, "dubious_tracks")
+    totals = ["tracks", "dubious_tracks", "over_speed", "over_acceleration", "over_turn_rate"]
+    same(got.group_by("site").agg(pl.col(totals).sum()),
+         want.group_by("site").agg(pl.col(totals).sum()), ["site"])
+    same(got.group_by("site").agg(pl.col("max_speed_mps", "max_accel_mps2",
+                                         "max_turn_rate_deg_s").max()),
+         want.group_by("site").agg(pl.col("max_speed_mps", "max_accel_mps2",
+                                          "max_turn_rate_deg_s").max()), ["site"],
+         max_accel_mps2=5.1e-4)
+
+
+@covers("latency_by_sensor")
+def test_latency_by_sensor(world):
+    """along-track error a = -latency v + noise, least squares through the origin over
+    points whose reference moves at >= 2 m/s, with its standard error."""
+    e = table(world, "track_errors").filter(pl.col("along_track_error_m").is_not_null()
+                                            & (pl.col("reference_speed_mps") >= 2.0))
+    rows = []
+    for (site, source, ref), g in e.group_by("site", "source", "reference"):
+        a, v = g["along_track_error_m"].to_numpy(), g["reference_speed_mps"].to_numpy()
+        lat = -float(np.linalg.lstsq(v[:, None], a, rcond=None)[0][0])
+        se = math.sqrt(np.sum((a + lat * v) ** 2) / (len(a) - 1) / np.sum(v * v))
+        rows.append((site, source, ref, len(a), lat, se, lat - 1.96 * se, lat + 1.96 * se))
+    want = pl.DataFrame(rows, orient="row", schema=[
+        "site", "source", "reference", "samples", "latency_s", "latency_se_s",
+        "latency_ci_low_s", "latency_ci_high_s"])
+    assert want.height >= 3
+    same(report(world, "latency_by_sensor"), want, ["site", "source", "reference"],
+         atol=5.1e-4)
+
+
+@covers("map_tracks")
+def test_map_tracks(world):
+    """Every layer's tracks thinned to their first point per 20 s."""
+    cols = ["site", "layer", "track", "time_ns", "lat_deg", "lon_deg", "x_enu_m", "y_enu_m"]
+    none = pl.lit(None, pl.Float64)
+    st = table(world, "system_tracks").select(
+        "site", pl.lit("fused").alias("layer"), pl.col("system_track_id").cast(pl.String)
+        .alias("track"), "time_ns", "lat_deg", "lon_deg", "x_enu_m", "y_enu_m")
+    assoc = table(world, "associations").select(
+        "site", pl.format("radar {}", "site_id").alias("layer"),
+        pl.format("{}-{}", "site_id", "local_track_id").alias("track"), "time_ns",
+        none.alias("lat_deg"), none.alias("lon_deg"), "x_enu_m", "y_enu_m")
+    ais = table(world, "ais_reports").select(
+        "site", pl.lit("ais").alias("layer"), pl.col("mmsi").cast(pl.String).alias("track"),
+        "time_ns", "lat_deg", "lon_deg", none.alias("x_enu_m"), none.alias("y_enu_m"))
+    air = table(world, "airfield_tracks").select(
+        "site", pl.lit("airfield").alias("layer"), pl.col("track_id").alias("track"),
+        "time_ns", "lat_deg", "lon_deg", none.alias("x_enu_m"), none.alias("y_enu_m"))
+    pts = pl.concat([x.select(cols) for x in (st, assoc, ais, air)], how="vertical_relaxed")
+    want = (pts.sort("time_ns").with_columns((pl.col("time_ns") // (20 * NS)).alias("slot"))
+            .group_by("site", "layer", "track", "slot").agg(pl.all().first()).drop("slot"))
+    assert set(want["layer"]) == {"fused", "radar R1", "radar R2", "ais", "airfield"}
+    same(report(world, "map_tracks"), want, ["site", "layer", "track", "time_ns"], atol=1e-9)
+
+
+@covers("reference_quality")
+def test_reference_quality(world):
+    r = table(world, "reference_tracks").with_columns(pl.col("ais_class").fill_null("(unknown)"))
+    good = ~pl.col("outlier")
+    want = r.group_by("site", "ais_class").agg(
+        pl.col("reference_id").n_unique().alias("vessels"), pl.len().alias("reports"),
+        pl.col("outlier").sum().alias("outliers"),
+        pl.col("outlier").cast(pl.Float64).mean().alias("outlier_share"),
+        pl.col("p95_m").filter(good).mean().alias("reference_p95_m"),
+        pl.col("sigma_position_m").filter(good).median().alias("ais_sigma_m"),
+        (pl.col("loo_residual_m").filter(good) ** 2).mean().sqrt().alias("ais_rms_error_m"),
+        pl.col("loo_residual_m").filter(good).quantile(0.95, interpolation="linear")
+        .alias("ais_p95_error_m"),
+        pl.col("manoeuvre_probability").filter(good).mean().alias("manoeuvre_share"))
+    assert want["reports"].sum() > 100
+    same(report(world, "reference_quality"), want, ["site", "ais_class"], atol=0.0051,
+         outlier_share=5.1e-6, manoeuvre_share=5.1e-4)
+
+
 # --- cross-track ----------------------------------------------------------------------------
 
 
