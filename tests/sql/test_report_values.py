@@ -631,6 +631,52 @@ def test_reference_quality(world):
          outlier_share=5.1e-6, manoeuvre_share=5.1e-4)
 
 
+@covers("track_continuity")
+def test_track_continuity(world):
+    """Per target and epoch its primary (nearest) fused track; gaps above 12 s (up to the
+    reference's 200 s), primary-track changes, swaps of two targets' tracks within 60 s,
+    epochs with more than one track."""
+    f = _fused_errors(world).with_columns(pl.col("sector").fill_null(OUTSIDE))
+    tgt = ["site", "reference", "reference_id"]
+    per = (f.sort("error_m").group_by(*tgt, "time_ns").agg(
+        pl.col("sector").first(), pl.len().alias("n_tracks"),
+        pl.col("system_track_id").first().alias("primary"))
+        .sort(*tgt, "time_ns").with_columns(
+            (pl.col("time_ns").diff().over(tgt) / NS).alias("dt_s"),
+            pl.col("primary").shift().over(tgt).alias("prev")))
+    epoch_s = per.filter(pl.col("dt_s") > 0).group_by("site").agg(
+        pl.col("dt_s").median().alias("epoch_s"))
+    changed = (pl.col("prev").is_not_null() & (pl.col("prev") != pl.col("primary"))
+               & (pl.col("dt_s") <= 200))
+    ch = per.filter(changed)
+    pairs = ch.join(ch, on=["site", "reference"], suffix="_b").filter(
+        (pl.col("prev") == pl.col("primary_b")) & (pl.col("primary") == pl.col("prev_b"))
+        & (pl.col("reference_id") < pl.col("reference_id_b"))
+        & ((pl.col("time_ns") - pl.col("time_ns_b")).abs() <= 60 * NS))
+    swaps = (pairs.select("site", "reference", "sector", "reference_id", "reference_id_b",
+                          "prev", "primary").unique()
+             .group_by("site", "reference", "sector").agg(pl.len().alias("track_swaps")))
+    gap = pl.col("dt_s")
+    want = (per.group_by("site", "sector", "reference").agg(
+        pl.col("reference_id").n_unique().alias("targets"), pl.len().alias("target_epochs"),
+        ((gap > 12) & (gap <= 200)).sum().alias("gaps"),
+        gap.filter(gap <= 200).max().alias("longest_gap_s"),
+        changed.sum().alias("track_changes"),
+        (pl.col("n_tracks") > 1).sum().alias("extra"))
+        .join(epoch_s, on="site").join(swaps, on=["site", "reference", "sector"], how="left")
+        .select("site", "sector", "reference", "targets", "target_epochs",
+                (pl.col("target_epochs") * pl.col("epoch_s") / 3600).alias("target_hours"),
+                "gaps", (pl.col("gaps") / pl.col("target_epochs")).alias("gap_probability"),
+                "longest_gap_s", "track_changes",
+                (pl.col("track_changes") * 3600.0 / (pl.col("target_epochs")
+                                                     * pl.col("epoch_s"))).alias("changes_per_h"),
+                pl.col("track_swaps").fill_null(0),
+                (pl.col("extra") / pl.col("target_epochs")).alias("extra_track_share")))
+    assert want["track_changes"].sum() > 0
+    same(report(world, "track_continuity"), want, ["site", "reference", "sector"],
+         atol=5.1e-4, gap_probability=5.1e-7, longest_gap_s=0.051, extra_track_share=5.1e-6)
+
+
 # --- cross-track ----------------------------------------------------------------------------
 
 
