@@ -847,6 +847,87 @@ def test_fault_timeline(world):
     same(report(world, "fault_timeline"), want, ["site", "lane", "start_utc"], atol=0.051)
 
 
+def _decisions(world) -> pl.DataFrame:
+    """Every family's integrity decisions: (site, family, sensor_kind, channel, sector,
+    unit, time_ns, eta, excluded, q, error_model)."""
+    air = table(world, "channel_health").select(
+        "site", pl.lit("airfield").alias("family"), "sensor_kind", "channel", "sector",
+        pl.col("track_id").alias("unit"), "time_ns", "eta", "excluded",
+        # chi2(2): P(xi <= d1) + P(xi >= d2)
+        (1.0 - (-pl.col("d1") / 2.0).exp() + (-pl.col("d2") / 2.0).exp()).alias("q"),
+        pl.col("error_model").fill_null("config"))
+    sea = table(world, "maritime_channel_health").select(
+        "site", pl.lit("maritime").alias("family"), "sensor_kind", "channel", "sector",
+        pl.lit("").alias("unit"), "time_ns", "eta", "excluded", "q",
+        pl.when(pl.col("sensor_kind") == "radar").then(pl.lit("reported sigmas"))
+        .alias("error_model"))
+    nav = (table(world, "nav_solution")
+           .filter(pl.col("gnss_eta").is_not_null() | pl.col("gnss_excluded").fill_null(False))
+           .select("site", pl.lit("nav").alias("family"), pl.lit("gnss").alias("sensor_kind"),
+                   pl.col("platform_id").alias("channel"), "sector", pl.lit("").alias("unit"),
+                   "time_ns", pl.col("gnss_eta").alias("eta"),
+                   pl.col("gnss_excluded").alias("excluded"), pl.col("gnss_q").alias("q"),
+                   pl.lit(None, pl.String).alias("error_model")))
+    return pl.concat([air, sea, nav], how="vertical_relaxed").with_columns(
+        pl.col("sector").fill_null(OUTSIDE), pl.col("excluded").fill_null(False))
+
+
+def _runs(df: pl.DataFrame, part: list[str], flag: str, max_gap: pl.Expr) -> pl.DataFrame:
+    """Runs of ``flag`` rows per ``part`` (a row further than ``max_gap`` ns from the
+    previous row starts a new run): part, start_ns, end_ns (the last row + step_ns)."""
+    d = df.sort(*part, "time_ns").with_columns(
+        pl.col(flag).shift().over(part).alias("prev"),
+        pl.col("time_ns").diff().over(part).alias("dt"))
+    starts = pl.col(flag) & (pl.col("prev").is_null() | ~pl.col("prev") | (pl.col("dt") > max_gap))
+    return (d.with_columns(starts.cast(pl.Int64).cum_sum().over(part).alias("run"))
+            .filter(flag).group_by(*part, "run").agg(
+                pl.col("time_ns").min().alias("start_ns"),
+                (pl.col("time_ns").max() + pl.col("step_ns").first()).alias("end_ns")))
+
+
+@covers("channel_faults_by_sector")
+def test_channel_faults_by_sector(world):
+    from scipy.stats import poisson
+
+    h = _decisions(world)
+    chan = ["site", "family", "sector", "channel"]
+    dt = h.sort("time_ns").with_columns(
+        pl.col("time_ns").diff().over(*chan, "unit").alias("dt"))
+    step = dt.group_by("site", "family", "channel").agg(
+        pl.col("dt").filter(pl.col("dt") > 0).median().fill_null(1e9).round(0).cast(pl.Int64)
+        .alias("step_ns"))
+    h = h.join(step, on=["site", "family", "channel"])
+    te = (_runs(h, [*chan, "unit"], "excluded", 3 * pl.col("step_ns"))
+          .group_by(chan).agg(pl.len().alias("target_episodes"),
+                              ((pl.col("end_ns") - pl.col("start_ns")).sum() / NS)
+                              .alias("target_excluded_s")))
+    per_time = h.group_by(*chan, "time_ns").agg(
+        (pl.col("excluded").cast(pl.Float64).mean() >= 0.5).alias("down"),
+        pl.col("step_ns").first())
+    ce = (_runs(per_time, chan, "down", 3 * pl.col("step_ns"))
+          .group_by(chan).agg(pl.len().alias("channel_episodes"),
+                              ((pl.col("end_ns") - pl.col("start_ns")).sum() / NS)
+                              .alias("channel_fault_s")))
+    checks = h.group_by(chan).agg(
+        pl.col("sensor_kind").first(), pl.col("eta").count().alias("decisions"),
+        (pl.col("eta") == 1).sum().alias("flagged"), pl.col("q").mean(),
+        pl.col("excluded").mean().alias("excluded_share"))
+    lam = (checks["decisions"] * checks["q"]).to_numpy()
+    checks = checks.with_columns(
+        pl.Series("p_chance", poisson.sf(checks["flagged"].to_numpy().astype(np.int64) - 1, lam)),
+        (pl.col("flagged") / pl.col("decisions")).alias("flagged_share"))
+    want = (checks.join(te, on=chan, how="left").join(ce, on=chan, how="left")
+            .with_columns(pl.col("target_episodes", "channel_episodes").fill_null(0),
+                          pl.col("target_excluded_s", "channel_fault_s").fill_null(0.0))
+            .drop("flagged"))
+    assert set(want["family"]) == {"airfield", "maritime", "nav"}
+    assert want["channel_episodes"].sum() >= 3
+    same(report(world, "channel_faults_by_sector"), want.drop("p_chance"), chan, atol=5.1e-6,
+         target_excluded_s=0.051, channel_fault_s=0.051)
+    same(report(world, "channel_faults_by_sector"), want.select(*chan, "p_chance"), chan,
+         atol=1e-5)
+
+
 def test_every_report_has_a_value_test():
     """(runs last in this file)"""
     assert sorted(set(list_reports()) - TESTED) == []
