@@ -928,6 +928,50 @@ def test_channel_faults_by_sector(world):
          atol=1e-5)
 
 
+@covers("channel_fault_episodes")
+def test_channel_fault_episodes(world):
+    h = _decisions(world)
+    chan = ["site", "family", "sector", "channel"]
+    dt = h.sort("time_ns").with_columns(
+        pl.col("time_ns").diff().over(*chan, "unit").alias("dt"))
+    step = dt.group_by("site", "family", "channel").agg(
+        pl.col("dt").filter(pl.col("dt") > 0).median().fill_null(1e9).round(0).cast(pl.Int64)
+        .alias("step_ns"))
+    h = h.join(step, on=["site", "family", "channel"])
+    per_time = h.group_by(*chan, "time_ns").agg(
+        (pl.col("excluded").cast(pl.Float64).mean() >= 0.5).alias("down"),
+        pl.col("step_ns").first())
+    ep = _runs(per_time, chan, "down", 3 * pl.col("step_ns")).drop("run")
+    # the evidence: the channel's decisions in the sector inside the episode
+    health = pl.concat([
+        table(world, "channel_health").select(
+            "site", pl.lit("airfield").alias("family"), "channel", "sector", "time_ns", "eta",
+            (pl.col("nis") / pl.col("dof")).alias("nis_per_dof"), "innovation_m",
+            pl.lit(None, pl.Float64).alias("range_bias_m")),
+        table(world, "maritime_channel_health").select(
+            "site", pl.lit("maritime").alias("family"), "channel", "sector", "time_ns", "eta",
+            (pl.col("nis") / pl.col("dof")).alias("nis_per_dof"), "innovation_m",
+            "range_bias_m")], how="vertical_relaxed").with_columns(
+        pl.col("sector").fill_null(OUTSIDE))
+    flagged = pl.col("eta") == 1
+    ev = (ep.join(health, on=chan)
+          .filter((pl.col("time_ns") >= pl.col("start_ns")) & (pl.col("time_ns") < pl.col("end_ns")))
+          .group_by(*chan, "start_ns", "end_ns").agg(
+              pl.col("eta").count().alias("decisions"), flagged.sum().alias("flags"),
+              pl.col("nis_per_dof").filter(flagged).mean().alias("mean_nis_per_dof"),
+              pl.col("range_bias_m").filter(flagged).mean().alias("range_bias_m"),
+              pl.col("innovation_m").filter(flagged).mean().alias("innovation_m")))
+    sensors = ep.filter(pl.col("family") != "nav")
+    assert sensors.height == ev.height >= 5
+    want = ev.with_columns(((pl.col("end_ns") - pl.col("start_ns")) / NS).alias("duration_s"),
+                           (pl.col("flags") <= 1).alias("isolated"))
+    got = report(world, "channel_fault_episodes")
+    assert got.height == ep.height  # the GNSS episodes too (their evidence: nav_solution)
+    same(got.filter(pl.col("family") != "nav"), want, [*chan, "start_ns"], atol=0.051,
+         mean_nis_per_dof=0.0051)
+    assert got.filter(pl.col("family") == "maritime")["range_bias_m"].max() > 40  # R2's 80 m
+
+
 def test_every_report_has_a_value_test():
     """(runs last in this file)"""
     assert sorted(set(list_reports()) - TESTED) == []
