@@ -955,7 +955,7 @@ def test_channel_fault_episodes(world):
         pl.col("sector").fill_null(OUTSIDE))
     flagged = pl.col("eta") == 1
     ev = (ep.join(health, on=chan)
-          .filter((pl.col("time_ns") >= pl.col("start_ns")) & (pl.col("time_ns") < pl.col("end_ns")))
+          .filter(pl.col("time_ns").is_between("start_ns", "end_ns", closed="left"))
           .group_by(*chan, "start_ns", "end_ns").agg(
               pl.col("eta").count().alias("decisions"), flagged.sum().alias("flags"),
               pl.col("nis_per_dof").filter(flagged).mean().alias("mean_nis_per_dof"),
@@ -970,6 +970,80 @@ def test_channel_fault_episodes(world):
     same(got.filter(pl.col("family") != "nav"), want, [*chan, "start_ns"], atol=0.051,
          mean_nis_per_dof=0.0051)
     assert got.filter(pl.col("family") == "maritime")["range_bias_m"].max() > 40  # R2's 80 m
+
+
+def _ais_messages(world) -> pl.DataFrame:
+    """Every AIS message once: position reports, static messages (5, 24), other types;
+    with the first [[sectors]] polygon (config order) holding its position."""
+    import shapely
+
+    rep = table(world, "ais_reports").select(
+        "site", "time_ns", "mmsi", "msg_type", pl.col("ais_class").alias("station_class"),
+        "lat_deg", "lon_deg", "time_source", pl.lit(True).alias("vessel"))
+    sta = table(world, "ais_static").filter(pl.col("msg_type").is_in([5, 24])).select(
+        "site", "time_ns", "mmsi", "msg_type", pl.col("ais_class").alias("station_class"),
+        pl.lit(None, pl.Float64).alias("lat_deg"), pl.lit(None, pl.Float64).alias("lon_deg"),
+        "time_source", pl.lit(True).alias("vessel"))
+    oth = table(world, "ais_other_messages").select(
+        "site", "time_ns", "mmsi", "msg_type",
+        pl.col("ais_class").fill_null("other").alias("station_class"), "lat_deg", "lon_deg",
+        "time_source", pl.lit(False).alias("vessel"))
+    m = pl.concat([rep, sta, oth], how="vertical_relaxed")
+    lat, lon = m["lat_deg"].to_numpy(), m["lon_deg"].to_numpy()
+    sector = np.where(np.isnan(lat), "(no position)", OUTSIDE).astype(object)
+    for sec in reversed(world.cfg.sectors):  # the first sector holding a point wins
+        inside = shapely.contains_xy(shapely.Polygon(sec.polygon_lat_lon_deg), lat, lon)
+        sector[inside] = sec.name
+    synthetic = (pl.col("time_source").str.starts_with("none:")
+                 | pl.col("time_source").str.contains(":undated"))
+    return m.with_columns(pl.Series("sector", sector, pl.String),
+                          synthetic.fill_null(False).alias("synthetic"))
+
+
+@covers("ais_traffic")
+def test_ais_traffic(world):
+    m = _ais_messages(world)
+    keyed = pl.concat([
+        m.with_columns(pl.lit("total").alias("breakdown"), pl.lit("all").alias("key")),
+        m.with_columns(pl.lit("class").alias("breakdown"), pl.col("station_class").alias("key")),
+        m.with_columns(pl.lit("msg_type").alias("breakdown"),
+                       pl.col("msg_type").cast(pl.String).str.zfill(2).alias("key")),
+        m.with_columns(pl.lit("time_source").alias("breakdown"),
+                       pl.col("time_source").fill_null("(unknown)").alias("key")),
+        m.filter(~pl.col("synthetic")).with_columns(
+            pl.lit("hour").alias("breakdown"),
+            utc_us(pl.col("time_ns")).dt.truncate("1h").dt.strftime("%Y-%m-%dT%H:00Z")
+            .alias("key")),
+        m.filter(pl.col("lat_deg").is_not_null()).with_columns(
+            pl.lit("sector").alias("breakdown"), pl.col("sector").alias("key")),
+        m.filter("vessel").with_columns(pl.lit("vessel").alias("breakdown"),
+                                        pl.col("mmsi").cast(pl.String).alias("key"))])
+    static = (table(world, "ais_static").select("site", "mmsi").unique()
+              .with_columns(pl.lit(True).alias("has_static")))
+    k = keyed.join(static, on=["site", "mmsi"], how="left")
+    timed = pl.col("time_ns").filter(~pl.col("synthetic"))
+    agg = k.group_by("site", "breakdown", "key").agg(
+        pl.col("mmsi").filter("vessel").n_unique().alias("vessels"),
+        pl.col("mmsi").n_unique().alias("stations"), pl.len().alias("messages"),
+        timed.len().alias("timed"), timed.min().alias("first"), timed.max().alias("last"),
+        pl.col("mmsi").filter(pl.col("vessel") & pl.col("has_static").fill_null(False))
+        .n_unique().alias("with_static"))
+    span_h = ((pl.col("last") - pl.col("first")) / 3.6e12).clip(1.0 / 60)
+    want = agg.select(
+        "site", "breakdown", "key", "vessels", "stations", "messages",
+        (pl.when(pl.col("timed") > 0).then(pl.col("timed")) / span_h).alias("messages_per_hour"),
+        (pl.col("with_static") / pl.when(pl.col("vessels") > 0).then(pl.col("vessels")))
+        .alias("static_share"),
+        (pl.col("messages") - pl.col("timed")).alias("synthetic_messages"))
+    # vessel rows: the 20 busiest per site (messages, then MMSI text)
+    busy = (want.filter(pl.col("breakdown") == "vessel").sort(["site", "messages", "key"],
+                                                             descending=[False, True, False])
+            .with_columns(pl.int_range(1, pl.len() + 1).over("site").alias("r"))
+            .filter(pl.col("r") <= 20).drop("r"))
+    want = pl.concat([want.filter(pl.col("breakdown") != "vessel"), busy])
+    assert set(want.filter(pl.col("breakdown") == "sector")["key"]) > {OUTSIDE}
+    same(report(world, "ais_traffic", cfg=world.cfg), want, ["site", "breakdown", "key"],
+         atol=0.051, static_share=5.1e-4)
 
 
 def test_every_report_has_a_value_test():
