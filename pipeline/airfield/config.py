@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.config import Config, ConfigError
+from pipeline.config import SIGMA_SPEED_WHY, Config, ConfigError
 from pipeline.configspec import (
     Document,
     count,
@@ -90,7 +90,7 @@ class SensorConfig:
                                               convert=var_model)
     velocity_model: VarModel | None = setting(None, sources=("velocity_ar", "velocity_gamma"),
                                               convert=var_model)
-    velocity_noise_mps: float = positive(0.5)
+    velocity_noise_mps: float = setting(0.5, ge=0.001, le=20.0, why=SIGMA_SPEED_WHY)
     # "default": no model in the file, the kind's default (set when it loads)
     error_model: str = field(default="config", repr=False)
 

@@ -50,7 +50,9 @@ class GapsConfig:
     manoeuvre_noise_factor: float = setting(5.0, ge=1.0)
     max_speed_mps: float = setting(15.0, gt=0.0, le=50.0, why=(
         "a ship sails at most ~25 m/s (50 kn): 50 m/s is no ship's speed"))
-    sigma_cog_rad: float = positive(3.0, unit="deg")
+    sigma_cog_rad: float = setting(3.0, unit="deg", gt=0.0, le=90.0, why=(
+        "an AIS COG sigma is a few degrees (tens when slow); beyond 90 deg the course says "
+        "nothing"))
     course_min_speed_mps: float = setting(1.0, ge=0.0)
     manoeuvre_rate_rad_per_s: float = positive(0.2, unit="deg")
     region_probability: float = probability(0.9)

@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, replace
 
-from pipeline.config import Config
+from pipeline.config import SIGMA_SPEED_WHY, Config
 from pipeline.configspec import (
     Document,
     count,
@@ -93,9 +93,11 @@ class NavSettings:
     gnss_timeout_s: float = setting(2.5, gt=0.0, le=600.0, why=(
         "a receiver gives a fix every 0.1-1 s: seconds without one are an outage, 10 "
         "minutes is far past it"))
-    gnss_position_sigma_m: float = positive(
-        2.9e-5, key="gnss_position_sigma_deg",
-        convert=lambda deg: math.radians(deg) * EARTH_RADIUS_M)
+    gnss_position_sigma_m: float = setting(
+        2.9e-5, key="gnss_position_sigma_deg", gt=0.0, le=0.01,
+        convert=lambda deg: math.radians(deg) * EARTH_RADIUS_M, why=(
+            "a GNSS latitude sigma is millimetres to tens of metres: 0.01 deg is 1.1 km, "
+            "no fix"))
     dr_correction_window_s: float = positive(120.0)
     dr_bound_n_sigma: float = positive(3.0)
     # the GNSS position test (pipeline/nav/integrity.py, issue 22)
@@ -112,9 +114,9 @@ class _FilterKeys:
     gnss_accel_sigma_mps2: float = positive(0.019)
     gate_n_sigma: float = positive(3.0)
     max_difference_gap_s: float = positive(3.0)
-    gnss_velocity_sigma_mps: float = positive(0.053)
+    gnss_velocity_sigma_mps: float = setting(0.053, ge=0.001, le=20.0, why=SIGMA_SPEED_WHY)
     gnss_velocity_tau_s: float = positive(15.0)
-    log_sigma_mps: float = positive(0.5)
+    log_sigma_mps: float = setting(0.5, ge=0.001, le=20.0, why=SIGMA_SPEED_WHY)
     current_walk_mps_per_sqrt_s: float = positive(2e-4)
 
 
