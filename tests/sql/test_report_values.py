@@ -251,11 +251,11 @@ def test_surface_accuracy_by_area(world):
     # posterior (variance corr, isotropic), integrated with the report's 32-point rule
     r = np.array([0.367193, 0.884754, 1.314174, 1.870075])
     d = np.array([0.465719, 0.775248, 1.102269, 1.701814])
-    u = np.concatenate([np.stack([[x, 0], [0, x], [-x, 0], [0, -x], [y, y], [-y, y], [-y, -y],
-                                  [y, -y]]) for x, y in zip(r, d, strict=True)])
-    draws = pl.DataFrame({"u1": u[:, 0], "u2": u[:, 1]})
+    rule = np.concatenate([np.stack([[x, 0], [0, x], [-x, 0], [0, -x], [y, y], [-y, y], [-y, -y],
+                                     [y, -y]]) for x, y in zip(r, d, strict=True)])
+    draws = pl.DataFrame({"u1": rule[:, 0], "u2": rule[:, 1]})
     half = pl.col("corr").clip(0.0) / 2.0
-    post = _surface_updates(world).filter(scored)
+    post = u.filter(scored)
     post = (post.with_columns(pl.col("reference").fill_null("(none)")).join(draws, how="cross")
             .with_columns(((pl.col("error_m") + half.sqrt() * pl.col("u1")) ** 2
                            + half * pl.col("u2") ** 2).sqrt().alias("e"))
