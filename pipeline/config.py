@@ -19,18 +19,30 @@ from pipeline.configspec import (
     ConfigError,
     Document,
     count,
+    gate,
     height,
     latitude,
     longitude,
     polygon,
     positive,
     probability,
+    sector_list,
     setting,
     text,
 )
 from pipeline.resources import resource_path
 
 __all__ = ["Config", "ConfigError", "load_config"]
+
+
+SCAN_PERIOD_WHY = ("a rotating antenna turns once per 0.5 s (120 rpm, surface movement "
+                   "radars) to 30 s (2 rpm, long-range surveillance); VTS radars 2-4 s")
+SIGMA_SPEED_WHY = ("a speed sigma is millimetres to metres per second; 20 m/s is no "
+                   "measurement of a ship or a taxiing aircraft")
+AIS_AGE_WHY = ("AIS reports every 2 s to 6 min (ITU-R M.1371): older than an hour is no "
+               "position")
+GNSS_POSITION_WHY = ("a GNSS position sigma is decimetres (RTK) to tens of metres; "
+                     "1 km is no fix")
 
 
 @dataclass(frozen=True)
@@ -46,7 +58,9 @@ class RegionConfig:
     origin_lat_deg: float = latitude()
     origin_lon_deg: float = longitude()
     origin_height_m: float = height(0.0)
-    radius_m: float = positive(100_000.0)
+    radius_m: float = setting(100_000.0, gt=0.0, le=1_000_000.0, why=(
+        "the regional frame is a tangent plane: 1000 km from its origin its north is "
+        "off by ~9 deg"))
     max_outside_share: float = setting(0.5, ge=0.0, le=1.0)
 
 
@@ -66,12 +80,18 @@ class RadarSite:
     lon_deg: float = longitude()
     height_m: float = height(0.0, file_only=True)
     north_alignment_rad: float = setting(0.0, unit="deg", ge=-180.0, le=180.0, file_only=True)
-    scan_period_s: float = positive()
-    max_range_m: float = positive()
-    sigma_range_m: float = positive(15.0)
-    sigma_azimuth_rad: float = setting(0.45, unit="deg", gt=0.0, lt=180.0)
-    sigma_speed_mps: float = positive(0.25)
-    sigma_course_rad: float = setting(2.0, unit="deg", gt=0.0, lt=180.0)
+    scan_period_s: float = setting(ge=0.5, le=30.0, why=SCAN_PERIOD_WHY)
+    max_range_m: float = setting(ge=100.0, le=250_000.0, why=(
+        "from a surface movement radar's few hundred metres to a long-range coastal "
+        "radar's 250 km (beyond it a ship is below the radar horizon of any mast)"))
+    sigma_range_m: float = setting(15.0, ge=0.1, le=1000.0, why=(
+        "a tracker's range sigma is a few metres to tens of metres; 1 km is no track"))
+    sigma_azimuth_rad: float = setting(0.45, unit="deg", ge=0.001, le=10.0, why=(
+        "an antenna's beam is 0.3-3 deg wide: its tracks' azimuth sigma is hundredths "
+        "to a few degrees"))
+    sigma_speed_mps: float = setting(0.25, ge=0.001, le=20.0, why=SIGMA_SPEED_WHY)
+    sigma_course_rad: float = setting(2.0, unit="deg", ge=0.01, le=90.0, why=(
+        "a track's course sigma is under a degree to tens of degrees (slow targets)"))
     # none of the four sigmas was in the file: the class defaults (set when it loads)
     sigmas_default: bool = field(default=False, repr=False)
 
@@ -83,16 +103,18 @@ RADAR_CLASS_DEFAULTS = {"vts": {"sigma_range_m": 15.0, "sigma_azimuth_deg": 0.45
 
 @dataclass(frozen=True)
 class AisConfig:
-    gate_probability: float = probability(0.999)
-    max_report_age_s: float = positive(30.0)
-    sigma_position_m: float = positive(10.0)
-    sigma_sog_mps: float = positive(0.3)
+    gate_probability: float = gate(0.999)
+    max_report_age_s: float = setting(30.0, gt=0.0, le=3600.0, why=AIS_AGE_WHY)
+    sigma_position_m: float = setting(10.0, ge=0.1, le=1000.0, why=GNSS_POSITION_WHY)
+    sigma_sog_mps: float = setting(0.3, ge=0.001, le=20.0, why=SIGMA_SPEED_WHY)
     # the history the identity test carries over a unit cut (the units' lead-in; also
     # their look-ahead, for the smoothed reference: pipeline.maritime.stage)
-    identity_window_s: float = positive(300.0)
+    identity_window_s: float = setting(300.0, ge=1.0, le=86_400.0, why=(
+        "the identity test's history spans seconds to at most a day"))
     # the false-identification budget alpha: the chance a pair that is not one ship is
     # confirmed; beta: the chance a ship's own AIS pair is rejected (Wald's boundaries)
-    false_identification_probability: float = probability(0.001)
+    false_identification_probability: float = setting(0.001, gt=0.0, le=0.1, why=(
+        "a false-identification budget above 10 % names ships by chance"))
     missed_identification_probability: float = probability(0.01)
     # per epoch: the chance a ship's own AIS is assigned to its track (P_M), and that
     # another ship's AIS is (P_S < P_M)
@@ -102,8 +124,11 @@ class AisConfig:
 
 @dataclass(frozen=True)
 class ValidationConfig:
-    max_speed_mps: float = positive(40.0)
-    max_range_m: float = positive(60000.0)
+    max_speed_mps: float = setting(40.0, ge=1.0, le=350.0, why=(
+        "the fastest plausible target, from a harbour's 1 m/s to a landing aircraft "
+        "(350 m/s is the speed of sound)"))
+    max_range_m: float = setting(60000.0, ge=100.0, le=250_000.0, why=(
+        "a report farther than 250 km from its radar is below any mast's radar horizon"))
 
 
 @dataclass(frozen=True)
@@ -178,7 +203,7 @@ class Config:
     ais: AisConfig = setting({})
     validation: ValidationConfig = setting({})
     fairway_legs: tuple[FairwayLeg, ...] = setting([], file_only=True)
-    sectors: tuple[Sector, ...] = setting([], file_only=True)
+    sectors: tuple[Sector, ...] = sector_list()
     warehouse_path: str = text("warehouse", key=("warehouse", "path"))
     # object-store options of an s3:// warehouse (endpoint, region, credentials: deltalake's
     # names; over the AWS_* environment variables): never printed (docs/scale.md)

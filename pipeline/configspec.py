@@ -54,12 +54,14 @@ class Spec:
     le: float | None = None
     choices: tuple[Any, ...] | None = None
     min_len: int | None = None
+    max_len: int | None = None
     unique: bool = False
     check: Callable[[Any], str | None] | None = None
     convert: Callable[..., Any] | None = None
     sources: tuple[str, ...] | None = None
     mask: Callable[[Any], Any] | None = None  # what `config check` shows of the value
     scenario: str | None = None  # a simulator setting: the scenario file that holds it
+    why: str | None = None  # the reason for the range (physics, the sensor), told with it
 
     def file_key(self, name: str) -> Path:
         if self.key is not None:
@@ -76,12 +78,12 @@ class Spec:
 def setting(default: Any = REQUIRED, *, key: str | Path | None = None, unit: str | None = None,
             gt: float | None = None, ge: float | None = None, lt: float | None = None,
             le: float | None = None, choices: tuple[Any, ...] | None = None,
-            min_len: int | None = None, unique: bool = False,
+            min_len: int | None = None, max_len: int | None = None, unique: bool = False,
             check: Callable[[Any], str | None] | None = None,
             convert: Callable[..., Any] | None = None, sources: tuple[str, ...] | None = None,
             factory: Callable[[], Any] | None = None, file_only: bool = False,
             mask: Callable[[Any], Any] | None = None,
-            scenario: str | None = None) -> Any:
+            scenario: str | None = None, why: str | None = None) -> Any:
     """A dataclass field read from the config file.
 
     ``default``: the value when the key is absent, in file units (``REQUIRED``: the key
@@ -93,19 +95,21 @@ def setting(default: Any = REQUIRED, *, key: str | Path | None = None, unit: str
     ``unit="deg"``: the file key ends ``_deg``, the field holds radians.
 
     Checks: ``gt``/``ge``/``lt``/``le`` bound every number in the value (file units);
-    ``choices``; ``min_len`` of an array; ``unique`` within its array of tables (""
-    excepted); ``check``: value -> problem text or None. ``convert``: checked file value
-    -> field value. ``sources``: several file keys, all or none present, passed to
-    ``convert``, which raises ``ValueError(message)`` or ``ValueError(index of the key
-    at fault, message)``. ``mask``: file value -> what ``surveil config check`` shows
-    (credentials are never printed).
+    ``why``: the reason for those bounds (physics, the sensor), appended to the problem
+    (``must be in [0.5, 30], got 1e-09: a rotating antenna ...``); ``choices``;
+    ``min_len``/``max_len`` of an array (``why`` for the latter too); ``unique`` within
+    its array of tables ("" excepted); ``check``: value -> problem text or None.
+    ``convert``: checked file value -> field value. ``sources``: several file keys, all
+    or none present, passed to ``convert``, which raises ``ValueError(message)`` or
+    ``ValueError(index of the key at fault, message)``. ``mask``: file value -> what
+    ``surveil config check`` shows (credentials are never printed).
 
     ``scenario``: the value is the simulator's world, not the site's (a fault schedule,
     an injected bias): it is read only from a scenario file (``config/scenarios/
     <scenario>.toml``, :func:`scenario_problem`); in a site config it is a problem
     saying where it moved, and the field keeps its default."""
     spec = Spec(default, (key,) if isinstance(key, str) else key, unit, gt, ge, lt, le, choices,
-                min_len, unique, check, convert, sources, mask, scenario)
+                min_len, max_len, unique, check, convert, sources, mask, scenario, why)
     meta = {"setting": spec}
     if factory is not None:
         return field(default_factory=factory, metadata=meta)
@@ -131,6 +135,37 @@ def positive(default: Any = REQUIRED, **kw: Any) -> Any:
 def probability(default: Any = REQUIRED, **kw: Any) -> Any:
     """A probability in the open interval (0, 1)."""
     return setting(default, gt=0.0, lt=1.0, **kw)
+
+
+def gate(default: Any = REQUIRED, **kw: Any) -> Any:
+    """The probability that a chi-square gate keeps a true pairing, in [0.5, 1)."""
+    return setting(default, ge=0.5, lt=1.0, why=(
+        "a gate keeps a true pairing with this probability; below 0.5 it rejects most "
+        "of them"), **kw)
+
+
+def false_alarm(default: Any = REQUIRED, **kw: Any) -> Any:
+    """The false-alarm probability of one integrity check, in (0, 0.1]."""
+    return setting(default, gt=0.0, le=0.1, why=(
+        "the share of healthy checks flagged; above 0.1 a healthy channel is excluded "
+        "every few epochs"), **kw)
+
+
+MAX_SECTORS = 100
+"""The most sectors (maritime or airfield areas) a site declares: a VTS area or an
+airfield is split into a few to a few tens; every sector is a row of each per-sector
+report and a bar of each audit chart. `surveil audit` of a 15-minute channel scene took
+5.8 s with the shipped 3 sectors and 8.5 s with the same water tiled into 100; with
+10,000 it ran for more than 600 s (issue 40). A cap, not a grouped audit: past a hundred
+the per-sector tables and charts are no longer read, and the sectors are the site's to
+merge (they name what operators watch)."""
+
+
+def sector_list(**kw: Any) -> Any:
+    """An array of sector tables, at most :data:`MAX_SECTORS`."""
+    return setting([], file_only=True, max_len=MAX_SECTORS, why=(
+        "a site is split into a few to a few tens of sectors; each is a row of every "
+        "per-sector report and a bar of every audit chart: merge small ones"), **kw)
 
 
 def count(default: Any = REQUIRED, **kw: Any) -> Any:
@@ -166,7 +201,35 @@ def _polygon(points: tuple[tuple[float, float], ...]) -> str | None:
     for i, (lat, lon) in enumerate(points):
         if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0):
             return f"vertex {i} [{lat}, {lon}] is not a [lat_deg, lon_deg] pair"
-    return None
+    return _simple_polygon(points)
+
+
+_NO_AREA_DEG2 = 1e-10  # ~1 m^2 at mid latitudes
+_INVALID = re.compile(r"^(?P<what>[A-Za-z -]+?)\s*\[(?P<lat>\S+) (?P<lon>\S+)\]$")
+
+
+def _simple_polygon(points: tuple[tuple[float, float], ...]) -> str | None:
+    """A polygon whose edges cross or touch (a bow-tie, a figure eight) or that encloses
+    no area is refused naming the point: which side of a crossing is "inside" is not
+    what the author meant (a bow-tie sector lost 17 % of its samples to "outside
+    sectors", issue 40). shapely's validity (GEOS), in the file's [lat, lon] plane."""
+    import shapely
+    from shapely.validation import explain_validity
+
+    shape = shapely.Polygon(points)
+    if shapely.MultiPoint(points).convex_hull.area < _NO_AREA_DEG2 or (
+            shape.is_valid and shape.area < _NO_AREA_DEG2):
+        return "encloses no area (its vertices lie on one line)"
+    if shape.is_valid:
+        return None
+    m = _INVALID.match(explain_validity(shape))
+    if m is None:
+        return f"is not a valid polygon ({explain_validity(shape)})"
+    at = f"[{float(m['lat']):.6f}, {float(m['lon']):.6f}]"
+    if "intersection" in m["what"]:
+        return (f"its edges cross or touch at {at} (lat_deg, lon_deg): a polygon's "
+                "boundary must not cross itself; list the vertices in order around it")
+    return f"is not a valid polygon ({m['what'].lower()} at {at} (lat_deg, lon_deg))"
 
 
 def polygon(**kw: Any) -> Any:
@@ -530,13 +593,20 @@ def _check(spec: Spec, value: Any) -> str | None:
     if spec.min_len is not None and len(value) < spec.min_len:
         noun = "entry" if spec.min_len == 1 else "entries"
         return f"needs at least {spec.min_len} {noun}, got {len(value)}"
+    if spec.max_len is not None and len(value) > spec.max_len:
+        return f"at most {spec.max_len} entries, got {len(value)}{_why(spec)}"
     for idx, x in _numbers(value):
         if ((spec.gt is not None and not x > spec.gt) or (spec.ge is not None and not x >= spec.ge)
                 or (spec.lt is not None and not x < spec.lt)
                 or (spec.le is not None and not x <= spec.le)):
             where = "".join(f"[{i}]" for i in idx)
-            return f"{'element ' + where + ' ' if where else ''}must be {_bounds(spec)}, got {x:g}"
+            return (f"{'element ' + where + ' ' if where else ''}must be {_bounds(spec)}, "
+                    f"got {x:g}{_why(spec)}")
     return spec.check(value) if spec.check is not None else None
+
+
+def _why(spec: Spec) -> str:
+    return f": {spec.why}" if spec.why else ""
 
 
 def _bounds(s: Spec) -> str:

@@ -152,6 +152,13 @@ def test_resolved_config_loads_back_to_the_same_config(tmp_path):
 
 # --- each defect, through the real CLI -------------------------------------------------------
 
+GATE_WHY = ("a gate keeps a true pairing with this probability; below 0.5 it rejects most "
+            "of them")
+MAX_SPEED_WHY = ("the fastest plausible target, from a harbour's 1 m/s to a landing aircraft "
+                 "(350 m/s is the speed of sound)")
+SCAN_WHY = ("a rotating antenna turns once per 0.5 s (120 rpm, surface movement radars) to "
+            "30 s (2 rpm, long-range surveillance); VTS radars 2-4 s")
+
 CASES = {  # name: (old, new, nth line starting with, expected message after "line N: ")
     "wrong type in [execution]": (
         "max_workers = 2", 'max_workers = "two"', ("max_workers", 1),
@@ -164,10 +171,11 @@ CASES = {  # name: (old, new, nth line starting with, expected message after "li
         "[sync] unknown key 'epoch_period'; did you mean 'epoch_period_s'?"),
     "gate probability out of (0, 1)": (
         "gate_probability = 0.999        #", "gate_probability = 1.5        #",
-        ("gate_probability", 1), "[association].gate_probability: must be in (0, 1), got 1.5"),
+        ("gate_probability", 1), f"[association].gate_probability: must be in [0.5, 1), got "
+                                 f"1.5: {GATE_WHY}"),
     "negative speed limit": (
         "max_speed_mps = 40.0", "max_speed_mps = -5", ("max_speed_mps = -5", 1),
-        "[validation].max_speed_mps: must be > 0, got -5"),
+        f"[validation].max_speed_mps: must be in [1, 350], got -5: {MAX_SPEED_WHY}"),
     "unknown section": (
         "[siap]", "[siapp]", ("[siapp]", 1), "unknown section [siapp]; did you mean [siap]?"),
     "radar site sigma": (
@@ -175,7 +183,9 @@ CASES = {  # name: (old, new, nth line starting with, expected message after "li
         "sigma_course_deg = 2.0\n\n[sync]",
         "sigma_range_m = 0\nsigma_azimuth_deg = 0.45\nsigma_speed_mps = 0.25\n"
         "sigma_course_deg = 2.0\n\n[sync]",
-        ("sigma_range_m", 2), "[radar_sites][1].sigma_range_m: must be > 0, got 0"),
+        ("sigma_range_m", 2), "[radar_sites][1].sigma_range_m: must be in [0.1, 1000], got 0: "
+                              "a tracker's range sigma is a few metres to tens of metres; 1 km "
+                              "is no track"),
     "airfield sensor pd": (
         "pd = 0.98", "pd = 1.5", ("pd = 1.5", 1),
         "[airfield.sensors][1].pd: must be in (0, 1], got 1.5"),
@@ -198,7 +208,48 @@ CASES = {  # name: (old, new, nth line starting with, expected message after "li
         "[gaps].particles: expected an integer, got 2000.5"),
     "ownship step": (
         "filter_step_s = 1.0", "filter_step_s = -1.0", ("filter_step_s", 1),
-        "[ownship].filter_step_s: must be > 0, got -1"),
+        "[ownship].filter_step_s: must be in [0.01, 60], got -1: the gyro and GNSS report at "
+        "1-100 Hz: the filter steps at most 100 times a second and at least once a minute"),
+    # issue 40: well-typed nonsense (a radar excluded in 894 of 897 epochs, a bow-tie sector
+    # losing 17 % of its samples to "outside sectors")
+    "scan period of a nanosecond": (
+        "scan_period_s = 3.0", "scan_period_s = 1e-9", ("scan_period_s", 1),
+        f"[radar_sites][0].scan_period_s: must be in [0.5, 30], got 1e-09: {SCAN_WHY}"),
+    "a radar that sees 10,000 km": (
+        "max_range_m = 24000.0", "max_range_m = 1e7", ("max_range_m", 1),
+        "[radar_sites][0].max_range_m: must be in [100, 250000], got 1e+07: from a surface "
+        "movement radar's few hundred metres to a long-range coastal radar's 250 km (beyond "
+        "it a ship is below the radar horizon of any mast)"),
+    "azimuth sigma of a nano-degree": (
+        "sigma_azimuth_deg = 0.45", "sigma_azimuth_deg = 1e-9", ("sigma_azimuth_deg", 1),
+        "[radar_sites][0].sigma_azimuth_deg: must be in [0.001, 10], got 1e-09: an antenna's "
+        "beam is 0.3-3 deg wide: its tracks' azimuth sigma is hundredths to a few degrees"),
+    "epochs every microsecond": (
+        "epoch_period_s = 4.0", "epoch_period_s = 1e-6", ("epoch_period_s", 1),
+        "[sync].epoch_period_s: must be in [0.5, 60], got 1e-06: the synchronised epochs "
+        "follow the scans: at most one per 0.5 s (the fastest antenna) and at least one a "
+        "minute"),
+    "a gate that keeps nothing": (
+        "gate_probability = 0.999        #", "gate_probability = 1e-9        #",
+        ("gate_probability", 1), f"[association].gate_probability: must be in [0.5, 1), got "
+                                 f"1e-09: {GATE_WHY}"),
+    "a false alarm every other check": (
+        "radar_q = 0.001", "radar_q = 0.5", ("radar_q", 1),
+        "[channel_integrity].radar_q: must be in (0, 0.1], got 0.5: the share of healthy "
+        "checks flagged; above 0.1 a healthy channel is excluded every few epochs"),
+    "a bow-tie sector": (
+        "polygon = [[46.255766, 30.640617], [46.256049, 30.848123], [46.453965, 30.847935], "
+        "[46.453680, 30.639678]]",
+        "polygon = [[46.255766, 30.640617], [46.256049, 30.848123], [46.453680, 30.639678], "
+        "[46.453965, 30.847935]]", ("polygon", 1),
+        "[sectors][0].polygon: its edges cross or touch at [46.354686, 30.744089] (lat_deg, "
+        "lon_deg): a polygon's boundary must not cross itself; list the vertices in order "
+        "around it"),
+    "a sector on a line": (
+        "polygon = [[46.255766, 30.640617], [46.256049, 30.848123], [46.453965, 30.847935], "
+        "[46.453680, 30.639678]]",
+        "polygon = [[46.0, 30.6], [46.1, 30.7], [46.2, 30.8]]", ("polygon", 1),
+        "[sectors][0].polygon: encloses no area (its vertices lie on one line)"),
 }
 
 
@@ -217,16 +268,18 @@ def test_bad_value_is_exit_2_naming_key_path_and_line(case, tmp_path, monkeypatc
 
 def test_every_problem_is_reported_at_once(tmp_path, monkeypatch, capsys):
     text = TEXT
-    for old, new, *_ in CASES.values():
+    applied = set()  # (cases editing the same line: the first)
+    for k, (old, new, *_) in CASES.items():
         if old in text and "[siap]" not in old:  # (one unknown section is enough)
             text = text.replace(old, new, 1)
+            applied.add(k)
     path = tmp_path / "many.toml"
     path.write_text(text, encoding="utf-8")
     code, _, err = surveil(monkeypatch, capsys, "--config", str(path), "report", "--list")
     assert code == 2
     lines = err.removeprefix("error: ").splitlines()
     found = {line.split(": ", 1)[1] for line in lines}
-    expected = {m for k, (*_, m) in CASES.items() if k != "unknown section"}
+    expected = {m for k, (*_, m) in CASES.items() if k in applied}
     assert expected <= found, expected - found
     numbers = [int(line.split(" line ")[1].split(":")[0]) for line in lines]
     assert numbers == sorted(numbers)  # in file order
@@ -324,7 +377,7 @@ def test_report_validates_the_config_too(args, tmp_path, monkeypatch, capsys):
     code, out, err = surveil(monkeypatch, capsys, "--config", str(path),
                              "--warehouse", str(tmp_path), *args)
     assert code == 2 and out == ""
-    assert "[validation].max_speed_mps: must be > 0, got -5" in err
+    assert "[validation].max_speed_mps: must be in [1, 350], got -5" in err
 
 
 def test_config_check_prints_the_resolved_config(tmp_path, monkeypatch, capsys):
@@ -433,3 +486,33 @@ def test_the_documented_template_checks(monkeypatch, capsys):
     code, out, err = surveil(monkeypatch, capsys, "config", "check",
                              str(resource_path("config") / "site-template.toml"))
     assert (code, err) == (0, "") and 'name = "my-harbour"' in out
+
+
+def _with_sectors(n: int) -> str:
+    """The shipped config with its maritime sectors replaced by ``n`` small squares."""
+    start = TEXT.index("[[sectors]]")
+    end = TEXT.index("\n[", TEXT.rindex("[[sectors]]") + 1)
+    squares = "".join(
+        f'[[sectors]]\nname = "s{i}"\npolygon = [[{46.3 + 0.001 * i:.3f}, 30.7], '
+        f"[{46.3 + 0.001 * i:.3f}, 30.701], [{46.3005 + 0.001 * i:.4f}, 30.701]]\n\n"
+        for i in range(n))
+    return TEXT[:start] + squares + TEXT[end + 1:]
+
+
+def test_more_sectors_than_the_audit_can_draw_is_exit_2(tmp_path, monkeypatch, capsys):
+    """Issue 40: 10,000 sectors loaded, and `surveil audit` was still running after 600 s
+    (3.4 s with 3). At most MAX_SECTORS, refused at the first [[sectors]] line."""
+    from pipeline.configspec import MAX_SECTORS
+
+    path = tmp_path / "many.toml"
+    path.write_text(_with_sectors(MAX_SECTORS), encoding="utf-8")
+    code, _, err = surveil(monkeypatch, capsys, "config", "check", str(path))
+    assert (code, err) == (0, "")
+    text = _with_sectors(MAX_SECTORS + 1)
+    path.write_text(text, encoding="utf-8")
+    code, _, err = surveil(monkeypatch, capsys, "config", "check", str(path))
+    assert code == 2
+    assert err == (f"error: {path} line {line_of(text, '[[sectors]]')}: [sectors]: at most "
+                   f"{MAX_SECTORS} entries, got {MAX_SECTORS + 1}: a site is split into a few "
+                   "to a few tens of sectors; each is a row of every per-sector report and a "
+                   "bar of every audit chart: merge small ones\n")

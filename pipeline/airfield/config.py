@@ -13,16 +13,17 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.config import Config, ConfigError
+from pipeline.config import SIGMA_SPEED_WHY, Config, ConfigError
 from pipeline.configspec import (
     Document,
     count,
+    false_alarm,
     height,
     latitude,
     longitude,
     polygon,
     positive,
-    probability,
+    sector_list,
     setting,
     text,
 )
@@ -89,7 +90,7 @@ class SensorConfig:
                                               convert=var_model)
     velocity_model: VarModel | None = setting(None, sources=("velocity_ar", "velocity_gamma"),
                                               convert=var_model)
-    velocity_noise_mps: float = positive(0.5)
+    velocity_noise_mps: float = setting(0.5, ge=0.001, le=20.0, why=SIGMA_SPEED_WHY)
     # "default": no model in the file, the kind's default (set when it loads)
     error_model: str = field(default="config", repr=False)
 
@@ -119,7 +120,7 @@ class IntegrityConfig:
     fewer than that share of the (at least that many) tracks it reported in the last
     epoch are reported now."""
 
-    q: float = probability(0.01)
+    q: float = false_alarm(0.01)
     readmit_run: int = count(5)
     exclusion: bool = setting(True)
     warmup_s: float = setting(1.0, ge=0.0)
@@ -140,13 +141,19 @@ class FilterConfig:
     tracks of different channels are one target when they are within the gate at
     enough common epochs."""
 
-    epoch_s: float = positive(1.0)
+    epoch_s: float = setting(1.0, ge=0.05, le=60.0, why=(
+        "surface sensors report at 1-20 Hz (SMR scans 1 s, MLAT 1 Hz); the filter steps "
+        "at most 20 times a second and at least once a minute"))
     sigma_input_m: float = positive(0.2)
     sigma_stationary_m: float = positive(0.05)
     sigma_accel_mps2: float = positive(1.5)
     vasn_stationary_after_s: float = positive(3.0)
-    track_timeout_s: float = positive(10.0)
-    association_gate_m: float = positive(60.0)
+    track_timeout_s: float = setting(10.0, ge=0.1, le=3600.0, why=(
+        "a surface track coasts a few updates to minutes; beyond an hour lost targets "
+        "stay alive"))
+    association_gate_m: float = setting(60.0, gt=0.0, le=5000.0, why=(
+        "two sensors' tracks of one aircraft are metres to tens of metres apart; 5 km "
+        "spans the whole airfield"))
     min_association_votes: int = count(5)
 
 
@@ -175,7 +182,7 @@ class AirfieldConfig:
     reference_lat_deg: float = latitude()
     reference_lon_deg: float = longitude()
     sensors: tuple[SensorConfig, ...] = setting([], file_only=True)
-    sectors: tuple[AirfieldSector, ...] = setting([], file_only=True)
+    sectors: tuple[AirfieldSector, ...] = sector_list()
     filter: FilterConfig = setting({})
     integrity: IntegrityConfig = setting({})
     # the airfield scenario's fault schedule: config/scenarios/airfield.toml only

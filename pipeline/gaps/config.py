@@ -35,8 +35,11 @@ class GapsConfig:
         [300.0, 600.0, 1200.0, 1800.0, 2700.0, 3600.0], min_len=1, check=_increasing)
     max_horizon_s: float = positive(3600.0)
     forecast_at_gap_end: bool = setting(True)
-    particles: int = setting(2000, ge=100)
-    step_s: float = positive(60.0)
+    particles: int = setting(2000, ge=100, le=1_000_000, why=(
+        "a forecast's memory and time grow with the particles: a million per gap is "
+        "past what a batch unit holds"))
+    step_s: float = setting(60.0, ge=1.0, le=3600.0, why=(
+        "a ship's track between reports is propagated in steps of seconds to an hour"))
     lead_in_s: float = positive(600.0)
     max_lead_in_obs: int = count(10)
     course_noise_rad_per_sqrt_s: float = positive(0.25, unit="deg")
@@ -45,8 +48,11 @@ class GapsConfig:
                                      convert=lambda per_hour: per_hour / 3600.0)
     turn_sigma_rad: float = positive(45.0, unit="deg")
     manoeuvre_noise_factor: float = setting(5.0, ge=1.0)
-    max_speed_mps: float = positive(15.0)
-    sigma_cog_rad: float = positive(3.0, unit="deg")
+    max_speed_mps: float = setting(15.0, gt=0.0, le=50.0, why=(
+        "a ship sails at most ~25 m/s (50 kn): 50 m/s is no ship's speed"))
+    sigma_cog_rad: float = setting(3.0, unit="deg", gt=0.0, le=90.0, why=(
+        "an AIS COG sigma is a few degrees (tens when slow); beyond 90 deg the course says "
+        "nothing"))
     course_min_speed_mps: float = setting(1.0, ge=0.0)
     manoeuvre_rate_rad_per_s: float = positive(0.2, unit="deg")
     region_probability: float = probability(0.9)

@@ -15,16 +15,22 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
 
-from pipeline.config import Config
+from pipeline.config import AIS_AGE_WHY, GNSS_POSITION_WHY, SIGMA_SPEED_WHY, Config
 from pipeline.configspec import (
     Document,
     count,
+    false_alarm,
+    gate,
     latitude,
     longitude,
     positive,
     probability,
     setting,
 )
+
+SHIP_SPEED_WHY = "a ship sails at most ~25 m/s (50 kn): 50 m/s is no ship's speed"
+TIMEOUT_WHY = ("a track coasts for a few scans to minutes; a timeout beyond an hour keeps "
+               "lost tracks alive")
 
 SECTIONS = (
     "sync", "association", "siap", "radar_bias", "fairway", "channel_integrity", "channel_faults",
@@ -37,8 +43,12 @@ class SyncConfig:
     """Two-step synchronisation (multi-radar paper eq. 7-13): sigma of the extrapolation
     interval (eq. 12, s) and the period of the synchronised epochs (s)."""
 
-    sigma_dt_s: float = positive(0.1)
-    epoch_period_s: float = positive(4.0)
+    sigma_dt_s: float = setting(0.1, gt=0.0, le=10.0, why=(
+        "the timing error of a report, milliseconds to a second; beyond 10 s the clocks "
+        "are not synchronised"))
+    epoch_period_s: float = setting(4.0, ge=0.5, le=60.0, why=(
+        "the synchronised epochs follow the scans: at most one per 0.5 s (the fastest "
+        "antenna) and at least one a minute"))
 
 
 @dataclass(frozen=True)
@@ -47,11 +57,11 @@ class AssociationConfig:
     assignment cost and its chi-square gate use position and velocity (4 dof, two-radar
     identification paper eq. 9-10 with the velocity rows) or the position only (2 dof)."""
 
-    gate_probability: float = probability(0.999)
+    gate_probability: float = gate(0.999)
     max_course_difference_rad: float = setting(30.0, unit="deg", gt=0.0, le=180.0)
-    max_speed_difference_mps: float = positive(2.5)
-    course_gate_min_speed_mps: float = setting(1.0, ge=0.0)
-    track_timeout_s: float = positive(30.0)
+    max_speed_difference_mps: float = setting(2.5, gt=0.0, le=50.0, why=SHIP_SPEED_WHY)
+    course_gate_min_speed_mps: float = setting(1.0, ge=0.0, le=50.0, why=SHIP_SPEED_WHY)
+    track_timeout_s: float = setting(30.0, ge=1.0, le=3600.0, why=TIMEOUT_WHY)
     velocity_cost: bool = setting(True)  # position + velocity d^2 (4 dof); False: position only
 
 
@@ -72,10 +82,10 @@ class RadarBiasConfig:
     apply: bool = setting(False)
     correction: Mapping[str, SiteBias] = setting({}, factory=dict)
     simulate: Mapping[str, SiteBias] = setting({}, factory=dict, scenario="channel")
-    max_ais_gap_s: float = positive(40.0)
+    max_ais_gap_s: float = setting(40.0, gt=0.0, le=3600.0, why=AIS_AGE_WHY)
     prior_range_bias_m: float = positive(100.0)
     prior_azimuth_bias_rad: float = setting(1.0, unit="deg", gt=0.0, le=180.0)
-    gate_probability: float = probability(0.999)
+    gate_probability: float = gate(0.999)
     min_track_share: float = setting(0.8, gt=0.0, le=1.0)
     min_reports_per_track: int = count(10)
     outlier_sigma: float = positive(3.5)
@@ -87,7 +97,7 @@ class SiapConfig:
     """``[siap]`` section: track-to-truth gate probability (chi-square, 2 dof), largest
     association distance (m), and the window pairing two changes into a swap (s)."""
 
-    gate_probability: float = probability(0.999)
+    gate_probability: float = gate(0.999)
     max_distance_m: float = positive(500.0)
     swap_window_s: float = positive(60.0)
 
@@ -220,24 +230,28 @@ class ChannelIntegrityConfig:
       stitch compares (faster, ~3x on a regional day's dense units; the state, the
       identity tests and SIAP's continuity then start afresh at every unit seam)."""
 
-    radar_q: float = probability(0.001)
-    ais_q: float = probability(0.01)
+    radar_q: float = false_alarm(0.001)
+    ais_q: float = false_alarm(0.01)
     readmit_run: int = count(5)
     radar_confirm: int = count(2)
     exclusion: bool = setting(True)
-    ais_sigma_position_m: float = positive(3.0)
-    ais_max_age_s: float = positive(10.0)
+    ais_sigma_position_m: float = setting(3.0, ge=0.1, le=1000.0, why=GNSS_POSITION_WHY)
+    ais_max_age_s: float = setting(10.0, gt=0.0, le=3600.0, why=AIS_AGE_WHY)
     ais_warmup_reports: int = setting(2, ge=0)
     ais_jump_m: float = positive(150.0)
-    ais_sigma_sog_mps: float = positive(0.1)
+    ais_sigma_sog_mps: float = setting(0.1, ge=0.001, le=20.0, why=SIGMA_SPEED_WHY)
     ais_sigma_cog_rad: float = positive(1.0, unit="deg")
     ais_max_gap_s: float = positive(60.0)
-    ais_sigma_report_age_s: float = positive(0.5)
-    ais_manoeuvre_psd_m2_s3: float = setting(0.03, ge=0.0)
-    outlier_q: float = probability(1e-4)
+    ais_sigma_report_age_s: float = setting(0.5, ge=0.0, le=60.0, why=(
+        "a receiver stamps a report within seconds of its fix, not minutes"))
+    ais_manoeuvre_psd_m2_s3: float = setting(0.03, ge=0.0, le=100.0, why=(
+        "ships accelerate by at most a few m/s^2"))
+    outlier_q: float = false_alarm(1e-4)
     coverage_min_targets: int = count(2)
     coverage_miss_share: float = probability(0.5)
-    scan_gap_factor: float = setting(1.5, gt=1.0)
+    scan_gap_factor: float = setting(1.5, gt=1.0, le=100.0, why=(
+        "an outage is declared after this many missed scans; beyond 100 an outage of "
+        "minutes goes unseen"))
     witness_s: float = positive(300.0)
     unit_settle_s: float = setting(300.0, ge=0.0, le=3600.0)
 
@@ -262,13 +276,13 @@ class ReferenceConfig:
     q_high_m2ps3: float = positive(0.1)
     sojourn_low_s: float = positive(600.0)
     sojourn_high_s: float = positive(60.0)
-    gate_probability: float = probability(0.9999)
+    gate_probability: float = gate(0.9999)
     max_rejections: int = count(3)
     max_gap_s: float = positive(200.0)
     extrapolate_s: float = setting(10.0, ge=0.0)
     max_p95_m: float = positive(20.0)
     sigma_cog_deg: float = positive(2.0)
-    match_gate_probability: float = probability(0.999)
+    match_gate_probability: float = gate(0.999)
     min_match_share: float = probability(0.5)
     max_distance_m: float = positive(2000.0)
     detection_max_distance_m: float = positive(500.0)

@@ -9,14 +9,14 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, replace
 
-from pipeline.config import Config
+from pipeline.config import SIGMA_SPEED_WHY, Config
 from pipeline.configspec import (
     Document,
     count,
+    false_alarm,
     latitude,
     longitude,
     positive,
-    probability,
     setting,
     text,
 )
@@ -84,19 +84,25 @@ class OwnshipScenarioConfig:
 class NavSettings:
     """Batch, mode and dead-reckoning settings (SI), from ``[ownship]``."""
 
-    filter_step_s: float = positive(1.0)
+    filter_step_s: float = setting(1.0, ge=0.01, le=60.0, why=(
+        "the gyro and GNSS report at 1-100 Hz: the filter steps at most 100 times a "
+        "second and at least once a minute"))
     warmup_s: float = setting(900.0, ge=0.0)
     convergence_s: float = setting(600.0, ge=0.0)
     max_gap_s: float = positive(600.0)
-    gnss_timeout_s: float = positive(2.5)
-    gnss_position_sigma_m: float = positive(
-        2.9e-5, key="gnss_position_sigma_deg",
-        convert=lambda deg: math.radians(deg) * EARTH_RADIUS_M)
+    gnss_timeout_s: float = setting(2.5, gt=0.0, le=600.0, why=(
+        "a receiver gives a fix every 0.1-1 s: seconds without one are an outage, 10 "
+        "minutes is far past it"))
+    gnss_position_sigma_m: float = setting(
+        2.9e-5, key="gnss_position_sigma_deg", gt=0.0, le=0.01,
+        convert=lambda deg: math.radians(deg) * EARTH_RADIUS_M, why=(
+            "a GNSS latitude sigma is millimetres to tens of metres: 0.01 deg is 1.1 km, "
+            "no fix"))
     dr_correction_window_s: float = positive(120.0)
     dr_bound_n_sigma: float = positive(3.0)
     # the GNSS position test (pipeline/nav/integrity.py, issue 22)
     gnss_position_tau_s: float = positive(60.0)  # correlation time of the position error
-    gnss_q: float = probability(0.001)  # false-alarm probability of one fix
+    gnss_q: float = false_alarm(0.001)  # false-alarm probability of one fix
     gnss_readmit_run: int = count(5)  # fixes in a row that pass before it is used again
     gnss_exclusion: bool = setting(True)  # false: test every fix, use them anyway
 
@@ -108,9 +114,9 @@ class _FilterKeys:
     gnss_accel_sigma_mps2: float = positive(0.019)
     gate_n_sigma: float = positive(3.0)
     max_difference_gap_s: float = positive(3.0)
-    gnss_velocity_sigma_mps: float = positive(0.053)
+    gnss_velocity_sigma_mps: float = setting(0.053, ge=0.001, le=20.0, why=SIGMA_SPEED_WHY)
     gnss_velocity_tau_s: float = positive(15.0)
-    log_sigma_mps: float = positive(0.5)
+    log_sigma_mps: float = setting(0.5, ge=0.001, le=20.0, why=SIGMA_SPEED_WHY)
     current_walk_mps_per_sqrt_s: float = positive(2e-4)
 
 

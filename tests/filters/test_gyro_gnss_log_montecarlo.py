@@ -50,4 +50,6 @@ def test_heading_goal_over_50_seeds():
     # NEES ~2-4 while converging) nor uselessly wide
     z = (table["error_at_converged_deg"] / table["sigma_at_converged_deg"]).to_numpy()
     assert 0.4 < np.std(z) < 1.3
-    assert 0.1 < s["nees_mean"] < 1.5
+    # mean NEES over the 50 seeds 0.861 (standard error 0.12; per seed 0.10-3.9): the bound
+    # is that +-2 SE; the filter before issue 21's fix (af555d9) gives 1.229 on these seeds
+    assert 0.6 < s["nees_mean"] < 1.1

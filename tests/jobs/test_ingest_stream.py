@@ -268,6 +268,45 @@ print(int(hwm[0].split()[1]))
 """
 
 
+_ARROW_PEAK_SCRIPT = """
+import sys
+from pathlib import Path
+import pyarrow as pa
+import pipeline.decode.registry as registry
+registry.JSON_BATCH, registry.JSON_MAX_CHUNKS = int(sys.argv[4]), int(sys.argv[5])
+from pipeline.ingest.driver import run_ingest
+from pipeline.families import load_config
+s = run_ingest([sys.argv[1]], load_config(), Path(sys.argv[2]), executor="serial")
+assert s.exit_code == 0 and s.rows["radar_tracks"] == int(sys.argv[3]), s.render()
+print(pa.default_memory_pool().max_memory())
+"""
+
+
+def test_arrow_memory_held_by_ingest_is_bounded_by_the_buffers_not_the_file(tmp_path):
+    """The fast test of bounded ingest memory (the slow one below measures the process's
+    resident set on files of 264 MB - 1 GB): the JSON buffers scaled down (2,000
+    messages, 4 chunks), a 12 MB file of 120,000 radar reports is ingested holding at
+    most a few buffers of Arrow memory (the pool's peak: 0.87 MB measured) - not the file
+    (with the buffers unbounded the same peak is 25.9 MB, twice the file's JSON; 6.4 MB
+    for a quarter of the file: it grows with it). Own process: the pool's peak is per
+    process. ~10 s."""
+    import importlib.util
+    import subprocess
+    import sys
+
+    repo = Path(__file__).resolve().parents[2]
+    spec = importlib.util.spec_from_file_location("bench_ingest", repo / "bench" / "ingest.py")
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    n = 120_000
+    path = bench.make_files(tmp_path, n, ["json"])["json"]
+    cmd = [sys.executable, "-c", _ARROW_PEAK_SCRIPT, str(path), str(tmp_path / "wh"), str(n),
+           "2000", "4"]
+    res = subprocess.run(cmd, capture_output=True, text=True, check=True, cwd=repo)
+    peak = int(res.stdout.split()[-1])
+    assert 0 < peak < 0.1 * path.stat().st_size, (peak, path.stat().st_size)
+
+
 @pytest.mark.slow
 def test_peak_memory_does_not_grow_with_the_file(tmp_path):
     import importlib.util

@@ -9,7 +9,6 @@ import os
 import shutil
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import polars as pl
@@ -109,12 +108,11 @@ def test_a_second_job_on_a_locked_warehouse_exits_2_naming_the_holder(e2e, tmp_p
     finally:
         holder.kill()
         holder.wait()
-    # the kernel released the lock with the killed holder: a run goes through
-    t0 = time.monotonic()
+    # the kernel released the lock with the killed holder: a run goes through (without
+    # --wait the lock is never waited for, LOCK_NB: one still held would be exit 2 above)
     res = subprocess.run([sys.executable, "-m", "jobs.cli", "--warehouse", str(wh), "run",
                           str(archive), "--executor", "serial"], cwd=REPO,
                          capture_output=True, text=True, check=False,
                          env={**os.environ, "PYTHONPATH": str(REPO)})
     assert res.returncode == 0, res.stderr
     assert "2 file(s) ingested" in res.stdout, res.stdout
-    assert time.monotonic() - t0 < 300

@@ -13,6 +13,7 @@ import pytest
 
 from jobs.batch import run_batch
 from jobs.simulate import run_simulate
+from pipeline.experiments.ownship_montecarlo import run_montecarlo
 from pipeline.ingest.driver import run_ingest
 from pipeline.nav.config import ownship_config
 from pipeline.reports import run_named_report
@@ -54,7 +55,7 @@ def run(tmp_path_factory, cfg) -> Run:
                pl.from_arrow(read_table(wh, "nav_outages")), report, outliers)
 
 
-def test_gyro_alone_exceeds_10_deg_while_integrated_heading_is_within_0_1_rms(run):
+def test_gyro_alone_exceeds_10_deg_while_integrated_heading_is_within_0_1_rms(run, cfg):
     s = run.solution
     assert s.height == DURATION_S - 1  # one row per 1-s step after the first sample
     gyro_max = np.degrees(s["gyro_heading_error_rad"].abs().max())
@@ -63,9 +64,27 @@ def test_gyro_alone_exceeds_10_deg_while_integrated_heading_is_within_0_1_rms(ru
     assert gyro_max > 10.0
     assert np.sqrt(np.mean(err**2)) <= 0.1
     assert np.abs(err).max() <= 0.3
-    # the reported sigma is honest on the converged part (mean NEES of alpha within 3x)
-    nees = (conv["heading_error_rad"] / conv["sigma_heading_rad"]) ** 2
-    assert 0.2 < nees.mean() < 3.0
+    # the reported sigma is honest on the converged part: one seed's mean NEES of alpha
+    # inside the 5-95 % range of seeds 1-50 (0.12-2.63; the heading error is correlated
+    # over minutes, so one run's mean spreads widely: the 20- and 50-seed means below and
+    # in tests/filters/test_gyro_gnss_log_montecarlo.py are the discriminating tests) ...
+    nees = float(((conv["heading_error_rad"] / conv["sigma_heading_rad"]) ** 2).mean())
+    assert 0.12 < nees < 2.63
+    # ... and the warehouse's figure is the in-memory filter's on the same seed (0.394 vs
+    # 0.385: the NMEA decimals): what the batch stores is what the filter computed
+    mc = run_montecarlo(cfg, seeds=[SEED], duration_s=DURATION_S, executor="serial")
+    assert nees == pytest.approx(mc["nees"][0], rel=0.05)
+
+
+def test_heading_sigma_is_not_overconfident_while_converging(cfg):
+    """Seeded Monte Carlo (seeds 1-20, 10 min each, one vectorised filter call, ~7 s): the
+    mean NEES of alpha at 300-600 s. The filter before issue 21's fix (af555d9) was
+    overconfident there: 3.42 on these seeds (docs/ownship.md §4: 2.1-2.6 at 300-540 s);
+    now 0.61 (seeds 1-50: 0.43, standard error 0.075; per seed 0.08-1.9, 5-95 %). Its
+    seed 7 gives 0.654 over the converged part: inside any honest one-seed bound."""
+    mc = run_montecarlo(cfg, seeds=range(1, 21), duration_s=600.0, converged_s=300.0,
+                        executor="serial")
+    assert 0.3 < mc["nees"].mean() < 1.2
 
 
 def test_every_injected_outlier_is_rejected_by_the_gate(run):

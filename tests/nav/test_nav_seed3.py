@@ -55,8 +55,11 @@ def test_solution_heading_rms_and_sigma_after_convergence(seed3):
     s = pl.from_arrow(read_table(wh, "nav_solution")).filter(pl.col("converged"))
     err = s["heading_error_rad"].to_numpy()
     assert np.degrees(np.sqrt(np.mean(err**2))) <= 0.1
-    # the reported sigma is honest (not overconfident) after convergence
+    # the reported sigma is honest (not overconfident) after convergence: inside the 5-95 %
+    # range of one-hour runs over seeds 1-50 (0.24-1.67; this seed 1.33, the in-memory
+    # filter's figure to 1e-4; the discriminating test is the mean over seeds,
+    # tests/nav/test_nav_acceptance.py and tests/filters/test_gyro_gnss_log_montecarlo.py)
     nees = float(np.mean((err / s["sigma_heading_rad"].to_numpy()) ** 2))
-    assert 0.2 < nees < 1.5
+    assert 0.24 < nees < 1.67
     # the report's figures are those of the table
     assert report["steps"].sum() == pl.from_arrow(read_table(wh, "nav_solution")).height

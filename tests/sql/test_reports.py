@@ -20,7 +20,8 @@ def test_report_header(name):
 @pytest.mark.parametrize("name", list_reports())
 def test_report_runs_on_the_warehouse(e2e, name):
     """Every report runs on the maritime warehouse; the spine's reports are non-empty
-    there (other families' reports are checked with their own scenarios)."""
+    there. Every report's rows and figures: tests/sql/test_report_values.py (a warehouse
+    of every family)."""
     t = run_named_report(e2e.warehouse, name, start_ns=e2e.start_ns, end_ns=e2e.end_ns)
     if name in DEMO_REPORTS:
         assert t.num_rows > 0
