@@ -71,7 +71,8 @@ episodes AS (
     WHERE down
     GROUP BY site, family, sector, channel, ep
 ),
-evidence AS (   -- the decisions of the channel in the sector from the first flag before the episode on
+evidence AS (   -- the decisions of the channel in the sector inside the episode (a radar's first
+                -- flag, radar_confirm scans before, is not counted)
     SELECT e.site, e.family, e.sector, e.channel, e.start_ns, e.end_ns,
            any_value(h.sensor_kind) AS sensor_kind,
            count(h.eta) AS decisions,
