@@ -8,6 +8,15 @@ traceback, rows kept against rows expected (every good item), and the rejects ro
 Goal: no traceback in any row, nothing lost beyond the bad item (kept == expected), the
 bad items counted as rejects, exit 1 whenever something was rejected, exit 2 for usage
 errors. The inputs come from :mod:`pipeline.simulate.hostile` (deterministic).
+
+The second table (issue 40, ``--trust``; ``--no-trust`` skips it) is the warehouse under
+attack: a copy of the ``clean`` case's batched warehouse per case, damaged (a log entry
+cut in half, a garbage next version, a raw or derived Parquet file deleted or rewritten)
+or abused (analysts' SQL that writes files, reads outside the warehouse, attaches or
+installs; report parameters that are no numbers; a site name that is terminal markup; a
+FIFO in an archive folder; configs that make no physical sense), then the commands an
+operator runs, each with the exit codes that tell the truth. Goal: every code as
+expected, no traceback, no command hanging, nothing written outside the warehouse.
 """
 
 from __future__ import annotations
@@ -268,11 +277,215 @@ def render(rows: list[dict]) -> str:
     return "\n".join(out)
 
 
+# --- the warehouse under attack (issue 40) --------------------------------------------------
+
+DERIVED_T = "system_tracks"
+
+
+@dataclass
+class TrustCase:
+    """One attack on a batched warehouse: ``attack(case_dir, warehouse)`` damages it or
+    writes inputs, and returns the commands to run with the exit codes each may end in;
+    ``outside``: a path no command may create."""
+
+    name: str
+    what: str
+    attack: Callable[[Path, Path], list[tuple[list[str], set[int]]]]
+    outside: str = ""
+
+
+def _delta_file(wh: Path, table: str) -> Path:
+    from urllib.parse import unquote
+
+    from deltalake import DeltaTable
+
+    root = wh / "tables" / table
+    rel = DeltaTable(str(root)).get_add_actions(flatten=True).column("path")[0].as_py()
+    return root / unquote(rel)
+
+
+def _newest_log(wh: Path, table: str) -> Path:
+    return max((wh / "tables" / table / "_delta_log").glob("*.json"), key=lambda p: int(p.stem))
+
+
+def _window_args() -> list[str]:
+    return ["--from", _iso(h.T0_NS), "--to", _iso(h.T0_NS + HOUR_NS)]
+
+
+REPORT = ["report", "map_tracks", *_window_args()]
+BATCH = ["batch", *_window_args(), "--executor", "serial"]
+DOCTOR_THEN_OK = [(["doctor"], {1}), (["doctor", "--repair"], {0, 1}), (REPORT, {0})]
+
+
+def _truncated_log(_d: Path, wh: Path) -> list[tuple[list[str], set[int]]]:
+    entry = _newest_log(wh, DERIVED_T)
+    entry.write_bytes(entry.read_bytes()[: entry.stat().st_size // 2])
+    return [(REPORT, {2}), (BATCH, {2}), *DOCTOR_THEN_OK]
+
+
+def _garbage_next(_d: Path, wh: Path) -> list[tuple[list[str], set[int]]]:
+    entry = _newest_log(wh, DERIVED_T)
+    (entry.parent / f"{int(entry.stem) + 1:020d}.json").write_text("garbage{\n")
+    return [(REPORT, {2}), *DOCTOR_THEN_OK]
+
+
+def _derived_deleted(_d: Path, wh: Path) -> list[tuple[list[str], set[int]]]:
+    _delta_file(wh, DERIVED_T).unlink()
+    return [(REPORT, {2}), *DOCTOR_THEN_OK]
+
+
+def _derived_rewritten(_d: Path, wh: Path) -> list[tuple[list[str], set[int]]]:
+    with open(_delta_file(wh, DERIVED_T), "ab") as f:
+        f.write(b"tampered")
+    return [(REPORT, {2}), (["sql", f"SELECT count(*) FROM {DERIVED_T}"], {2}),
+            *DOCTOR_THEN_OK]
+
+
+def _raw_deleted(d: Path, wh: Path) -> list[tuple[list[str], set[int]]]:
+    _delta_file(wh, RADAR_T).unlink()
+    base_in = d.parents[1] / "clean" / "in"  # the archive file its ledger names
+    return [(BATCH, {2}), (["doctor", "--repair"], {1}),
+            (["ingest", str(base_in), "--force", "--executor", "serial"], {0}),
+            (BATCH, {0}), (["doctor"], {0})]
+
+
+def _sql(query: str) -> Callable[[Path, Path], list[tuple[list[str], set[int]]]]:
+    def attack(d: Path, wh: Path) -> list[tuple[list[str], set[int]]]:
+        q = query.replace("{wh}", str(wh)).replace("{d}", str(d))
+        return [(["sql", q], {2}), (REPORT, {0})]
+
+    return attack
+
+
+def _params(_d: Path, _wh: Path) -> list[tuple[list[str], set[int]]]:
+    return [([*REPORT, "--param", f"step_s={v}"], {2}) for v in ("0", "inf", "nan", "-5")]
+
+
+def _audit_sector(d: Path, _wh: Path) -> list[tuple[list[str], set[int]]]:
+    return [(["audit", *_window_args(), "--sector", "a/b", "--out", str(d / "audit")], {2})]
+
+
+def _markup_site(d: Path, _wh: Path) -> list[tuple[list[str], set[int]]]:
+    h.write_radar_mcap(d / "odd" / "site.mcap", _radar(50), site="[/]")
+    return [(["ingest", str(d / "odd"), "--executor", "serial"], {1}),
+            (["sql", "SELECT * FROM rejects"], {0}), (REPORT, {0})]
+
+
+def _fifo(d: Path, _wh: Path) -> list[tuple[list[str], set[int]]]:
+    folder = d / "archive"
+    h.write_radar_mcap(folder / "good.mcap", _radar(50))
+    os.mkfifo(folder / "recorder.mcap")
+    (folder / "gone.mcap").symlink_to(folder / "nowhere.mcap")
+    return [(["ingest", str(folder), "--executor", "serial"], {0, 1}),
+            (["run", str(folder), "--executor", "serial"], {0, 1})]
+
+
+def _config(edit: Callable[[str], str]) -> Callable[[Path, Path], list[tuple[list[str], set[int]]]]:
+    def attack(d: Path, _wh: Path) -> list[tuple[list[str], set[int]]]:
+        cfg = d / "site.toml"
+        cfg.write_text(edit((REPO / "config" / "surveil.toml").read_text()))
+        return [(["config", "check", str(cfg)], {2}), (["--config", str(cfg), *BATCH], {2})]
+
+    return attack
+
+
+def _bow_tie(text: str) -> str:
+    return text + ('\n[[sectors]]\nname = "bow_tie"\npolygon = [[46.30, 30.70], [46.40, 30.80], '
+                   '[46.30, 30.80], [46.40, 30.70]]\n')
+
+
+def _many_sectors(text: str) -> str:
+    cells = "".join(f'\n[[sectors]]\nname = "s{i}"\npolygon = [[46.0, {30 + i * 1e-3:.3f}], '
+                    f'[46.0, {30.0005 + i * 1e-3:.4f}], [46.1, {30.0005 + i * 1e-3:.4f}], '
+                    f'[46.1, {30 + i * 1e-3:.3f}]]\n' for i in range(10_000))
+    return text + cells
+
+
+TRUST_CASES = [
+    TrustCase("log_truncated", f"{DERIVED_T}'s newest log entry cut in half", _truncated_log),
+    TrustCase("log_garbage_next", f"a garbage next version of {DERIVED_T}", _garbage_next),
+    TrustCase("derived_deleted", f"a Parquet file of {DERIVED_T} deleted", _derived_deleted),
+    TrustCase("derived_rewritten", f"a Parquet file of {DERIVED_T} rewritten (size)",
+              _derived_rewritten),
+    TrustCase("raw_deleted", f"a Parquet file of {RADAR_T} deleted", _raw_deleted),
+    TrustCase("sql_copy_into_wh", "sql COPY ... TO a file in the warehouse",
+              _sql(f"COPY (SELECT 1 AS x) TO '{{wh}}/tables/{DERIVED_T}/x.parquet'"),
+              outside=f"wh/tables/{DERIVED_T}/x.parquet"),
+    TrustCase("sql_copy_out", "sql COPY ... TO a file elsewhere",
+              _sql("COPY (SELECT 1 AS x) TO '{d}/out.csv'"), outside="out.csv"),
+    TrustCase("sql_read_passwd", "sql read_csv('/etc/passwd')",
+              _sql("SELECT * FROM read_csv('/etc/passwd')")),
+    TrustCase("sql_attach", "sql ATTACH another database",
+              _sql("ATTACH '{d}/other.duckdb' AS other"), outside="other.duckdb"),
+    TrustCase("sql_install", "sql INSTALL httpfs (the network)", _sql("INSTALL httpfs")),
+    TrustCase("sql_set", "sql SET enable_external_access = true",
+              _sql("SET enable_external_access = true")),
+    TrustCase("param_not_a_number", "report --param step_s = 0 / inf / nan / -5", _params),
+    TrustCase("audit_sector_a/b", "audit --sector 'a/b'", _audit_sector),
+    TrustCase("site_markup", "an MCAP whose metadata site is '[/]'", _markup_site),
+    TrustCase("archive_fifo", "a FIFO and a dangling link in an archive folder", _fifo),
+    TrustCase("scan_period_1e-9", "a radar with scan_period_s = 1e-9",
+              _config(lambda t: t.replace("scan_period_s = 3.0", "scan_period_s = 1e-9", 1))),
+    TrustCase("sector_bow_tie", "a self-intersecting sector", _config(_bow_tie)),
+    TrustCase("sectors_10000", "10,000 sectors", _config(_many_sectors)),
+]
+
+
+def _run_limited(args: list[str], wh: Path, timeout_s: float = 300.0
+                 ) -> tuple[int | str, bool]:
+    try:
+        code, tb, _ = _run_timeout(args, wh, timeout_s)
+    except subprocess.TimeoutExpired:
+        return "hung", False
+    return code, tb
+
+
+def _run_timeout(args: list[str], wh: Path, timeout_s: float) -> tuple[int, bool, str]:
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    cmd = [sys.executable, "-m", "jobs.cli", "--warehouse", str(wh), *args]
+    res = subprocess.run(cmd, cwd=REPO, env=env, capture_output=True, text=True, check=False,
+                         timeout=timeout_s, stdin=subprocess.DEVNULL)
+    text = res.stdout + res.stderr
+    return res.returncode, "Traceback" in text or "terminate called" in text, text
+
+
+def run_trust_case(case: TrustCase, base: Path, root: Path) -> dict:
+    d = root / "trust" / case.name.replace("/", "_")
+    shutil.rmtree(d, ignore_errors=True)
+    shutil.copytree(base.parent, d, symlinks=True)
+    wh = d / base.name
+    steps = case.attack(d, wh)
+    done, tb, as_expected = [], False, True
+    for args, allowed in steps:
+        code, t = _run_limited(args, wh)
+        tb |= t
+        ok = code in allowed
+        as_expected &= ok
+        name = next((a for a in args if not a.startswith("-") and "/" not in a), args[0])
+        done.append(f"{name} {code}{'' if ok else '!'}")
+    wrote = bool(case.outside) and (d / case.outside).exists()
+    return {"case": case.name, "codes": done, "traceback": tb,
+            "ok": as_expected and not wrote and not tb,
+            "wrote": wrote}  # fmt: skip
+
+
+def render_trust(rows: list[dict]) -> str:
+    head = (f"| {'case':<20} | {'commands and exit codes (! = not the expected code)':<78} "
+            f"| tb | wrote outside | as expected |")  # fmt: skip
+    out = [head, "|" + "|".join("-" * (len(c)) for c in head.split("|")[1:-1]) + "|"]
+    for r in rows:
+        out.append(f"| {r['case']:<20} | {', '.join(r['codes']):<78} | "
+                   f"{'YES' if r['traceback'] else 'no':<2} | {'YES' if r['wrote'] else 'no':<13} "
+                   f"| {'yes' if r['ok'] else 'NO':<11} |")  # fmt: skip
+    return "\n".join(out)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--workdir", type=Path, default=None)
     ap.add_argument("--cases", default="", help="comma-separated case names (default: all)")
     ap.add_argument("--no-batch", action="store_true", help="import/ingest only")
+    ap.add_argument("--no-trust", action="store_true", help="skip the warehouse attacks")
     a = ap.parse_args()
     root = a.workdir or Path(tempfile.mkdtemp(prefix="surveil-hostile-"))
     wanted = {c for c in a.cases.split(",") if c}
@@ -283,13 +496,29 @@ def main() -> None:
             continue
         rows.append(run_case(case, root, not a.no_batch))
         print(render(rows[-1:]).splitlines()[-1], flush=True)
-    print()
-    print(render(rows))
+    if rows:
+        print()
+        print(render(rows))
     print(f"\n{len(rows)} cases in {time.monotonic() - t0:.0f} s; inputs under {root}")
     bad = [r["case"] for r in rows if r["traceback"]]
     lost = [r["case"] for r in rows if r["expected"] >= 0 and r["kept"] != r["expected"]]
     print(f"tracebacks: {', '.join(bad) or 'none'}; rows lost beyond the bad item: "
           f"{', '.join(lost) or 'none'}")
+    if a.no_trust or a.no_batch:
+        return
+    base = root / "clean" / "wh"
+    if not base.exists():
+        run_case(CASES[0], root, True)
+    trust = []
+    for tcase in TRUST_CASES:
+        if wanted and tcase.name not in wanted and "trust" not in wanted:
+            continue
+        trust.append(run_trust_case(tcase, base, root))
+        print(render_trust(trust[-1:]).splitlines()[-1], flush=True)
+    print()
+    print(render_trust(trust))
+    off = [r["case"] for r in trust if not r["ok"]]
+    print(f"\nwarehouse attacks: {len(trust)} cases; not as expected: {', '.join(off) or 'none'}")
 
 
 if __name__ == "__main__":

@@ -14,6 +14,7 @@ found (after ``--repair``: some remain, or a command is left to run), 2 usage er
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -34,6 +35,7 @@ from pipeline.warehouse.doctor import (
     lost_rows,
     record_lost_raw,
     restore_log,
+    set_aside_log,
 )
 from pipeline.warehouse.location import Location, as_location
 from pipeline.warehouse.lock import warehouse_lock
@@ -92,6 +94,9 @@ def _findings(warehouse: str, exam: Examination, when: str) -> str:
                          title=f"{when}: {len(exam.findings)} problem(s) in {warehouse}")
 
 
+_BATCHED = frozenset(n for fam in FAMILIES for n in fam.outputs)  # tables the batch writes
+
+
 def run_doctor(cfg: Config, warehouse: Path | Location, *, repair: bool = False,
                executor_kind: str | None = None, command: str = "surveil doctor --repair"
                ) -> DoctorResult:
@@ -113,6 +118,12 @@ def _repair(cfg: Config, warehouse: Path | Location, result: DoctorResult,
     treated: list[TableDamage] = []
     for d in exam.damaged.values():
         if d.log_error is None:
+            continue
+        if d.good_version is None and d.name in _BATCHED:  # the batch makes it again
+            set_aside_log(warehouse, d, backup)
+            treated.append(dataclasses.replace(d, good_at_ns=0))  # every unit re-batched
+            result.done.append(f"{d.name}: no version of its log reads; its log moved to "
+                               f"{backup}, the table re-made by batching every unit again")
             continue
         if d.good_version is None:
             result.todo.append(f"{d.name}: no version of its log reads; rebuild it from the "
@@ -147,9 +158,8 @@ def _rebatch(cfg: Config, warehouse: Path | Location, result: DoctorResult, lost
     if "batch_units" in lost.ledgers:
         spans += [(site, a, b) for site, ws in pending_by_site(warehouse).items()
                   for a, b in ws]
-    batched = {n for fam in FAMILIES for n in fam.outputs}
     for d in exam.damaged.values():
-        if d.kind == "derived" and d.name not in batched:
+        if d.kind == "derived" and d.name not in _BATCHED:
             result.todo.append(f"{d.name}: its rows come from a calibration, not the batch: "
                                "run `surveil calibrate` / `surveil calibrate-radars` again "
                                "over the windows it covered")

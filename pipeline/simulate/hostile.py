@@ -162,10 +162,10 @@ def radar_report(i: int, *, site: str = "R1", t_ns: int | None = None, **over: o
 
 
 def write_radar_mcap(path: Path, messages: list[tuple[int, bytes]], *,
-                     topic: str = "/radar/R1/tracks") -> Path:  # fmt: skip
+                     topic: str = "/radar/R1/tracks", site: str | None = None) -> Path:  # fmt: skip
     """``(log_time_ns, payload)`` on one radar channel (json, surveil.RadarTrackReport),
     zstd chunks, written with the ``mcap`` writer (log times up to 2^64 - 1 allowed, as
-    MCAP allows them)."""
+    MCAP allows them); ``site``: the file's ``surveil.scenario`` metadata names it."""
     from mcap.writer import CompressionType, Writer
 
     from pipeline.resources import resource_path
@@ -179,5 +179,7 @@ def write_radar_mcap(path: Path, messages: list[tuple[int, bytes]], *,
         ch = w.register_channel(topic, "json", sid)
         for seq, (t, payload) in enumerate(messages):
             w.add_message(ch, log_time=t, data=payload, publish_time=t, sequence=seq)
+        if site is not None:
+            w.add_metadata("surveil.scenario", {"site": site})
         w.finish()
     return path

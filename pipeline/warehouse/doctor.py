@@ -130,8 +130,8 @@ def _examine_table(loc: Location, name: str, out: Examination) -> None:
         out.findings.append(Finding(name, "unknown_table", f"tables/{name} is not a table "
                                     "schemas/ declares (another release's?)", "none: left alone"))
         return
-    if not (table / LOG_DIR).is_dir():
-        return  # (a folder without a log: never committed)
+    if not (table / LOG_DIR).is_dir() or not (table / LOG_DIR).listdir(missing_ok=True):
+        return  # (a folder without a log: never committed, or its log set aside)
     try:
         dt = open_delta(table)
     except DamagedTableError as exc:
@@ -193,7 +193,10 @@ def _log_detail(d: TableDamage) -> str:
 
 def _log_repair(d: TableDamage) -> str:
     if d.good_version is None:
-        return "none: no version reads; rebuild the table from the archive"
+        return ("moves its log aside and batches every unit again (a table the batch "
+                "writes; any other: none, rebuild it from the archive)"
+                if d.kind == "derived" else
+                "none: no version reads; rebuild the table from the archive")
     then = ("re-batches the units committed since" if d.kind == "derived"
             else "names the archive files ingested since, to ingest again"
             if d.kind == "raw" else "`surveil run` redoes what it recorded since")
@@ -375,6 +378,16 @@ def restore_log(warehouse: Path | Location, damage: TableDamage, backup: Locatio
             newer = True
         if newer:
             _move_aside(last, backup, f"{rel}/_last_checkpoint")
+
+
+def set_aside_log(warehouse: Path | Location, damage: TableDamage, backup: Location) -> None:
+    """Move every entry of ``damage``'s log aside into ``backup`` (no version of it
+    reads): the table then reads as absent (empty), its data files unreferenced, and its
+    next commit is its version 0. For a table the batch re-computes whole."""
+    log = table_location(warehouse, damage.name) / LOG_DIR
+    rel = f"tables/{damage.name}/{LOG_DIR}"
+    for n in log.listdir(missing_ok=True):
+        _move_aside(log / n, backup, f"{rel}/{n}")
 
 
 def forget_files(warehouse: Path | Location, damage: TableDamage, backup: Location
