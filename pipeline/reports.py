@@ -42,7 +42,7 @@ from pipeline.requirements import ConfigSection, RequirementsConfig, requirement
 from pipeline.resources import resource_path
 from pipeline.tables import table_specs
 from pipeline.warehouse.location import Location
-from pipeline.warehouse.views import register_tables
+from pipeline.warehouse.views import lock_down, register_tables
 
 _HEADER = re.compile(r"^--\s*(\w[\w ]*?):\s*(.*)$")
 _PARAM = re.compile(r"\$(\w+)\s*(?:\(([^)]*)\))?")
@@ -378,14 +378,27 @@ _SPILLS = itertools.count()  # one spill folder per connection (DuckDB names its
 
 
 def open_warehouse(warehouse: Path | Location, threads: int = 2,
-                   tables: Sequence[str] | None = None) -> duckdb.DuckDBPyConnection:
+                   tables: Sequence[str] | None = None, write_dir: Path | None = None,
+                   refuse_damaged: bool = True) -> duckdb.DuckDBPyConnection:
     """An in-memory DuckDB whose views are the warehouse tables' current snapshots (of
-    ``tables`` only, when given). On object storage DuckDB scans each snapshot's pyarrow
-    dataset on the warehouse's own filesystem (no DuckDB extension is downloaded)."""
+    ``tables`` only, when given), read-only: the views scan each snapshot's pyarrow
+    dataset (no DuckDB extension is downloaded, locally or on object storage), then the
+    connection is locked (:func:`pipeline.warehouse.views.lock_down`): its SQL reaches
+    no file and no network, only ``write_dir`` when given (``surveil sql
+    --allow-write-files``). A table whose files differ from its Delta log is refused
+    (:class:`pipeline.warehouse.integrity.TableFileError`; ``refuse_damaged`` False:
+    its view raises that message when read, the other tables stay readable)."""
     spill = Path(tempfile.gettempdir()) / f"surveil-duckdb-{os.getpid()}-{next(_SPILLS)}"
     con = duckdb.connect(config={"threads": threads, "memory_limit": REPORT_MEMORY,
-                                 "temp_directory": str(spill)})  # made and removed by DuckDB
-    register_tables(con, warehouse, tables)
+                                 "temp_directory": str(spill),  # made and removed by DuckDB
+                                 "autoinstall_known_extensions": False,
+                                 "autoload_known_extensions": False})
+    try:
+        register_tables(con, warehouse, tables, refuse_damaged=refuse_damaged)
+        lock_down(con, write_dir)
+    except BaseException:
+        con.close()
+        raise
     return con
 
 
