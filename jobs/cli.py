@@ -536,6 +536,8 @@ def report(st: _State, name, from_, to, sector, fmt, params, list_, site) -> Non
                    "--from/--to or raise SURVEIL_REPORT_MEMORY (e.g. 8GB). "
                    f"{str(exc).splitlines()[0]}", err=True)
         sys.exit(1)
+    except duckdb.Error as exc:  # e.g. a parameter the report's SQL cannot use
+        raise UsageError(f"report {name}: {str(exc).strip().splitlines()[0]}") from None
     if rows == 0:
         why = explain_empty(st.existing_warehouse, load_report(name, dirs), start_ns=start,
                             end_ns=end, sector=sector, cfg=st.cfg, site=site)

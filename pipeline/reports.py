@@ -5,8 +5,9 @@ Every report takes the window and sector parameters, always bound, never pasted 
 text: ``$start_ns`` and ``$end_ns`` (int64 ns UTC, half-open window) and ``$sector`` (a
 sector name, or ``None`` for every sector). Requirement figures come from the config's
 ``[requirements]`` (``$ed87_manoeuvring_p95_m``, ...: :mod:`pipeline.requirements`). A
-report may declare more parameters in its header, each with a default
-(``$step_s (DOUBLE, default 20)``), that a caller may override.
+report may declare more parameters in its header, each with a default and bounds
+(``$step_s (DOUBLE, default 20, >= 0.001)``), that a caller may override; a number must
+be finite and within the bounds.
 
 Header (every file, shipped or user's)::
 
@@ -24,6 +25,8 @@ from __future__ import annotations
 
 import contextlib
 import itertools
+import math
+import operator
 import os
 import re
 import tempfile
@@ -48,6 +51,8 @@ _HEADER = re.compile(r"^--\s*(\w[\w ]*?):\s*(.*)$")
 _PARAM = re.compile(r"\$(\w+)\s*(?:\(([^)]*)\))?")
 _COMMENT = re.compile(r"--[^\n]*")
 _NAME = re.compile(r"[A-Za-z0-9_]+")
+_BOUND = re.compile(r"(>=|<=|>|<)\s*([-+]?\d+(?:\.\d*)?(?:[eE][-+]?\d+)?)")
+_BOUND_OPS = {">": operator.gt, ">=": operator.ge, "<": operator.lt, "<=": operator.le}
 WINDOW_PARAMS = ("start_ns", "end_ns", "sector", "site")
 REQUIRED_HEADER = ("name", "description", "params")
 
@@ -69,9 +74,24 @@ class ReportParam:
     sql_type: str | None = None
     default: str | None = None
     doc: str = ""
+    bounds: tuple[tuple[str, float], ...] = ()  # ((">", 0.0), ...): what a value must be
 
     def convert(self, value: Any) -> Any:
-        """A value given as text (command line) -> the declared type's Python value."""
+        """A value given as text (command line) -> the declared type's Python value,
+        checked: a DOUBLE is finite (no ``inf``, ``nan``) and every value within the
+        header's bounds (``$step_s (DOUBLE, default 20, >= 0.001)``); ReportError
+        otherwise."""
+        got = self._parsed(value)
+        if isinstance(got, float) and not math.isfinite(got):
+            raise ReportError(f"parameter ${self.name} must be a finite number, not {value!r}")
+        if isinstance(got, int | float) and not isinstance(got, bool):
+            for op, limit in self.bounds:
+                if not _BOUND_OPS[op](got, limit):
+                    raise ReportError(f"parameter ${self.name} must be {op} {limit:g}, "
+                                      f"not {value!r}")
+        return got
+
+    def _parsed(self, value: Any) -> Any:
         if not isinstance(value, str):
             return value
         t = (self.sql_type or "").upper()
@@ -231,8 +251,10 @@ def parse_params(text: str) -> tuple[ReportParam, ...]:
         default = next((p.split(None, 1)[1] for p in parts
                         if p.lower().startswith("default ") and len(p.split(None, 1)) == 2),
                        None)
+        bounds = tuple((m[1], float(m[2])) for m in map(_BOUND.fullmatch, parts) if m)
         for n in [*pending, name]:
-            out.append(ReportParam(n, sql_type, default if n == name else None, paren.strip()))
+            out.append(ReportParam(n, sql_type, default if n == name else None, paren.strip(),
+                                   bounds))
         pending = []
     out += [ReportParam(n) for n in pending]
     return tuple(out)

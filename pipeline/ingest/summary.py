@@ -32,6 +32,9 @@ class IngestSummary:
     place_warnings: list[str] = field(default_factory=list)
     changed: list[str] = field(default_factory=list)  # changed while read: not committed
     quarantined: list[tuple[str, str]] = field(default_factory=list)  # (file, why)
+    # entries of the input folders that are not regular files (a FIFO, a dangling link):
+    # never opened, listed with why (pipeline.ingest.plan.not_a_file); no exit code
+    not_files: list[tuple[str, str]] = field(default_factory=list)
 
     @property
     def rejected(self) -> int:
@@ -96,6 +99,10 @@ class IngestSummary:
         for path in self.changed[:10]:
             lines.append(f"NOT INGESTED {path}: changed while being read (still being "
                          "written?); read again when the recorder has finished it")
+        for path, why in self.not_files[:10]:
+            lines.append(f"SKIPPED {path}: {why}")
+        if len(self.not_files) > 10:
+            lines.append(f"... and {len(self.not_files) - 10} more entries skipped")
         for path, why in self.quarantined[:10]:
             lines.append(f"QUARANTINED {path}: {why}")
         if len(self.quarantined) > 10:
