@@ -124,3 +124,31 @@ def test_a_removed_table_file_is_refused(copy):
     file.unlink()
     with pytest.raises(TableFileError, match="is missing"):
         read_table(copy, "track_errors")
+
+
+def test_a_rewritten_file_on_s3_is_refused_and_sql_there_is_locked(s3):
+    import numpy as np
+
+    from pipeline.warehouse.location import parse_location
+    from pipeline.warehouse.staged import TableStager, commit_window
+    from tests.warehouse.test_commit_window import T0_NS, truth_rows
+
+    bucket = s3.bucket()
+    wh = parse_location(f"s3://{bucket}/wh")
+    t = T0_NS + np.arange(0, 60) * 10**9
+    st = TableStager(wh / "_staging" / "a", threaded=False)
+    st.add("truth", truth_rows(t, speed=1.0))
+    commit_window(wh, "truth", st.close(), start_ns=T0_NS, end_ns=T0_NS + 60 * 10**9)
+    con = open_warehouse(wh)
+    try:
+        assert con.sql("SELECT count(*) FROM truth").fetchall() == [(60,)]
+        with pytest.raises(duckdb.PermissionException):
+            con.sql("SELECT * FROM read_csv('/etc/passwd')")
+    finally:
+        con.close()
+    (key,) = [k for k in s3.keys(bucket, "wh/tables/truth/") if k.endswith(".parquet")]
+    s3.client().put_object(Bucket=bucket, Key=key, Body=b"PAR1 not the table PAR1")
+    with pytest.raises(TableFileError) as err:
+        read_table(wh, "truth")
+    assert err.value.table == "truth" and err.value.path.endswith(key.rsplit("/", 1)[1])
+    assert err.value.found_bytes == len(b"PAR1 not the table PAR1")
