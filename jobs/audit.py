@@ -3,6 +3,7 @@ Chromium when asked)."""
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -39,10 +40,13 @@ class AuditResult:
 
 
 def audit_name(start_ns: int, end_ns: int, sector: str | None) -> str:
+    """``audit_<from>_<to>[_<sector>].html``; in the sector's name every character but a
+    letter, digit, ``.``, ``_`` or ``-`` is written ``_`` (a sector ``a/b`` is
+    ``..._a_b.html``: a name from the config never makes a path)."""
     from jobs.common import iso
 
     stem = f"audit_{iso(start_ns)}_{iso(end_ns)}".replace(":", "").replace("-", "")
-    return stem + (f"_{sector}" if sector else "") + ".html"
+    return stem + (f"_{re.sub(r'[^A-Za-z0-9._-]', '_', sector)}" if sector else "") + ".html"
 
 
 def run_audit(cfg: Config, warehouse: Path, out_dir: Path, *, start_ns: int, end_ns: int,

@@ -540,6 +540,8 @@ def report(st: _State, name, from_, to, sector, fmt, params, list_, site) -> Non
                    "--from/--to or raise SURVEIL_REPORT_MEMORY (e.g. 8GB). "
                    f"{str(exc).splitlines()[0]}", err=True)
         sys.exit(1)
+    except duckdb.Error as exc:  # e.g. a parameter the report's SQL cannot use
+        raise UsageError(f"report {name}: {str(exc).strip().splitlines()[0]}") from None
     if rows == 0:
         why = explain_empty(st.existing_warehouse, load_report(name, dirs), start_ns=start,
                             end_ns=end, sector=sector, cfg=st.cfg, site=site)
@@ -627,35 +629,66 @@ def export(st: _State, from_, to, out_path, site) -> None:
 @cli.command()
 @click.argument("query", required=False)
 @_FORMAT
+@click.option("--allow-write-files", "write_dir", type=click.Path(file_okay=False),
+              help="a folder the SQL may write (COPY ... TO exports) and read; without "
+                   "it the SQL reaches no file: the warehouse is read through its views")
 @click.pass_obj
-def sql(st: _State, query, fmt) -> None:
+def sql(st: _State, query, fmt, write_dir) -> None:
     """Run SQL over the warehouse views (the tables reports use; `surveil schema` lists
-    them). Without QUERY: an interactive prompt (end a statement with ';', quit with
-    .quit or Ctrl-D)."""
-    import duckdb
-
+    them), read-only: no file, extension or database is reachable but the views (and
+    the --allow-write-files folder). Without QUERY: an interactive prompt (end a
+    statement with ';', quit with .quit or Ctrl-D)."""
     from pipeline.render import format_report
     from pipeline.reports import open_warehouse
 
-    con = open_warehouse(st.existing_warehouse)
+    con = open_warehouse(st.existing_warehouse, write_dir=_write_dir(st, write_dir),
+                         refuse_damaged=False)  # the other tables stay readable
     try:
         if query is not None:
-            try:
-                table = con.sql(query)
-            except duckdb.Error as exc:
-                raise UsageError(str(exc).strip()) from None
+            table = _run_sql(con, query)
             if table is not None:
-                click.echo(format_report(table.to_arrow_table(), fmt), nl=fmt != "table")
+                click.echo(format_report(table, fmt), nl=fmt != "table")
             return
         _prompt(con, fmt)
     finally:
         con.close()
 
 
+def _write_dir(st: _State, given: str | None) -> Path | None:
+    """``--allow-write-files``: an existing folder outside the warehouse (exit 2 else)."""
+    if given is None:
+        return None
+    folder = Path(given).expanduser().resolve()
+    if not folder.is_dir():
+        raise UsageError(f"--allow-write-files {given}: no such folder")
+    wh = st.existing_warehouse
+    if isinstance(wh, Path):
+        wh = wh.resolve()
+        if folder == wh or folder.is_relative_to(wh) or wh.is_relative_to(folder):
+            raise UsageError(f"--allow-write-files {given}: the folder holds or is inside the "
+                             f"warehouse {wh}; the SQL may not write there")
+    return folder
+
+
+def _run_sql(con: Any, text: str) -> Any:
+    """The rows of ``con.sql(text)`` as an Arrow table (None: a statement without rows);
+    a DuckDB error as a :class:`UsageError` (a refused file access says why)."""
+    import duckdb
+
+    try:
+        rel = con.sql(text)
+        return None if rel is None else rel.to_arrow_table()
+    except duckdb.PermissionException as exc:
+        raise UsageError(f"{str(exc).strip()}: surveil sql reads the warehouse through its "
+                         "views only (no file, ATTACH or extension); to export results, "
+                         "give --allow-write-files DIR and COPY ... TO a file under DIR"
+                         ) from None
+    except duckdb.Error as exc:
+        raise UsageError(str(exc).strip()) from None
+
+
 def _prompt(con: Any, fmt: str) -> None:
     import contextlib
-
-    import duckdb
 
     from pipeline.render import format_report
 
@@ -677,12 +710,12 @@ def _prompt(con: Any, fmt: str) -> None:
             continue
         text, buf = "\n".join(buf), []
         try:
-            rel = con.sql(text)
-        except duckdb.Error as exc:
-            click.echo(f"error: {str(exc).strip()}", err=True)
+            table = _run_sql(con, text)
+        except UsageError as exc:
+            click.echo(f"error: {exc}", err=True)
             continue
-        if rel is not None:
-            click.echo(format_report(rel.to_arrow_table(), fmt), nl=fmt != "table")
+        if table is not None:
+            click.echo(format_report(table, fmt), nl=fmt != "table")
 
 
 @cli.command()

@@ -10,16 +10,14 @@ import re
 from datetime import UTC, datetime
 
 from pipeline.errors import UsageError
-
-_SITE_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}")
+from pipeline.tables import SITE_NAME_RULE, is_site_name
 
 
 def checked_site(name: str) -> str:
     """A ``--site`` name: 1-64 letters, digits, ``.``, ``_``, ``-``, starting with a
-    letter or digit; :class:`UsageError` otherwise."""
-    if not _SITE_NAME.fullmatch(name):
-        raise UsageError(f"--site {name!r}: a site name is 1-64 letters, digits, '.', '_' "
-                         "or '-', starting with a letter or digit")
+    letter or digit (:data:`pipeline.tables.SITE_NAME`); :class:`UsageError` otherwise."""
+    if not is_site_name(name):
+        raise UsageError(f"--site {name!r}: {SITE_NAME_RULE}")
     return name
 
 

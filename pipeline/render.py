@@ -1,11 +1,19 @@
 """Report tables as a person reads them: a terminal table that never cuts a value, CSV,
-JSON; and ``surveil schema``'s tables (every table, or one table's columns)."""
+JSON; and ``surveil schema``'s tables (every table, or one table's columns).
+
+Every value is data (an AIS name, a callsign, a site, a topic, a file name: untrusted
+text, issue 40 item 4) and is printed as it is: the terminal table hands it to rich as
+:class:`rich.text.Text`, never as markup (``[/]``, ``[bold]``, ``[#FF0]`` print as
+written), and control characters (an ANSI escape, a carriage return, a newline) print
+as ``\\xNN`` escapes in the table and the row blocks; CSV quotes as CSV does, JSON
+escapes as JSON does."""
 
 from __future__ import annotations
 
 import io
 import json
 import os
+import re
 import shutil
 import sys
 
@@ -13,6 +21,8 @@ import pyarrow as pa
 import pyarrow.csv as pacsv
 
 from pipeline.tables import column_doc, column_unit, table_specs
+
+_CONTROL = re.compile(r"[\x00-\x1f\x7f-\x9f]")
 
 
 def schema_table(name: str | None) -> pa.Table:
@@ -54,13 +64,17 @@ def format_report(table: pa.Table, fmt: str, title: str = "", width: int | None 
         return json.dumps(table.to_pylist(), indent=2, default=str)
     from rich.console import Console
     from rich.table import Table
+    from rich.text import Text
 
+    title = printable(title)
     if table.num_rows == 0:
         return f"{title + ': ' if title else ''}(no rows)\n"
     width = width or terminal_width()
-    cells = [[("" if v is None else str(v)) for v in row.values()] for row in table.to_pylist()]
-    names = table.column_names
-    numeric = [_numeric(table.schema.field(n).type) for n in names]
+    cells = [[("" if v is None else printable(str(v))) for v in row.values()]
+             for row in table.to_pylist()]
+    names = [printable(n) for n in table.column_names]
+    fields = list(table.schema)
+    numeric = [_numeric(f.type) for f in fields]
     # the narrowest each column can be: numbers and headers whole, text at its longest word
     least = []
     for j, n in enumerate(names):
@@ -72,17 +86,23 @@ def format_report(table: pa.Table, fmt: str, title: str = "", width: int | None 
             least.append(max(len(n), min(max(words), 40)))
     if sum(least) + 3 * len(names) + 1 > width and names:
         return _vertical(names, cells, title)
-    t = Table(title=title or None, show_lines=False)
+    t = Table(title=Text(title) if title else None, show_lines=False)
     for j, name in enumerate(names):
-        t.add_column(name, justify="right" if numeric[j] else "left", no_wrap=numeric[j],
+        t.add_column(Text(name), justify="right" if numeric[j] else "left", no_wrap=numeric[j],
                      overflow="fold", min_width=least[j])
-    for row in cells:
-        t.add_row(*row)
+    for row in cells:  # Text: a value is never read as rich markup
+        t.add_row(*map(Text, row))
     natural = sum(max([len(n), *(len(r[j]) for r in cells)]) for j, n in enumerate(names))
     console = Console(width=min(width, natural + 3 * len(names) + 1) if names else width,
                       record=True, file=io.StringIO())
     console.print(t)
     return console.export_text()
+
+
+def printable(text: str) -> str:
+    """``text`` with each control character as a visible ``\\xNN`` escape: a value
+    cannot move the cursor, colour the terminal or start a line of its own."""
+    return _CONTROL.sub(lambda m: f"\\x{ord(m.group()):02x}", text)
 
 
 def _vertical(names: list[str], cells: list[list[str]], title: str) -> str:

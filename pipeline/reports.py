@@ -5,8 +5,9 @@ Every report takes the window and sector parameters, always bound, never pasted 
 text: ``$start_ns`` and ``$end_ns`` (int64 ns UTC, half-open window) and ``$sector`` (a
 sector name, or ``None`` for every sector). Requirement figures come from the config's
 ``[requirements]`` (``$ed87_manoeuvring_p95_m``, ...: :mod:`pipeline.requirements`). A
-report may declare more parameters in its header, each with a default
-(``$step_s (DOUBLE, default 20)``), that a caller may override.
+report may declare more parameters in its header, each with a default and bounds
+(``$step_s (DOUBLE, default 20, >= 0.001)``), that a caller may override; a number must
+be finite and within the bounds.
 
 Header (every file, shipped or user's)::
 
@@ -24,6 +25,8 @@ from __future__ import annotations
 
 import contextlib
 import itertools
+import math
+import operator
 import os
 import re
 import tempfile
@@ -42,12 +45,14 @@ from pipeline.requirements import ConfigSection, RequirementsConfig, requirement
 from pipeline.resources import resource_path
 from pipeline.tables import table_specs
 from pipeline.warehouse.location import Location
-from pipeline.warehouse.views import register_tables
+from pipeline.warehouse.views import lock_down, register_tables
 
 _HEADER = re.compile(r"^--\s*(\w[\w ]*?):\s*(.*)$")
 _PARAM = re.compile(r"\$(\w+)\s*(?:\(([^)]*)\))?")
 _COMMENT = re.compile(r"--[^\n]*")
 _NAME = re.compile(r"[A-Za-z0-9_]+")
+_BOUND = re.compile(r"(>=|<=|>|<)\s*([-+]?\d+(?:\.\d*)?(?:[eE][-+]?\d+)?)")
+_BOUND_OPS = {">": operator.gt, ">=": operator.ge, "<": operator.lt, "<=": operator.le}
 WINDOW_PARAMS = ("start_ns", "end_ns", "sector", "site")
 REQUIRED_HEADER = ("name", "description", "params")
 
@@ -69,9 +74,24 @@ class ReportParam:
     sql_type: str | None = None
     default: str | None = None
     doc: str = ""
+    bounds: tuple[tuple[str, float], ...] = ()  # ((">", 0.0), ...): what a value must be
 
     def convert(self, value: Any) -> Any:
-        """A value given as text (command line) -> the declared type's Python value."""
+        """A value given as text (command line) -> the declared type's Python value,
+        checked: a DOUBLE is finite (no ``inf``, ``nan``) and every value within the
+        header's bounds (``$step_s (DOUBLE, default 20, >= 0.001)``); ReportError
+        otherwise."""
+        got = self._parsed(value)
+        if isinstance(got, float) and not math.isfinite(got):
+            raise ReportError(f"parameter ${self.name} must be a finite number, not {value!r}")
+        if isinstance(got, int | float) and not isinstance(got, bool):
+            for op, limit in self.bounds:
+                if not _BOUND_OPS[op](got, limit):
+                    raise ReportError(f"parameter ${self.name} must be {op} {limit:g}, "
+                                      f"not {value!r}")
+        return got
+
+    def _parsed(self, value: Any) -> Any:
         if not isinstance(value, str):
             return value
         t = (self.sql_type or "").upper()
@@ -231,8 +251,10 @@ def parse_params(text: str) -> tuple[ReportParam, ...]:
         default = next((p.split(None, 1)[1] for p in parts
                         if p.lower().startswith("default ") and len(p.split(None, 1)) == 2),
                        None)
+        bounds = tuple((m[1], float(m[2])) for m in map(_BOUND.fullmatch, parts) if m)
         for n in [*pending, name]:
-            out.append(ReportParam(n, sql_type, default if n == name else None, paren.strip()))
+            out.append(ReportParam(n, sql_type, default if n == name else None, paren.strip(),
+                                   bounds))
         pending = []
     out += [ReportParam(n) for n in pending]
     return tuple(out)
@@ -378,14 +400,27 @@ _SPILLS = itertools.count()  # one spill folder per connection (DuckDB names its
 
 
 def open_warehouse(warehouse: Path | Location, threads: int = 2,
-                   tables: Sequence[str] | None = None) -> duckdb.DuckDBPyConnection:
+                   tables: Sequence[str] | None = None, write_dir: Path | None = None,
+                   refuse_damaged: bool = True) -> duckdb.DuckDBPyConnection:
     """An in-memory DuckDB whose views are the warehouse tables' current snapshots (of
-    ``tables`` only, when given). On object storage DuckDB scans each snapshot's pyarrow
-    dataset on the warehouse's own filesystem (no DuckDB extension is downloaded)."""
+    ``tables`` only, when given), read-only: the views scan each snapshot's pyarrow
+    dataset (no DuckDB extension is downloaded, locally or on object storage), then the
+    connection is locked (:func:`pipeline.warehouse.views.lock_down`): its SQL reaches
+    no file and no network, only ``write_dir`` when given (``surveil sql
+    --allow-write-files``). A table whose files differ from its Delta log is refused
+    (:class:`pipeline.warehouse.integrity.TableFileError`; ``refuse_damaged`` False:
+    its view raises that message when read, the other tables stay readable)."""
     spill = Path(tempfile.gettempdir()) / f"surveil-duckdb-{os.getpid()}-{next(_SPILLS)}"
     con = duckdb.connect(config={"threads": threads, "memory_limit": REPORT_MEMORY,
-                                 "temp_directory": str(spill)})  # made and removed by DuckDB
-    register_tables(con, warehouse, tables)
+                                 "temp_directory": str(spill),  # made and removed by DuckDB
+                                 "autoinstall_known_extensions": False,
+                                 "autoload_known_extensions": False})
+    try:
+        register_tables(con, warehouse, tables, refuse_damaged=refuse_damaged)
+        lock_down(con, write_dir)
+    except BaseException:
+        con.close()
+        raise
     return con
 
 

@@ -7,6 +7,7 @@ and conforms tables to them (column order, types, the ``date`` partition column)
 
 from __future__ import annotations
 
+import re
 import threading
 import tomllib
 from dataclasses import dataclass
@@ -73,6 +74,18 @@ def site_column() -> SiteColumn:
 def default_site() -> str:
     """The site of rows whose MCAP file and command name none (``default``)."""
     return site_column().default
+
+
+SITE_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}")
+"""A site name: 1-64 letters, digits, ``.``, ``_``, ``-``, starting with a letter or
+digit (``--site`` and the ``site`` of an MCAP file's metadata alike)."""
+SITE_NAME_RULE = "a site name is 1-64 letters, digits, '.', '_' or '-', starting with a " \
+    "letter or digit"
+
+
+def is_site_name(name: object) -> bool:
+    """Whether ``name`` is a valid site name (:data:`SITE_NAME`)."""
+    return isinstance(name, str) and SITE_NAME.fullmatch(name) is not None
 
 
 def has_site(name: str) -> bool:

@@ -6,7 +6,7 @@
 -- grain: one row per (site, layer, track, thinned time)
 -- params: $start_ns (BIGINT, inclusive), $end_ns (BIGINT, exclusive),
 --         $sector (VARCHAR, NULL = every sector), $site (VARCHAR, NULL = every site),
---         $step_s (DOUBLE, default 20)
+--         $step_s (DOUBLE, default 20, >= 0.001)
 -- source tables: system_tracks, associations, ais_reports, airfield_tracks
 WITH pts AS (
     SELECT site, 'fused' AS layer, CAST(system_track_id AS VARCHAR) AS track, time_ns,

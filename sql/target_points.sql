@@ -6,7 +6,7 @@
 -- grain: one row per (site, target, thinned epoch)
 -- params: $start_ns (BIGINT, inclusive), $end_ns (BIGINT, exclusive),
 --         $sector (VARCHAR, NULL = every sector), $site (VARCHAR, NULL = every site),
---         $top (BIGINT, default 5), $step_s (DOUBLE, default 20)
+--         $top (BIGINT, default 5), $step_s (DOUBLE, default 20, >= 0.001)
 -- source tables: track_errors, system_tracks (written by `surveil batch`)
 WITH e AS (
     SELECT t.site, t.reference, t.reference_id, t.time_ns, t.system_track_id, t.error_m,

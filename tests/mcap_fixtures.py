@@ -104,6 +104,7 @@ def write_mcap(
     compression: CompressionType = CompressionType.ZSTD,
     finish: bool = True,
     extra_channels: dict[str, tuple[str, str, str]] | None = None,
+    metadata: dict[str, dict[str, str]] | None = None,
 ) -> Path:
     """Write ``messages`` to ``path`` with the real channel layout of the simulator.
 
@@ -111,6 +112,7 @@ def write_mcap(
     surveil.TruthState, ``/ais/nmea`` -> nmea0183 without schema. ``extra_channels`` maps a
     topic to (message_encoding, schema_name, schema_encoding) for unknown channels.
     ``finish=False`` leaves the file as a crashed writer would (no summary, no footer).
+    ``metadata``: metadata records (name -> key/values), written ahead of the messages.
     """
     schemas_dir = resource_path("schemas")
     f = open(path, "wb")  # noqa: SIM115 - kept open on purpose when finish=False
@@ -123,6 +125,8 @@ def write_mcap(
         TRUTH_SCHEMA, "jsonschema", (schemas_dir / "truth_state.schema.json").read_bytes()
     )
     channels: dict[str, int] = {}
+    for name, values in (metadata or {}).items():
+        w.add_metadata(name, values)
 
     def channel(topic: str) -> int:
         if topic in channels:

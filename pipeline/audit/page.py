@@ -298,9 +298,17 @@ def render(data: AuditData, *, title: str = "") -> str:
             parts.append(s.html)
     parts.append(f"<script>{_DRAWN_JS}</script>")
     parts.append(f"<script type='application/json' id='audit-meta'>"
-                 f"{json.dumps({'charts': n, 'window': window, 'sector': data.sector})}"
+                 f"{script_json({'charts': n, 'window': window, 'sector': data.sector})}"
                  "</script></body></html>")
     return "\n".join(parts)
+
+
+def script_json(value: object) -> str:
+    """``value`` as JSON that stays inside a ``<script>`` element: ``<``, ``>`` and ``&``
+    as ``\\u`` escapes (a sector named ``</script><script>...`` is text, not markup);
+    ``json.loads`` reads it back unchanged."""
+    text = json.dumps(value)
+    return text.replace("<", "\\u003c").replace(">", "\\u003e").replace("&", "\\u0026")
 
 
 def chart_count(page: str) -> int:

@@ -60,6 +60,7 @@ class RunSummary:
     ingest: IngestSummary | None = None
     imports: ImportResult = field(default_factory=ImportResult)
     deferred: list[tuple[str, str]] = field(default_factory=list)  # still being written
+    skipped: list[tuple[str, str]] = field(default_factory=list)  # not regular files
     moved: list[str] = field(default_factory=list)  # files now of another site
     stale: list[str] = field(default_factory=list)  # windows of another config
     windows: list[tuple[int, int]] = field(default_factory=list)
@@ -102,6 +103,7 @@ class RunSummary:
 
     def render(self) -> str:
         later = [f"  deferred {p}: {why}" for p, why in self.deferred]
+        later += [f"  skipped {p}: {why}" for p, why in self.skipped]
         if self.nothing_to_do:
             return "\n".join([
                 f"run: nothing to do: {self.files_skipped} file(s) unchanged"
@@ -151,8 +153,9 @@ def run_nightly(cfg: Config, warehouse: Path, *, folders: list[str] | None = Non
         raise UsageError(str(exc)) from None
     if not scan.mcap and not scan.raw and not objects:
         raise UsageError(f"no recordings (MCAP, or NMEA text, AIS CSV, ASTERIX, pcap, ROS 1 "
-                         f"bags) under: {', '.join(map(str, chosen))}")
-    summary = RunSummary(started_at_ns=time.time_ns(), command=command)
+                         f"bags) under: {', '.join(map(str, chosen))}" + "".join(
+                             f"; skipped {p}: {why}" for p, why in scan.skipped[:5]))
+    summary = RunSummary(started_at_ns=time.time_ns(), command=command, skipped=scan.skipped)
     settle_s = cfg.archive_settle_s
     raws, deferred_raw = settled(scan.raw, settle_s, now_ns, raw=True)
     if raws and not where.is_local:  # imported/ is a local folder of the warehouse

@@ -31,6 +31,7 @@ from pipeline.config import Config
 from pipeline.convert.config import import_options
 from pipeline.convert.legacy import detect_format, import_file, output_path
 from pipeline.errors import UsageError
+from pipeline.ingest.plan import folder_files, not_a_file
 from pipeline.io.mcap_read import MAGIC
 from pipeline.tables import conform, default_site
 from pipeline.units import NS
@@ -50,13 +51,18 @@ class ArchiveScan:
     mcap: list[Path] = field(default_factory=list)
     raw: list[Path] = field(default_factory=list)  # what `surveil import` reads
     other: list[Path] = field(default_factory=list)  # neither: not read
+    # entries that are not regular files (FIFO, socket, device, dangling link, link to a
+    # folder): never opened, each with why (pipeline.ingest.plan.not_a_file)
+    skipped: list[tuple[str, str]] = field(default_factory=list)
 
 
 def scan_folders(folders: Sequence[Path | str], exclude: Iterable[Path] = ()) -> ArchiveScan:
     """Every file under ``folders`` (recursive; hidden files and anything under
     ``exclude``, the warehouse, left out), sorted into MCAP files, raw recordings
-    (``detect_format`` of :mod:`pipeline.convert.legacy`) and others. A folder that does
-    not exist is a :class:`UsageError`."""
+    (``detect_format`` of :mod:`pipeline.convert.legacy`) and others. A symbolic link to
+    a file is followed (read as its target); an entry that is not a regular file (a
+    FIFO, socket, device, dangling link, link to a folder) is never opened and is listed
+    in ``skipped`` with why. A folder that does not exist is a :class:`UsageError`."""
     skip = [Path(p).resolve() for p in exclude]
     scan = ArchiveScan()
     seen: set[Path] = set()
@@ -64,9 +70,17 @@ def scan_folders(folders: Sequence[Path | str], exclude: Iterable[Path] = ()) ->
         root = Path(raw).expanduser()
         if not root.exists():
             raise UsageError(f"archive folder does not exist: {root}")
-        files = [root] if root.is_file() else sorted(
-            q for q in root.rglob("*") if q.is_file()
-            and not any(part.startswith(".") for part in q.relative_to(root).parts))
+        if root.is_dir():
+            listed = folder_files(root, "*", found_skipped := [])
+            scan.skipped += [(p, why) for p, why in found_skipped
+                             if not _hidden(Path(p), root)
+                             and not any(Path(p).is_relative_to(s) for s in skip)]
+            files = [q for q in listed if not _hidden(q, root)]
+        elif (why := not_a_file(root)) is not None:
+            scan.skipped.append((str(root), why))
+            files = []
+        else:
+            files = [root]
         for q in files:
             q = q.resolve()
             if q in seen or any(q.is_relative_to(s) for s in skip):
@@ -79,6 +93,10 @@ def scan_folders(folders: Sequence[Path | str], exclude: Iterable[Path] = ()) ->
             else:
                 scan.other.append(q)
     return scan
+
+
+def _hidden(path: Path, root: Path) -> bool:
+    return any(part.startswith(".") for part in path.relative_to(root).parts)
 
 
 def finished_mcap(path: Path) -> bool:

@@ -65,18 +65,19 @@ def run_ingest(
     if as_location(warehouse).is_local:
         warehouse = Path(warehouse).resolve()
     staging = as_location(warehouse) / "_staging" / f"ingest-{os.getpid()}-{time.time_ns()}"
+    not_files: list[tuple[str, str]] = []
     units = plan_units(
         paths, warehouse=warehouse, staging=staging, validation=cfg.validation,
         start_ns=start_ns, end_ns=end_ns, force=force,
         asterix_editions=tuple(sorted(import_options(cfg).asterix_editions.items())),
-        site=site,
+        site=site, skipped=not_files,
     )  # fmt: skip
     check_sites(units)
     if units:  # every file's commit replaces its rows in each: exit 2 when a log is broken
         # (a missing data file is not read: `ingest --force` of its source replaces it)
         require_readable(warehouse, [*RAW_TABLES, "mcap_index", LEDGER], files=False)
     ex = _executor(executor, cfg, len(units))
-    summary = IngestSummary(files_total=len(units))
+    summary = IngestSummary(files_total=len(units), not_files=not_files)
     if start_ns is not None:
         summary.window = (start_ns, end_ns)  # type: ignore[assignment]
     committed = False

@@ -31,6 +31,10 @@ class IngestSummary:
     # the place check (pipeline.batch.place): sites whose positions lie outside the region
     place_warnings: list[str] = field(default_factory=list)
     changed: list[str] = field(default_factory=list)  # changed while read: not committed
+    quarantined: list[tuple[str, str]] = field(default_factory=list)  # (file, why)
+    # entries of the input folders that are not regular files (a FIFO, a dangling link):
+    # never opened, listed with why (pipeline.ingest.plan.not_a_file); no exit code
+    not_files: list[tuple[str, str]] = field(default_factory=list)
 
     @property
     def rejected(self) -> int:
@@ -53,6 +57,8 @@ class IngestSummary:
         self.files_ok += m.status == "ok"
         self.files_partial += m.status == "partial"
         self.files_quarantined += m.status == "quarantined"
+        if m.status == "quarantined":
+            self.quarantined.append((m.source_file, m.error or "nothing readable"))
         self.files_duplicate += m.status == "duplicate"
         self.messages_read += m.message_count
         for k, v in m.rows.items():
@@ -93,6 +99,14 @@ class IngestSummary:
         for path in self.changed[:10]:
             lines.append(f"NOT INGESTED {path}: changed while being read (still being "
                          "written?); read again when the recorder has finished it")
+        for path, why in self.not_files[:10]:
+            lines.append(f"SKIPPED {path}: {why}")
+        if len(self.not_files) > 10:
+            lines.append(f"... and {len(self.not_files) - 10} more entries skipped")
+        for path, why in self.quarantined[:10]:
+            lines.append(f"QUARANTINED {path}: {why}")
+        if len(self.quarantined) > 10:
+            lines.append(f"... and {len(self.quarantined) - 10} more quarantined files")
         for text in self.place_warnings:
             lines.append(f"WARNING: {text}")
         for path, err in self.failed[:10]:

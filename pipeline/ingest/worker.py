@@ -14,8 +14,10 @@ Ledger: a file whose size and SHA-256 match its ledger row (status ok/duplicate)
 (``FileManifest.skipped``), unless ``force``, or unless an optional decoder was missing
 when it was read (error "decoder not installed": it may be installed now); it is hashed
 first, before any decoding. Status: ``ok``; ``partial`` (chunks lost, file cut off,
-channels whose decoder is not installed); ``quarantined`` (not MCAP, or nothing
-readable: one rejects row says why).
+channels whose decoder is not installed); ``quarantined`` (not MCAP, nothing
+readable, or a ``site`` in its metadata that is not a site name: one rejects row says
+why, ``invalid_site`` for the last; nothing of such a file is read, the other files of
+the run are not affected).
 
 Time window ``[start_ns, end_ns)``: rows are kept when the table's time column is inside
 (``time_ns``; ``log_time_ns`` for rejects). Only the chunks whose index overlaps the
@@ -49,13 +51,14 @@ from pipeline.ingest.context import IngestContext
 from pipeline.io.mcap_index import mcap_index_rows
 from pipeline.io.mcap_read import ReadStatus, read_mcap_batches
 from pipeline.io.mcap_site import declared_site
-from pipeline.tables import conform, default_site, empty, spec
+from pipeline.tables import SITE_NAME_RULE, conform, default_site, empty, is_site_name, spec
 from pipeline.warehouse.ledger import SKIP_STATUSES, file_fingerprint, lookup
 from pipeline.warehouse.location import Location, as_location
 from pipeline.warehouse.staged import StagedFile, TableStager
 
 WINDOW_READ_MARGIN_NS = 60 * 10**9
-FILE_LEVEL_CODES = frozenset({"not_mcap", "corrupt_chunk", "truncated", "unknown_schema"})
+FILE_LEVEL_CODES = frozenset({"not_mcap", "corrupt_chunk", "truncated", "unknown_schema",
+                              "invalid_site"})
 _MAGIC_SAMPLE = 64  # bytes of a not-MCAP file kept in its rejects row
 MISSING_DECODER = "decoder not installed"
 
@@ -107,12 +110,22 @@ class FileManifest:
     changed_while_read: bool = False
 
 
+class InvalidSiteError(ValueError):
+    """A file's metadata names a site that is not a site name (``[/]``, a path, 65
+    characters...): the file is refused, as ``--site`` would refuse the name."""
+
+
 def file_site(unit: IngestUnit, path: Path | None = None) -> str:
     """The file's site: its MCAP metadata's (:mod:`pipeline.io.mcap_site`), else the
     command's ``--site``, else the default (``schemas/tables.toml [site]``). The driver
     refuses an explicit ``--site`` that contradicts a file's metadata before any work.
-    ``path``: where the file's bytes are read (its local copy)."""
-    return declared_site(path or unit.path) or unit.site or default_site()
+    ``path``: where the file's bytes are read (its local copy). :class:`InvalidSiteError`
+    when the metadata's site is not a site name (:data:`pipeline.tables.SITE_NAME`)."""
+    named = declared_site(path or unit.path)
+    if named is not None and not is_site_name(named):
+        raise InvalidSiteError(f"its metadata names site {named!r}: {SITE_NAME_RULE}; "
+                               "nothing of the file was read")
+    return named or unit.site or default_site()
 
 
 @contextlib.contextmanager
@@ -179,6 +192,10 @@ def _ingest(unit: IngestUnit, ctx: IngestContext, path: Path) -> FileManifest:
 def _decode_and_stage(
     unit: IngestUnit, ctx: IngestContext, path: Path, size: int, sha: str | Future[str]
 ) -> FileManifest:
+    try:
+        site = file_site(unit, path)
+    except InvalidSiteError as exc:
+        return _refused(unit, size, sha, "invalid_site", str(exc))
     lo, hi = _read_window(unit)
     scan = read_mcap_batches(path, start_ns=lo, end_ns=hi, buffers=ctx.chunk_buffers)
     decoder = FileDecoder(
@@ -188,7 +205,6 @@ def _decode_and_stage(
         parse_pool=ctx.parse_pool,
         strings=ctx.strings,
     )
-    site = file_site(unit, path)
     stager = TableStager(_stage_folder(unit), site=site)
     reasons: Counter = Counter()
 
@@ -242,6 +258,25 @@ def _decode_and_stage(
         chunks_decompressed=status.chunks_decompressed,
         site=site,
     )
+
+
+def _refused(unit: IngestUnit, size: int, sha: str | Future[str], reason_code: str,
+             reason: str) -> FileManifest:
+    """A file refused whole before it is read: ``quarantined``, one rejects row (under
+    the default site: the file names none that may be stored) saying why."""
+    stager = TableStager(_stage_folder(unit), site=default_site())
+    try:
+        rejects = make_rejects([unit.start_ns or 0], source_file=unit.path, topic=None,
+                               reason_code=[reason_code], reason=[reason], raw=[None])
+        stager.add("rejects", rejects)
+    finally:
+        staged = stager.close()
+    return FileManifest(
+        source_file=unit.path, size_bytes=size,
+        sha256=sha if isinstance(sha, str) else sha.result(), status="quarantined",
+        error=reason, rows={"rejects": 1}, rejects_by_reason={reason_code: 1},
+        staged={"rejects": list(staged)}, site=default_site(),
+    )  # fmt: skip
 
 
 def _stage_folder(unit: IngestUnit) -> Location:

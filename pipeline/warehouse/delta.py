@@ -35,6 +35,7 @@ from deltalake.exceptions import DeltaError, TableNotFoundError
 from pipeline.tables import conform, empty, spec
 from pipeline.units import NS
 from pipeline.warehouse.damage import log_error, missing_error, require_local_files
+from pipeline.warehouse.integrity import check_file_sizes
 from pipeline.warehouse.location import Location, as_location
 from pipeline.warehouse.pending import pinned_versions
 
@@ -189,7 +190,7 @@ def reader_dataset(warehouse: Path | Location, name: str,
     delta_table = _reader_table(warehouse, name, pins)
     if delta_table is None:
         return None
-    return _snapshot_dataset(delta_table, table_location(warehouse, name), spec(name).schema,
+    return _snapshot_dataset(delta_table, table_location(warehouse, name), name,
                              dictionaries=True)
 
 
@@ -224,7 +225,7 @@ def read_table(
                      else predicate & (pds.field("site") == site))
     if predicate is not None:
         expr = predicate if expr is None else expr & predicate
-    dataset = _snapshot_dataset(delta_table, table_location(warehouse, name), spec(name).schema)
+    dataset = _snapshot_dataset(delta_table, table_location(warehouse, name), name)
     have = set(dataset.schema.names)
     try:
         table = dataset.to_table(columns=[c for c in target.names if c in have], filter=expr)
@@ -250,11 +251,11 @@ def has_rows(warehouse: Path, name: str, start_ns: int, end_ns: int,
     expr = window_filter(name, start_ns, end_ns)
     if site is not None:
         expr = pds.field("site") == site if expr is None else expr & (pds.field("site") == site)
-    dataset = _snapshot_dataset(delta_table, table_location(warehouse, name), spec(name).schema)
+    dataset = _snapshot_dataset(delta_table, table_location(warehouse, name), name)
     return dataset.head(1, columns=[spec(name).time_column], filter=expr).num_rows > 0
 
 
-def _snapshot_dataset(snapshot: DeltaTable, path: Location, schema: pa.Schema,
+def _snapshot_dataset(snapshot: DeltaTable, path: Location, name: str,
                       dictionaries: bool = False) -> pds.Dataset:
     """``snapshot``'s (the version readers see) Parquet files as a plain pyarrow dataset
     on the table's filesystem (hive ``date=`` partitions): the local one, or the
@@ -266,8 +267,12 @@ def _snapshot_dataset(snapshot: DeltaTable, path: Location, schema: pa.Schema,
     ("terminate called without an active exception", exit 134: about 1 run in 2 of a
     script that reads the ledger and exits; apache/arrow#34314, delta-io/delta-rs#2184).
     The file list comes from the Delta log (so replaced files are never read); the
-    reading is Arrow's own."""
+    reading is Arrow's own. Each file is first checked against the size the log records
+    (:func:`pipeline.warehouse.integrity.check_file_sizes`: a ``stat`` each): a file
+    changed outside the pipeline is refused, never read as the table."""
+    check_file_sizes(name, snapshot, path)
     # local paths, percent-encoded as URIs (a space is %20, '#' is %23, '%' is %25)
+    schema = spec(name).schema
     parts = snapshot.metadata().partition_columns
     fmt = pds.ParquetFileFormat()
     # the columns the table has (one written before the canonical schema gained a column

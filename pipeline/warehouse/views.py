@@ -41,6 +41,13 @@ built anew.
 cannot write a database file there, and an analyst reads it with ``surveil sql`` (the
 views of :func:`register_tables`, over each snapshot's pyarrow dataset on the
 warehouse's own filesystem). :func:`rebuild_views_file` returns None there.
+
+**Read-only for analysts.** ``surveil sql``, the reports and the audit do not use this
+file: their in-memory connection (:func:`pipeline.reports.open_warehouse`) gets the
+views of :func:`register_tables` over pyarrow datasets and is then locked
+(:func:`lock_down`): DuckDB reaches no file by a path, so no statement can rewrite the
+warehouse or read outside it. The file itself is for DuckDB's own command line, which
+has every right of the user running it.
 """
 
 from __future__ import annotations
@@ -56,6 +63,7 @@ import threading
 import uuid
 from collections.abc import Collection, Iterable
 from pathlib import Path
+from typing import Any
 
 import duckdb
 import pyarrow as pa
@@ -64,6 +72,7 @@ from pipeline.tables import column_comment, spec, table_specs
 from pipeline.warehouse.crashpoints import crash_point
 from pipeline.warehouse.damage import DamagedTableError
 from pipeline.warehouse.delta import sql_literal, table_path, table_snapshot
+from pipeline.warehouse.integrity import TableFileError
 from pipeline.warehouse.location import Location, as_location
 from pipeline.warehouse.pending import pinned_versions
 
@@ -109,7 +118,8 @@ def _select_list(schema: pa.Schema, *, null: bool, present: Collection[str] | No
 
 
 def view_sql(name: str, files: list[str], schema: str | None = None,
-             present: Collection[str] | None = None, root: Path | None = None) -> str:
+             present: Collection[str] | None = None, root: Path | None = None,
+             damage: str | None = None) -> str:
     """``CREATE OR REPLACE VIEW`` statement of table ``name`` over ``files``.
 
     With no files the view is typed and empty (``... WHERE false``), and DuckDB (2.0 on)
@@ -121,9 +131,13 @@ def view_sql(name: str, files: list[str], schema: str | None = None,
     bind parameters in a view definition); with ``root`` (the warehouse), they are written
     relative to it, as in the views file. ``present``: the columns the table has (None:
     all); one the canonical schema gained after the table was written reads as NULL.
+    ``damage``: the view is typed and raises this message when a query reads it.
     """
     s = spec(name).schema
     qualified = f"{_ident(schema)}.{_ident(name)}" if schema else _ident(name)
+    if damage is not None:
+        body = f"SELECT {_select_list(s, null=True)} WHERE error({sql_literal(damage)})"
+        return f"CREATE OR REPLACE VIEW {qualified}{_DEFER_BINDING} AS {body}"
     if not files:
         body = f"SELECT {_select_list(s, null=True)} WHERE false"
         return f"CREATE OR REPLACE VIEW {qualified}{_DEFER_BINDING} AS {body}"
@@ -225,39 +239,46 @@ def _docs_digest() -> str:
 
 def register_tables(
     con: duckdb.DuckDBPyConnection, warehouse: Path | Location,
-    names: Iterable[str] | None = None
+    names: Iterable[str] | None = None, *, refuse_damaged: bool = True
 ) -> list[str]:
     """Create one view per table (all canonical tables when ``names`` is None) in ``con``
-    over the table's current snapshot; returns the view names. On object storage each
-    view reads the snapshot's pyarrow dataset (:func:`_register_datasets`)."""
-    if not as_location(warehouse).is_local:
-        return _register_datasets(con, as_location(warehouse), names)
-    statements = view_statements(warehouse, names)
-    for sql in statements.values():
-        con.execute(sql)
-    return list(statements)
+    over the table's current snapshot; returns the view names.
 
+    Each view reads the snapshot's pyarrow dataset (the Parquet files the Delta log
+    lists, each checked against its recorded size:
+    :func:`pipeline.warehouse.integrity.check_file_sizes`) on the warehouse's own
+    filesystem, locally or on object storage: DuckDB itself opens no file of the
+    warehouse, so a connection locked by :func:`lock_down` can neither read nor write
+    one by a path (``surveil sql``, reports: issue 40). DuckDB pushes projections and
+    filters into the dataset. The tables' Delta logs are read in parallel: on object
+    storage each costs round trips (~10-60 ms each on a store here), locally ~3 ms.
 
-def _register_datasets(con: duckdb.DuckDBPyConnection, loc: Location,
-                       names: Iterable[str] | None) -> list[str]:
-    """The views of a warehouse on object storage: each table's snapshot as the pyarrow
-    dataset ``read_table`` reads (the warehouse's own ``S3FileSystem``, its native
-    reader; DuckDB pushes the projection and filters into it), registered on ``con`` as
-    ``_surveil_arrow_<table>``, and the view casting it to the canonical types. The
-    tables' Delta logs are read in parallel: on object storage each costs round trips
-    (~10-60 ms each on a store here), locally ~3 ms."""
+    A table whose files differ from its log raises its
+    :class:`~pipeline.warehouse.integrity.TableFileError`; with ``refuse_damaged``
+    False (``surveil sql``: the other tables stay readable) its view raises that message
+    instead when a query reads it."""
     from concurrent.futures import ThreadPoolExecutor
 
     from pipeline.warehouse.delta import reader_dataset
 
+    loc = as_location(warehouse)
     selected = list(names) if names is not None else list(table_specs())
     pins = pinned_versions(loc)
+
+    def dataset_of(name: str) -> Any:
+        try:
+            return reader_dataset(loc, name, pins)
+        except TableFileError as exc:
+            if refuse_damaged:
+                raise
+            return exc
+
     with ThreadPoolExecutor(max(1, min(8, len(selected)))) as pool:
-        found = list(pool.map(lambda n: reader_dataset(loc, n, pins), selected))
+        found = list(pool.map(dataset_of, selected))
     for name, dataset in zip(selected, found, strict=True):
         s = spec(name).schema
-        if dataset is None:
-            con.execute(view_sql(name, []))
+        if dataset is None or isinstance(dataset, TableFileError):
+            con.execute(view_sql(name, [], damage=None if dataset is None else str(dataset)))
             continue
         arrow = f"_surveil_arrow_{name}"
         con.register(arrow, dataset)
@@ -265,6 +286,22 @@ def _register_datasets(con: duckdb.DuckDBPyConnection, loc: Location,
         con.execute(f"CREATE OR REPLACE VIEW {_ident(name)} AS SELECT "
                     f"{_select_list(s, null=False, present=present)} FROM {_ident(arrow)}")
     return selected
+
+
+def lock_down(con: duckdb.DuckDBPyConnection, write_dir: Path | None = None) -> None:
+    """Make ``con`` reach no file and no network: external access off (no
+    ``read_csv('/etc/passwd')``, ``COPY ... TO``, ``ATTACH``, ``INSTALL``/``LOAD``), no
+    extension auto-installed or auto-loaded, and the configuration locked (no ``SET``
+    undoes it). ``write_dir``: the one folder its statements may read and write
+    (``surveil sql --allow-write-files``: exports). Call it after
+    :func:`register_tables`; DuckDB's spill files (``temp_directory``) still work."""
+    con.execute("SET autoinstall_known_extensions = false")
+    con.execute("SET autoload_known_extensions = false")
+    if write_dir is not None:
+        folder = os.path.join(os.path.abspath(write_dir), "")  # a prefix: the trailing '/'
+        con.execute(f"SET allowed_directories = [{sql_literal(folder)}]")
+    con.execute("SET enable_external_access = false")
+    con.execute("SET lock_configuration = true")
 
 
 _TEMPLATE = "views_template"  # in-memory database: the documented views of a new file
