@@ -72,7 +72,6 @@ from pipeline.tables import column_comment, spec, table_specs
 from pipeline.warehouse.crashpoints import crash_point
 from pipeline.warehouse.damage import DamagedTableError
 from pipeline.warehouse.delta import sql_literal, table_path, table_snapshot
-from pipeline.warehouse.integrity import TableFileError
 from pipeline.warehouse.location import Location, as_location
 from pipeline.warehouse.pending import pinned_versions
 
@@ -253,8 +252,8 @@ def register_tables(
     filters into the dataset. The tables' Delta logs are read in parallel: on object
     storage each costs round trips (~10-60 ms each on a store here), locally ~3 ms.
 
-    A table whose files differ from its log raises its
-    :class:`~pipeline.warehouse.integrity.TableFileError`; with ``refuse_damaged``
+    A damaged table (its log unreadable, or its files not those its log records) raises
+    its :class:`~pipeline.warehouse.damage.DamagedTableError`; with ``refuse_damaged``
     False (``surveil sql``: the other tables stay readable) its view raises that message
     instead when a query reads it."""
     from concurrent.futures import ThreadPoolExecutor
@@ -268,7 +267,7 @@ def register_tables(
     def dataset_of(name: str) -> Any:
         try:
             return reader_dataset(loc, name, pins)
-        except TableFileError as exc:
+        except DamagedTableError as exc:  # its log unreadable or its files changed
             if refuse_damaged:
                 raise
             return exc
@@ -277,7 +276,7 @@ def register_tables(
         found = list(pool.map(dataset_of, selected))
     for name, dataset in zip(selected, found, strict=True):
         s = spec(name).schema
-        if dataset is None or isinstance(dataset, TableFileError):
+        if dataset is None or isinstance(dataset, DamagedTableError):
             con.execute(view_sql(name, [], damage=None if dataset is None else str(dataset)))
             continue
         arrow = f"_surveil_arrow_{name}"
