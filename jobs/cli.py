@@ -548,24 +548,11 @@ def report(st: _State, name, from_, to, sector, fmt, params, list_, site) -> Non
         click.echo(f"{name}: no rows. {why}", err=True)
     if fmt != "csv":
         click.echo(format_report(table, fmt, title=name), nl=fmt != "table")
-    _provenance(st, load_report(name, dirs).source_tables(), start, end, site)
+    from pipeline.batch.provenance import report_provenance
 
-
-def _provenance(st: _State, tables: list[str], start: int | None, end: int | None,
-                site: str | None) -> None:
-    """On stderr: the config digests behind the rows of ``tables`` in the window, and a
-    warning when a family's rows there come from several configs (or another config than
-    the current one): pipeline.batch.provenance."""
-    from pipeline.batch.provenance import rows_provenance
-    from pipeline.reports import ALL_TIME
-
-    lines, warnings = rows_provenance(st.existing_warehouse, st.cfg, tables,
-                                      ALL_TIME[0] if start is None else start,
-                                      ALL_TIME[1] if end is None else end, site)
-    for line in lines:
+    for line in report_provenance(st.existing_warehouse, st.cfg,  # on stderr: the configs
+                                  load_report(name, dirs).source_tables(), start, end, site):
         click.echo(line, err=True)
-    for line in warnings:
-        click.echo(f"WARNING: {line}", err=True)
 
 
 def _list_reports(dirs: tuple[Path, ...]) -> None:
@@ -626,7 +613,7 @@ def export(st: _State, from_, to, out_path, site) -> None:
     click.echo(summary.render())
 
 
-@cli.command()
+@cli.command(context_settings={"ignore_unknown_options": True})  # QUERY may start "--"
 @click.argument("query", required=False)
 @_FORMAT
 @click.option("--allow-write-files", "write_dir", type=click.Path(file_okay=False),
@@ -636,16 +623,21 @@ def export(st: _State, from_, to, out_path, site) -> None:
 def sql(st: _State, query, fmt, write_dir) -> None:
     """Run SQL over the warehouse views (the tables reports use; `surveil schema` lists
     them), read-only: no file, extension or database is reachable but the views (and
-    the --allow-write-files folder). Without QUERY: an interactive prompt (end a
-    statement with ';', quit with .quit or Ctrl-D)."""
+    the --allow-write-files folder). Without QUERY: the statements piped on stdin, or
+    on a terminal an interactive prompt (end a statement with ';', quit with .quit or
+    Ctrl-D)."""
     from pipeline.render import format_report
-    from pipeline.reports import open_warehouse
+    from pipeline.reports import open_warehouse, run_sql, sql_write_dir
 
-    con = open_warehouse(st.existing_warehouse, write_dir=_write_dir(st, write_dir),
-                         refuse_damaged=False)  # the other tables stay readable
+    con = open_warehouse(st.existing_warehouse, refuse_damaged=False,  # the others read
+                         write_dir=sql_write_dir(st.existing_warehouse, write_dir))
     try:
-        if query is not None:
-            table = _run_sql(con, query)
+        if query is None and not sys.stdin.isatty():  # piped: every statement up to a
+            lines = sys.stdin.read().splitlines()     # .quit, the last ';' optional
+            query = "\n".join(lines[:next((i for i, ln in enumerate(lines)
+                                           if ln.strip() in _QUIT), len(lines))])
+        if query is not None and query.strip():
+            table = run_sql(con, query)
             if table is not None:
                 click.echo(format_report(table, fmt), nl=fmt != "table")
             return
@@ -654,43 +646,14 @@ def sql(st: _State, query, fmt, write_dir) -> None:
         con.close()
 
 
-def _write_dir(st: _State, given: str | None) -> Path | None:
-    """``--allow-write-files``: an existing folder outside the warehouse (exit 2 else)."""
-    if given is None:
-        return None
-    folder = Path(given).expanduser().resolve()
-    if not folder.is_dir():
-        raise UsageError(f"--allow-write-files {given}: no such folder")
-    wh = st.existing_warehouse
-    if isinstance(wh, Path):
-        wh = wh.resolve()
-        if folder == wh or folder.is_relative_to(wh) or wh.is_relative_to(folder):
-            raise UsageError(f"--allow-write-files {given}: the folder holds or is inside the "
-                             f"warehouse {wh}; the SQL may not write there")
-    return folder
-
-
-def _run_sql(con: Any, text: str) -> Any:
-    """The rows of ``con.sql(text)`` as an Arrow table (None: a statement without rows);
-    a DuckDB error as a :class:`UsageError` (a refused file access says why)."""
-    import duckdb
-
-    try:
-        rel = con.sql(text)
-        return None if rel is None else rel.to_arrow_table()
-    except duckdb.PermissionException as exc:
-        raise UsageError(f"{str(exc).strip()}: surveil sql reads the warehouse through its "
-                         "views only (no file, ATTACH or extension); to export results, "
-                         "give --allow-write-files DIR and COPY ... TO a file under DIR"
-                         ) from None
-    except duckdb.Error as exc:
-        raise UsageError(str(exc).strip()) from None
+_QUIT = (".quit", ".exit", "\\q")
 
 
 def _prompt(con: Any, fmt: str) -> None:
     import contextlib
 
     from pipeline.render import format_report
+    from pipeline.reports import run_sql
 
     with contextlib.suppress(ImportError):
         import readline  # noqa: F401  (line editing and history for input())
@@ -703,14 +666,14 @@ def _prompt(con: Any, fmt: str) -> None:
         except EOFError:
             click.echo("", err=True)
             return
-        if not buf and line.strip() in (".quit", ".exit", "\\q"):
+        if not buf and line.strip() in _QUIT:
             return
         buf.append(line)
         if not line.rstrip().endswith(";"):
             continue
         text, buf = "\n".join(buf), []
         try:
-            table = _run_sql(con, text)
+            table = run_sql(con, text)
         except UsageError as exc:
             click.echo(f"error: {exc}", err=True)
             continue

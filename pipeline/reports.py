@@ -41,6 +41,7 @@ import pyarrow.csv as pacsv
 
 from pipeline.config import Config
 from pipeline.configspec import Document, setting
+from pipeline.errors import UsageError
 from pipeline.requirements import ConfigSection, RequirementsConfig, requirements_config
 from pipeline.resources import resource_path
 from pipeline.tables import table_specs
@@ -495,3 +496,35 @@ def report_listing(dirs: tuple[Path, ...]) -> list[str]:
             text, origin = f"(unusable: {exc})", ""
         lines.append(f"{n:<{width}}{text[:110]}{'...' if len(text) > 110 else ''}{origin}")
     return lines
+
+
+def sql_write_dir(warehouse: Path | Location, given: str | None) -> Path | None:
+    """``surveil sql --allow-write-files``: an existing folder outside the warehouse
+    (:class:`UsageError`, exit 2, otherwise); None without one."""
+    if given is None:
+        return None
+    folder = Path(given).expanduser().resolve()
+    if not folder.is_dir():
+        raise UsageError(f"--allow-write-files {given}: no such folder")
+    if isinstance(warehouse, Path):
+        wh = warehouse.resolve()
+        if folder == wh or folder.is_relative_to(wh) or wh.is_relative_to(folder):
+            raise UsageError(f"--allow-write-files {given}: the folder holds or is inside the "
+                             f"warehouse {wh}; the SQL may not write there")
+    return folder
+
+
+def run_sql(con: duckdb.DuckDBPyConnection, text: str) -> pa.Table | None:
+    """The rows of ``con.sql(text)`` (every statement run, the last one's rows) as an
+    Arrow table (None: a statement without rows); a DuckDB error as a
+    :class:`UsageError` (a refused file access says why)."""
+    try:
+        rel = con.sql(text)
+        return None if rel is None else rel.to_arrow_table()
+    except duckdb.PermissionException as exc:
+        raise UsageError(f"{str(exc).strip()}: surveil sql reads the warehouse through its "
+                         "views only (no file, ATTACH or extension); to export results, "
+                         "give --allow-write-files DIR and COPY ... TO a file under DIR"
+                         ) from None
+    except duckdb.Error as exc:
+        raise UsageError(str(exc).strip()) from None

@@ -152,3 +152,15 @@ def rows_provenance(warehouse: Path, cfg: Config, tables: Iterable[str], start_n
     if not fams:
         return [], []
     return provenance_lines(window_digests(warehouse, start_ns, end_ns, site, fams), cfg)
+
+
+def report_provenance(warehouse: Path, cfg: Config, tables: Iterable[str],
+                     start_ns: int | None, end_ns: int | None, site: str | None) -> list[str]:
+    """What ``surveil report`` prints on stderr after a report: the config digests behind
+    the rows of ``tables`` in the window (None: all time), then a ``WARNING:`` line when
+    a family's rows there come from several configs or another than the current one
+    (:func:`rows_provenance`)."""
+    lines, warnings = rows_provenance(warehouse, cfg, tables,
+                                      0 if start_ns is None else start_ns,
+                                      2**63 - 1 if end_ns is None else end_ns, site)
+    return [*lines, *(f"WARNING: {w}" for w in warnings)]

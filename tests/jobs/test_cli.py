@@ -122,6 +122,15 @@ def test_sql_and_schema(e2e):
                           "sql"], input="SELECT 40 + 2 AS answer;\n.quit\n", text=True,
                          capture_output=True, cwd=REPO, check=False)
     assert res.returncode == 0 and "42" in res.stdout
+    # piped without a final ';' (was: nothing run, exit 0), and a query opening with a
+    # comment (was: exit 2, click read "-- ..." as an option)
+    res = subprocess.run([sys.executable, "-m", "jobs.cli", "--warehouse", str(e2e.warehouse),
+                          "sql", "--format", "csv"], input="SELECT 1 AS a;\nSELECT 40 + 2 AS b",
+                         text=True, capture_output=True, cwd=REPO, check=False)
+    assert res.returncode == 0 and res.stdout.split() == ['"b"', "42"], res.stderr
+    res = surveil("--warehouse", str(e2e.warehouse), "sql", "-- the answer\nSELECT 6 * 7 AS c",
+                  "--format", "csv")
+    assert res.returncode == 0 and res.stdout.split() == ['"c"', "42"], res.stderr
     res = surveil("schema", "radar_tracks", "--format", "csv")
     assert res.returncode == 0
     assert '"range_m","double","no","m","slant range from the site, m"' in res.stdout
