@@ -394,6 +394,10 @@ def checked_warehouse(path: Path | str | Location,
             f"warehouse path {loc.uri!r} holds {', '.join(repr(c) for c in bad)}, which the "
             "Delta Lake library cannot use in a table path: choose another directory"
         )
+    if loc.is_local and "," in loc.uri:  # DuckDB's file_search_path is a comma list
+        raise UsageError(f"warehouse path {loc.uri!r} holds ',', which the views file "
+                         "(DuckDB's file_search_path, a comma-separated list) cannot name: "
+                         "choose another directory")
     return loc
 
 

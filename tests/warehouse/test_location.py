@@ -172,3 +172,18 @@ def test_a_location_is_the_same_after_a_trip_through_pickle():
     loc = Location("s3://b/wh", {"aws_region": "eu-north-1"}.items())
     assert pickle.loads(pickle.dumps(loc)) == loc and hash(loc) == hash(Location(
         "s3://b/wh", [("AWS_REGION", "eu-north-1")]))
+
+
+def test_a_warehouse_path_with_a_comma_is_exit_2_before_any_write(tmp_path):
+    """Was: ingest into ``.../w,c`` committed its tables, then the views file (DuckDB's
+    comma-separated ``file_search_path``) failed with a traceback."""
+    import subprocess
+    import sys
+
+    with pytest.raises(UsageError, match="holds ','"):
+        checked_warehouse(tmp_path / "w,c")
+    res = subprocess.run([sys.executable, "-m", "jobs.cli", "--warehouse", str(tmp_path / "w,c"),
+                          "ingest", str(tmp_path / "none.mcap")], cwd=ROOT, capture_output=True,
+                         text=True, check=False)
+    assert res.returncode == 2 and "holds ','" in res.stderr and "Traceback" not in res.stderr
+    assert not (tmp_path / "w,c").exists()
