@@ -3,7 +3,6 @@
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -13,20 +12,11 @@ import jobs  # noqa: F401  (first: caps polars to one thread before polars loads
 from pipeline.config import Config
 from pipeline.families import load_config
 from pipeline.units import NS
+from tests.real_data import REAL_DATA, real_data_dir  # noqa: F401  (re-exported)
 
-REAL_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "real"
 # 00:50 -> 01:10: two archive files and two batch units across the hour boundary
 E2E_START_NS = 1_768_438_200 * NS  # 2026-01-15T00:50:00Z
 E2E_DURATION_S = 1200.0
-
-
-def real_data_dir() -> Path:
-    """../shared/data/real, or skip: those recordings are not part of the repository."""
-    env = os.environ.get("SURVEIL_REAL_DATA")
-    path = Path(env) if env else REAL_DATA
-    if not path.is_dir():
-        pytest.skip(f"real recordings not available at {path} (set SURVEIL_REAL_DATA)")
-    return path
 
 
 @dataclass(frozen=True)

@@ -9,13 +9,13 @@ from datetime import date
 
 import polars as pl
 import pytest
-from conftest import real_data_dir
 
 from jobs.batch import run_batch
 from pipeline.convert.asterix import wrap_asterix_file
 from pipeline.ingest.driver import run_ingest
 from pipeline.units import NS
 from pipeline.warehouse.delta import read_table
+from tests.real_data import real_data_dir
 
 pytestmark = pytest.mark.realdata
 DAY = date(2026, 1, 15)

@@ -8,13 +8,13 @@ from __future__ import annotations
 import numpy as np
 import polars as pl
 import pytest
-from conftest import real_data_dir
 
 from jobs.batch import run_batch
 from pipeline.convert.importer import run_import
 from pipeline.ingest.driver import run_ingest
 from pipeline.reports import run_named_report
 from pipeline.warehouse.delta import read_table
+from tests.real_data import real_data_dir
 
 pytestmark = [pytest.mark.realdata, pytest.mark.slow]
 HOUR_NS = 3600 * 10**9

@@ -41,7 +41,7 @@ def _solent_config():
 
 @pytest.fixture(scope="module")
 def solent(tmp_path_factory) -> tuple[Path, object]:
-    from conftest import real_data_dir
+    from tests.real_data import real_data_dir
 
     src = real_data_dir() / CSV
     if not src.exists():

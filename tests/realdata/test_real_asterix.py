@@ -26,10 +26,10 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 import pytest
-from conftest import real_data_dir
 
 from pipeline.families import load_config
 from pipeline.units import NS
+from tests.real_data import real_data_dir
 
 pytestmark = pytest.mark.realdata
 SERVICE = {2, 19, 23, 25, 31, 34, 63, 65, 247, 252}

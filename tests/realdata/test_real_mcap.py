@@ -17,11 +17,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import real_data_dir
 from mcap.reader import make_reader
 
 from pipeline.families import load_config
 from pipeline.units import NS
+from tests.real_data import real_data_dir
 
 pytestmark = pytest.mark.realdata
 DECODED = {

@@ -40,7 +40,7 @@ TABLES = ("nav_gnss", "nav_heading", "nav_speed_log", "arpa_targets", "arpa_own_
 
 
 def _real() -> Path:
-    from conftest import real_data_dir
+    from tests.real_data import real_data_dir
 
     return real_data_dir()
 

@@ -14,11 +14,11 @@ from pathlib import Path
 
 import polars as pl
 import pytest
-from conftest import real_data_dir
 
 from pipeline.audit.data import collect
 from pipeline.families import load_config
 from pipeline.reports import open_warehouse, run_named_report
+from tests.real_data import real_data_dir
 from tests.realdata.site_walk import Walk, walk, write_cat010_capture
 
 pytestmark = pytest.mark.realdata
