@@ -84,6 +84,24 @@ def test_repair_gives_back_every_derived_row(e2e, warehouse, clean_rows, damage)
         assert list((warehouse / DOCTOR_DIR).glob(f"*/tables/{table}/{what}"))
 
 
+def test_a_derived_table_whose_every_log_entry_is_broken_is_batched_anew(e2e, warehouse,
+                                                                          clean_rows):
+    """No version of track_errors' log reads (its first entry cut, the later ones and
+    checkpoints garbage): was "rebuild it from the archive"; the batch writes the table,
+    so the repair sets the log aside and batches every unit again."""
+    log = warehouse / "tables" / "track_errors" / "_delta_log"
+    for entry in log.iterdir():
+        if entry.is_file():
+            entry.write_bytes(entry.read_bytes()[: entry.stat().st_size // 2])
+    assert examine(warehouse).damaged["track_errors"].good_version is None
+    result = run_doctor(e2e.cfg, warehouse, repair=True, executor_kind="serial")
+    assert result.exit_code == 0, result.render()
+    assert result.after is not None and result.after.healthy, result.render()
+    for name in DERIVED:
+        assert _same(rows(warehouse, name), clean_rows[name]), name
+    assert list((warehouse / DOCTOR_DIR).glob("*/tables/track_errors/_delta_log/*.json"))
+
+
 def test_a_layout_other_than_schemas_is_found_and_left_alone(e2e, warehouse):
     """A table whose columns are not those ``schemas/`` declares, and a folder of a table
     it does not declare, are named; --repair leaves them (a rebuild's job)."""
