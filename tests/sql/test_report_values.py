@@ -885,25 +885,39 @@ def _runs(df: pl.DataFrame, part: list[str], flag: str, max_gap: pl.Expr) -> pl.
                 (pl.col("time_ns").max() + pl.col("step_ns").first()).alias("end_ns")))
 
 
+CHANNEL = ["site", "family", "sector", "channel"]
+
+
+def _stepped_decisions(world) -> pl.DataFrame:
+    """The decisions with each (site, family, channel)'s decision step (the median
+    positive interval between its decisions in one unit; 1 s when it has none)."""
+    h = _decisions(world)
+    dt = h.sort("time_ns").with_columns(
+        pl.col("time_ns").diff().over(*CHANNEL, "unit").alias("dt"))
+    step = dt.group_by("site", "family", "channel").agg(
+        pl.col("dt").filter(pl.col("dt") > 0).median().fill_null(1e9).round(0).cast(pl.Int64)
+        .alias("step_ns"))
+    return h.join(step, on=["site", "family", "channel"])
+
+
+def _channel_down(h: pl.DataFrame) -> pl.DataFrame:
+    """Per channel and decision time: down when at least half its targets are excluded."""
+    return h.group_by(*CHANNEL, "time_ns").agg(
+        (pl.col("excluded").cast(pl.Float64).mean() >= 0.5).alias("down"),
+        pl.col("step_ns").first())
+
+
 @covers("channel_faults_by_sector")
 def test_channel_faults_by_sector(world):
     from scipy.stats import poisson
 
-    h = _decisions(world)
-    chan = ["site", "family", "sector", "channel"]
-    dt = h.sort("time_ns").with_columns(
-        pl.col("time_ns").diff().over(*chan, "unit").alias("dt"))
-    step = dt.group_by("site", "family", "channel").agg(
-        pl.col("dt").filter(pl.col("dt") > 0).median().fill_null(1e9).round(0).cast(pl.Int64)
-        .alias("step_ns"))
-    h = h.join(step, on=["site", "family", "channel"])
+    h = _stepped_decisions(world)
+    chan = CHANNEL
     te = (_runs(h, [*chan, "unit"], "excluded", 3 * pl.col("step_ns"))
           .group_by(chan).agg(pl.len().alias("target_episodes"),
                               ((pl.col("end_ns") - pl.col("start_ns")).sum() / NS)
                               .alias("target_excluded_s")))
-    per_time = h.group_by(*chan, "time_ns").agg(
-        (pl.col("excluded").cast(pl.Float64).mean() >= 0.5).alias("down"),
-        pl.col("step_ns").first())
+    per_time = _channel_down(h)
     ce = (_runs(per_time, chan, "down", 3 * pl.col("step_ns"))
           .group_by(chan).agg(pl.len().alias("channel_episodes"),
                               ((pl.col("end_ns") - pl.col("start_ns")).sum() / NS)
@@ -930,17 +944,9 @@ def test_channel_faults_by_sector(world):
 
 @covers("channel_fault_episodes")
 def test_channel_fault_episodes(world):
-    h = _decisions(world)
-    chan = ["site", "family", "sector", "channel"]
-    dt = h.sort("time_ns").with_columns(
-        pl.col("time_ns").diff().over(*chan, "unit").alias("dt"))
-    step = dt.group_by("site", "family", "channel").agg(
-        pl.col("dt").filter(pl.col("dt") > 0).median().fill_null(1e9).round(0).cast(pl.Int64)
-        .alias("step_ns"))
-    h = h.join(step, on=["site", "family", "channel"])
-    per_time = h.group_by(*chan, "time_ns").agg(
-        (pl.col("excluded").cast(pl.Float64).mean() >= 0.5).alias("down"),
-        pl.col("step_ns").first())
+    h = _stepped_decisions(world)
+    chan = CHANNEL
+    per_time = _channel_down(h)
     ep = _runs(per_time, chan, "down", 3 * pl.col("step_ns")).drop("run")
     # the evidence: the channel's decisions in the sector inside the episode
     health = pl.concat([
