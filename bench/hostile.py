@@ -216,12 +216,15 @@ def _iso(t_ns: int) -> str:
     return dt.datetime.fromtimestamp(t_ns // NS, dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
 
 
-def _run(args: list[str], wh: Path) -> tuple[int, bool, str]:
+def _run(args: list[str], wh: Path, timeout_s: float | None = None) -> tuple[int, bool, str]:
+    """``surveil --warehouse wh ARGS`` as a subprocess (no stdin): exit code, whether it
+    printed a traceback (or a C++ abort), its output."""
     env = {**os.environ, "PYTHONPATH": str(REPO)}
     cmd = [sys.executable, "-m", "jobs.cli", "--warehouse", str(wh), *args]
-    res = subprocess.run(cmd, cwd=REPO, env=env, capture_output=True, text=True, check=False)
+    res = subprocess.run(cmd, cwd=REPO, env=env, capture_output=True, text=True, check=False,
+                         timeout=timeout_s, stdin=subprocess.DEVNULL)
     text = res.stdout + res.stderr
-    return res.returncode, "Traceback" in text, text
+    return res.returncode, "Traceback" in text or "terminate called" in text, text
 
 
 def run_case(case: Case, root: Path, batch: bool) -> dict:
@@ -434,19 +437,10 @@ TRUST_CASES = [
 def _run_limited(args: list[str], wh: Path, timeout_s: float = 300.0
                  ) -> tuple[int | str, bool]:
     try:
-        code, tb, _ = _run_timeout(args, wh, timeout_s)
+        code, tb, _ = _run(args, wh, timeout_s)
     except subprocess.TimeoutExpired:
         return "hung", False
     return code, tb
-
-
-def _run_timeout(args: list[str], wh: Path, timeout_s: float) -> tuple[int, bool, str]:
-    env = {**os.environ, "PYTHONPATH": str(REPO)}
-    cmd = [sys.executable, "-m", "jobs.cli", "--warehouse", str(wh), *args]
-    res = subprocess.run(cmd, cwd=REPO, env=env, capture_output=True, text=True, check=False,
-                         timeout=timeout_s, stdin=subprocess.DEVNULL)
-    text = res.stdout + res.stderr
-    return res.returncode, "Traceback" in text or "terminate called" in text, text
 
 
 def run_trust_case(case: TrustCase, base: Path, root: Path) -> dict:
