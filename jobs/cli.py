@@ -740,6 +740,7 @@ def calibrate(st: _State, from_, to, max_order, min_speed, site) -> None:
         summary = run_calibrate(st.cfg, warehouse, start_ns=start, end_ns=end,
                                 max_order=max_order, min_speed_mps=min_speed, site=site)
     click.echo(summary.render())
+    sys.exit(summary.exit_code)
 
 
 @cli.command("calibrate-radars")
@@ -752,14 +753,18 @@ def calibrate(st: _State, from_, to, max_order, min_speed, site) -> None:
 def calibrate_radars(st: _State, from_, to, fmt, site) -> None:
     """Estimate each radar's range, azimuth and time bias from AIS ships in a window,
     with 95 % intervals; write radar_bias_by_site and print the config lines."""
-    from pipeline.batch.calibrate import render, run_calibration
+    from pipeline.batch.calibrate import run_calibration
+    from pipeline.errors import views_stale_note
 
     start, end = _window(from_, to, required=True)
     warehouse = st.existing_warehouse
     site = st.site(site)
     with _locked(st):
-        est = run_calibration(st.cfg, warehouse, start_ns=start, end_ns=end, site=site)
-    click.echo(est.write_json() if fmt == "json" else render(est))
+        cal = run_calibration(st.cfg, warehouse, start_ns=start, end_ns=end, site=site)
+    click.echo(cal.estimates.write_json() if fmt == "json" else cal.render())
+    if fmt == "json" and cal.views_error:
+        click.echo(views_stale_note("calibration", cal.views_error), err=True)
+    sys.exit(cal.exit_code)
 
 
 # --- experiments (the papers' simulation experiments, seeded) -------------------------------

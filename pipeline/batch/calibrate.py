@@ -21,16 +21,34 @@ from pipeline import tables
 from pipeline.airfield.config import airfield_config
 from pipeline.airfield.stage import calibration
 from pipeline.config import Config
-from pipeline.errors import UsageError
+from pipeline.errors import EXIT_VIEWS_STALE, UsageError, views_stale_note
 from pipeline.maritime.bias import correction_toml, estimate_biases
 from pipeline.maritime.config import radar_bias_config
 from pipeline.units import NS, iso
 from pipeline.warehouse.delta import read_table, replace_window
-from pipeline.warehouse.views import rebuild_views_file
+from pipeline.warehouse.views import rebuild_views_after_commits
+
+
+@dataclass
+class RadarCalibration:
+    """What ``calibrate-radars`` wrote: the estimates (with their ``site``), and why the
+    views file could not be rebuilt after the commits (a full disk), else None."""
+
+    estimates: pl.DataFrame
+    views_error: str | None = None
+
+    @property
+    def exit_code(self) -> int:
+        return EXIT_VIEWS_STALE if self.views_error else 0
+
+    def render(self) -> str:
+        text = render(self.estimates)
+        return text + "\n" + views_stale_note("calibration", self.views_error) \
+            if self.views_error else text
 
 
 def run_calibration(cfg: Config, warehouse: Path, *, start_ns: int, end_ns: int,
-                    site: str | None = None) -> pl.DataFrame:
+                    site: str | None = None) -> RadarCalibration:
     """Estimate the biases of [start_ns, end_ns), site by site (``site``: that one only),
     commit each site's, return the rows (with their ``site``)."""
     gap_ns = round(radar_bias_config(cfg).max_ais_gap_s * NS)
@@ -53,8 +71,7 @@ def run_calibration(cfg: Config, warehouse: Path, *, start_ns: int, end_ns: int,
             out.append(pl.from_arrow(table))
     if not out:
         raise UsageError("no radar track followed an AIS ship in the window: nothing to fit")
-    rebuild_views_file(warehouse)
-    return pl.concat(out)
+    return RadarCalibration(pl.concat(out), rebuild_views_after_commits(warehouse))
 
 
 def render(est: pl.DataFrame) -> str:
@@ -82,11 +99,18 @@ class CalibrateSummary:
     end_ns: int
     rows: int
     fits: dict[str, str]
+    views_error: str | None = None  # the views rebuild after the commits failed: why
+
+    @property
+    def exit_code(self) -> int:
+        return EXIT_VIEWS_STALE if self.views_error else 0
 
     def render(self) -> str:
         lines = [f"sensor_error_models: {self.rows} rows for fit window "
                  f"[{self.start_ns}, {self.end_ns})"]
         lines += [f"  {k:<18} {v}" for k, v in sorted(self.fits.items())]
+        if self.views_error:
+            lines.append(views_stale_note("calibration", self.views_error))
         return "\n".join(lines)
 
 
@@ -125,5 +149,5 @@ def run_calibrate(cfg: Config, warehouse: Path, *, start_ns: int, end_ns: int,
                  for k, f in fits.items()}
     if n_rows == 0:
         raise UsageError("too few matched reports in the window to fit any error model")
-    rebuild_views_file(warehouse)
-    return CalibrateSummary(start_ns, end_ns, n_rows, desc)
+    return CalibrateSummary(start_ns, end_ns, n_rows, desc,
+                            rebuild_views_after_commits(warehouse))

@@ -48,7 +48,7 @@ from pipeline.warehouse.crashpoints import crash_point
 from pipeline.warehouse.delta import require_readable
 from pipeline.warehouse.location import as_location
 from pipeline.warehouse.sites import sites_in
-from pipeline.warehouse.views import rebuild_views_file, warm_up
+from pipeline.warehouse.views import rebuild_views_after_commits, rebuild_views_file, warm_up
 
 log = logging.getLogger(__name__)
 
@@ -101,11 +101,7 @@ def run_batch(
         out.by_site[name] = summary
         _continue(cfg, warehouse, summary, executor_kind, progress)
     with deferred_interrupts():
-        try:
-            rebuild_views_file(warehouse)
-        except OSError as exc:  # a full disk after the commits: they stand, the file is stale
-            log.error("views file not rebuilt after the batch: %s", exc)
-            out.views_error = f"{type(exc).__name__}: {exc}"
+        out.views_error = rebuild_views_after_commits(warehouse)
     return out
 
 

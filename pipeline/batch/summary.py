@@ -7,6 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
+from pipeline.errors import EXIT_VIEWS_STALE, views_stale_note
+
 
 @dataclass
 class BatchSummary:
@@ -142,21 +144,9 @@ class SitesSummary:
                          f"{iso_s(self.asked_end_ns)}): no site has data in it; nothing written")
         lines += [b.render() for b in self.by_site.values()]
         if self.views_error:
-            lines.append(views_stale_note(self.views_error))
+            lines.append(views_stale_note("batch", self.views_error))
         return "\n".join(lines)
 
-
-EXIT_VIEWS_STALE = 3
-"""Exit code of a job whose commits are all made but whose views file (``surveil.duckdb``)
-could not be rebuilt after them (a full disk)."""
-
-
-def views_stale_note(error: str) -> str:
-    """What a job whose commits are made says when its views rebuild failed (``error``)."""
-    return (f"the batch is committed, but the views file surveil.duckdb could not be rebuilt "
-            f"({error}): its views are stale (the tables, `surveil report` and `surveil sql` "
-            "are up to date); `surveil doctor --repair` or the next writing command rebuilds "
-            f"it (exit code {EXIT_VIEWS_STALE})")
 
 
 def iso_s(t_ns: int) -> str:

@@ -34,7 +34,7 @@ from pipeline.warehouse.delta import require_readable
 from pipeline.warehouse.ledger import LEDGER, same_content
 from pipeline.warehouse.location import Location, as_location
 from pipeline.warehouse.overlaps import record_overlaps, synthetic_time_channels
-from pipeline.warehouse.views import rebuild_views_file
+from pipeline.warehouse.views import rebuild_views_after_commits
 
 log = logging.getLogger(__name__)
 
@@ -101,7 +101,7 @@ def run_ingest(
                 _warn_synthetic(warehouse, summary)
             _warn_place(warehouse, cfg, summary)
             with deferred_interrupts():
-                rebuild_views_file(warehouse, ctx.views)
+                summary.views_error = rebuild_views_after_commits(warehouse, ctx.views)
     return summary
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from pipeline.decode.registry import RAW_TABLES
+from pipeline.errors import EXIT_VIEWS_STALE, views_stale_note
 from pipeline.ingest.worker import FileManifest
 
 
@@ -35,6 +36,8 @@ class IngestSummary:
     # entries of the input folders that are not regular files (a FIFO, a dangling link):
     # never opened, listed with why (pipeline.ingest.plan.not_a_file); no exit code
     not_files: list[tuple[str, str]] = field(default_factory=list)
+    # the views file's rebuild after the commits failed (a full disk): why, else None
+    views_error: str | None = None
 
     @property
     def rejected(self) -> int:
@@ -45,10 +48,11 @@ class IngestSummary:
     def exit_code(self) -> int:
         """0: everything read was used (all files ok or skipped, no rejects row); 1: some
         row was rejected, some file partial/quarantined or changed while it was read, or
-        a unit failed."""
+        a unit failed; :data:`EXIT_VIEWS_STALE` (3) when nothing else went wrong but the
+        views file could not be rebuilt after the commits."""
         bad = (self.files_partial or self.files_quarantined or self.failed or self.rejected
                or self.changed)
-        return 1 if bad else 0
+        return 1 if bad else EXIT_VIEWS_STALE if self.views_error else 0
 
     def add(self, m: FileManifest) -> None:
         if m.skipped:
@@ -113,6 +117,8 @@ class IngestSummary:
             lines.append(f"FAILED {path}: {err}")
         if len(self.failed) > 10:
             lines.append(f"... and {len(self.failed) - 10} more failed units")
+        if self.views_error:
+            lines.append(views_stale_note("ingest", self.views_error))
         lines.append(f"exit code {self.exit_code}")
         return "\n".join(lines)
 

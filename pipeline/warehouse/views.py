@@ -415,6 +415,20 @@ def rebuild_views_file(warehouse: Path | Location, engine: ViewsEngine | None = 
     return _rebuild(engine if engine is not None else _SHARED, warehouse)
 
 
+def rebuild_views_after_commits(warehouse: Path | Location,
+                                engine: ViewsEngine | None = None) -> str | None:
+    """:func:`rebuild_views_file` after a job's commits: a rebuild that fails on the disk
+    (a full disk: ``OSError``, DuckDB's ``IOException``) leaves the commits standing and
+    the file stale (the next writer or ``surveil doctor --repair`` rebuilds it); returns
+    why it failed, logged, or None when it is up to date."""
+    try:
+        rebuild_views_file(warehouse, engine)
+    except (OSError, duckdb.IOException) as exc:
+        log.error("views file not rebuilt after the commits: %s", exc)
+        return f"{type(exc).__name__}: {exc}"
+    return None
+
+
 def _rebuild(engine: ViewsEngine, warehouse: Path | Location) -> Path | None:
     if not as_location(warehouse).is_local:
         return None

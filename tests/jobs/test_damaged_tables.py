@@ -118,3 +118,27 @@ def test_a_full_disk_at_the_views_rebuild_after_the_commit_is_exit_3(e2e, wareho
     fixed = _surveil(warehouse, "doctor", "--repair")
     assert fixed.returncode == 0, fixed.stdout
     assert not views_stale(warehouse)
+
+
+def _stale_views_exit_3(res: subprocess.CompletedProcess, job: str, warehouse: Path) -> None:
+    assert res.returncode == 3, (res.returncode, res.stderr[-2000:])
+    assert "Traceback" not in res.stderr
+    assert f"the {job} is committed" in res.stdout and "surveil doctor --repair" in res.stdout
+    assert views_stale(warehouse)
+    assert _surveil(warehouse, "doctor", "--repair").returncode == 0
+    assert not views_stale(warehouse)
+
+
+def test_a_full_disk_at_the_views_rebuild_after_an_ingest_is_exit_3(e2e, tmp_path):
+    """(the code before: a traceback, exit 1, after the commits had been made)"""
+    fresh = tmp_path / "fresh"
+    res = _surveil(fresh, "ingest", *map(str, e2e.archive), "--executor", "serial",
+                   env={FAIL_ENV: "views.written"})
+    _stale_views_exit_3(res, "ingest", fresh)
+
+
+def test_a_full_disk_at_the_views_rebuild_after_a_calibration_is_exit_3(e2e, warehouse):
+    window = ["--from", iso(e2e.start_ns), "--to", iso(e2e.end_ns)]
+    res = _surveil(warehouse, "calibrate-radars", *window, env={FAIL_ENV: "views.written"})
+    _stale_views_exit_3(res, "calibration", warehouse)
+    assert "range bias" in res.stdout  # the estimates are printed all the same
