@@ -26,6 +26,7 @@ from pipeline.convert.config import import_options
 from pipeline.convert.legacy import ImportedFile, detect_format, import_file, output_path
 from pipeline.convert.output import REJECTS_TOPIC
 from pipeline.errors import UsageError
+from pipeline.render import printable
 from pipeline.units import describe_time, time_in_range
 
 
@@ -76,7 +77,8 @@ class ImportSummary:
         for path, err in self.failed:
             lines.append(f"  FAILED {path}: {err}")
         lines.append(f"exit code {self.exit_code}")
-        return "\n".join(lines)
+        # file names come from the archive: a control character in one is shown escaped
+        return "\n".join(map(printable, lines))
 
 
 def expand_inputs(paths: Sequence[Path | str]) -> tuple[list[Path], list[Path]]:

@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 from pipeline.decode.registry import RAW_TABLES
 from pipeline.errors import EXIT_VIEWS_STALE, views_stale_note
 from pipeline.ingest.worker import FileManifest
+from pipeline.render import printable
 
 
 @dataclass
@@ -120,7 +121,8 @@ class IngestSummary:
         if self.views_error:
             lines.append(views_stale_note("ingest", self.views_error))
         lines.append(f"exit code {self.exit_code}")
-        return "\n".join(lines)
+        # file names come from the archive: a control character in one is shown escaped
+        return "\n".join(map(printable, lines))
 
 
 def _merge(into: dict[str, int], counts: dict[str, int]) -> None:

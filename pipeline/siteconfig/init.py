@@ -22,6 +22,7 @@ from pipeline.config import Config
 from pipeline.convert.legacy import detect_format
 from pipeline.errors import UsageError
 from pipeline.families import load_config
+from pipeline.render import printable
 from pipeline.siteconfig.propose import propose
 from pipeline.siteconfig.render import render, summary_lines
 from pipeline.siteconfig.survey import sites_of, survey_warehouse
@@ -35,9 +36,10 @@ class InitResult:
     lines: list[str] = field(default_factory=list)
 
     def render(self) -> str:
-        return "\n".join([f"config init: wrote {self.out}", *("  " + x for x in self.lines),
-                          f"next: surveil config check {self.out}; then surveil --config "
-                          f"{self.out} ingest ... (docs/site.md)"])
+        lines = [f"config init: wrote {self.out}", *("  " + x for x in self.lines),
+                 f"next: surveil config check {self.out}; then surveil --config "
+                 f"{self.out} ingest ... (docs/site.md)"]
+        return "\n".join(map(printable, lines))  # names from the archive, escaped
 
 
 def _is_warehouse(p: Path) -> bool:

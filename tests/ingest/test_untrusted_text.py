@@ -73,3 +73,16 @@ def test_a_file_whose_metadata_site_is_invalid_is_refused_alone(tmp_path, cfg, s
     ledger = pl.from_arrow(read_table(wh, "ingest_ledger")).filter(
         pl.col("source_file") == str(bad))
     assert ledger["status"].to_list() == ["quarantined"]
+
+
+def test_a_file_name_with_control_characters_is_shown_escaped_in_the_summary(tmp_path, cfg):
+    """The ingest summary prints the archive's file names (QUARANTINED lines, warnings):
+    a name carrying a terminal escape or a newline cannot colour the terminal or forge a
+    line of its own (the code before printed it raw)."""
+    evil = tmp_path / "in" / "x\x1b[2J\nexit code 0.mcap"
+    evil.parent.mkdir()
+    evil.write_bytes(b"not an mcap file at all")
+    text = run_ingest([evil.parent], cfg, tmp_path / "wh", executor="serial").render()
+    assert "QUARANTINED" in text
+    assert "\x1b" not in text and "x\\x1b[2J\\x0aexit code 0.mcap" in text
+    assert text.splitlines()[-1] == "exit code 1"
