@@ -116,6 +116,10 @@ class AisConfig:
     false_identification_probability: float = setting(0.001, gt=0.0, le=0.1, why=(
         "a false-identification budget above 10 % names ships by chance"))
     missed_identification_probability: float = probability(0.01)
+    # offline: a point takes the identity decision reached at most this much later
+    # (pipeline.maritime.identity, "Fixed lag"); 0: the causal test, as a live picture
+    identity_lag_s: float = setting(60.0, ge=0.0, le=86_400.0, why=(
+        "the identity test's lag spans seconds to at most a day"))
     # per epoch: the chance a ship's own AIS is assigned to its track (P_M), and that
     # another ship's AIS is (P_S < P_M)
     match_probability: float = probability(0.95)
@@ -397,6 +401,10 @@ def _check_identity_test(doc: Document, ais: AisConfig) -> None:
         doc.problem(("ais", "missed_identification_probability"),
                     "false_identification_probability + missed_identification_probability "
                     "must be below 1")
+    if ais.identity_lag_s > ais.identity_window_s:
+        doc.problem(("ais", "identity_lag_s"),
+                    f"must be at most identity_window_s ({ais.identity_window_s:g} s, the "
+                    "units' look-ahead: a longer lag would make results depend on the cuts)")
     if ais.stray_match_probability >= ais.match_probability:
         doc.problem(("ais", "stray_match_probability"),
                     f"must be below match_probability ({ais.match_probability})")

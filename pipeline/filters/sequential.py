@@ -92,6 +92,31 @@ def held_decision(s: np.ndarray, segment_start: np.ndarray, lo: float, hi: float
     return up[last]
 
 
+def fixed_lag_decision(s: np.ndarray, segment_start: np.ndarray, lo: float, hi: float,
+                       time_ns: np.ndarray, lag_ns: int) -> np.ndarray:
+    """:func:`held_decision` smoothed with a fixed lag: per row, the decision the test
+    reaches NEXT in its segment (the next row whose held sum touches ``hi`` or ``lo``,
+    this row included) when that row is at most ``lag_ns`` later, else the row's own
+    (causal) decision. An offline test thus names a pair from the start of the evidence
+    that confirmed it (the rows since the sum last touched ``lo``) and withdraws it from
+    the start of the evidence that rejected it (since it last touched ``hi``), never
+    more than ``lag_ns`` before the decision. ``time_ns``: non-decreasing within each
+    segment. ``lag_ns = 0`` is :func:`held_decision`."""
+    causal = held_decision(s, segment_start, lo, hi)
+    if causal.size == 0 or lag_ns <= 0:
+        return causal
+    s = np.asarray(s, dtype=float)
+    t = np.asarray(time_ns, dtype=np.int64)
+    up = s >= hi - BOUNDARY_TOLERANCE
+    touch = up | (s <= lo + BOUNDARY_TOLERANCE)
+    rows = np.arange(s.size)
+    segment = np.cumsum(np.asarray(segment_start, dtype=bool))
+    nxt = np.minimum.accumulate(np.where(touch, rows, s.size)[::-1])[::-1]
+    j = np.minimum(nxt, s.size - 1)
+    ahead = (nxt < s.size) & (segment[j] == segment) & (t[j] - t <= lag_ns)
+    return np.where(ahead, up[j], causal)
+
+
 def held_cumsum_reference(increments: np.ndarray, segment_start: np.ndarray, lo: float,
                           hi: float) -> np.ndarray:
     """:func:`held_cumsum` as the plain recursion, one row after another (tests)."""

@@ -53,8 +53,19 @@ confirmed from a fresh start, by Ville's inequality on the likelihood ratio unde
 and beta = ``missed_identification_probability``. The track takes m when the sum
 reaches A and keeps it until the sum falls to B: it drops a confirmed MMSI on the same
 test (evidence e^(A-B) against it). A track with several confirmed MMSIs at an epoch
-shows the one with the largest sum (then the smaller MMSI). The test is causal: a track
-is named from the epoch of its confirmation, never before.
+shows the one with the largest sum (then the smaller MMSI).
+
+**Fixed lag** (``identity_lag_s``, :func:`~pipeline.filters.sequential.fixed_lag_decision`).
+The batch is offline: a point takes the decision the test reaches next on its pair when
+that decision comes at most ``identity_lag_s`` later. A confirmed track is named from
+the start of the evidence that confirmed it (the epochs since its sum last touched B),
+not from the confirmation on, and a withdrawn MMSI is taken off from the start of the
+evidence against it (since the sum last touched A: an association swap's first misses),
+never further back than the lag. The test, its budget alpha and its decisions are the
+causal ones; only the epochs a decision covers move. ``identity_lag_s = 0`` is the
+causal test (a track named from the epoch of its confirmation, what a live picture
+shows). The lag is at most ``identity_window_s``, the units' look-ahead: a unit sees every
+decision that reaches back into its own epochs, and results do not depend on the cuts.
 """
 
 from __future__ import annotations
@@ -65,7 +76,7 @@ import numpy as np
 import polars as pl
 
 from pipeline.config import AisConfig, RegionConfig
-from pipeline.filters.sequential import held_cumsum, held_decision, wald_boundaries
+from pipeline.filters.sequential import fixed_lag_decision, held_cumsum, wald_boundaries
 from pipeline.frames import geodetic_to_enu
 from pipeline.geometry import position_covariance
 from pipeline.maritime.associate import assign, assign_grouped, gate_threshold
@@ -347,7 +358,8 @@ def confirmed_identity(tracks: pl.DataFrame, ais: pl.DataFrame, matches: pl.Data
     start = np.r_[True, (sid[1:] != sid[:-1]) | (mmsi[1:] != mmsi[:-1])] if ev.height \
         else np.empty(0, bool)
     s = held_cumsum(ev["llr"].to_numpy(), start, lo, hi)
-    confirmed = held_decision(s, start, lo, hi)
+    confirmed = fixed_lag_decision(s, start, lo, hi, ev["time_ns"].to_numpy(),
+                                   round(cfg.identity_lag_s * NS))
     # several confirmed MMSIs on a track: the largest sum (rounded: the scan's sums
     # differ in the last bits with the rows before them), then the smaller MMSI
     best = (

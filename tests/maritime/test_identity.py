@@ -3,6 +3,8 @@ identity (Wald's sequential test per track and MMSI)."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import polars as pl
 import pytest
@@ -125,11 +127,14 @@ def _identity(cfg: Config, tracks: pl.DataFrame, ais: pl.DataFrame, sid: int) ->
     return fused.filter(pl.col("system_track_id") == sid).sort("time_ns")["mmsi"].to_list()
 
 
-def test_identity_confirmed_by_the_test_and_dropped_the_same_way(cfg):
-    """AIS next to the track for 20 epochs, then reported 3 km away: the MMSI is taken
-    at the first epoch the held sum of log-likelihood ratios reaches Wald's A (not
-    before: the test is causal) and dropped when it falls to B (the old +-300 s vote
-    named all 60 epochs)."""
+@pytest.mark.parametrize("lag_s", [0.0, 60.0])
+def test_identity_confirmed_by_the_test_and_dropped_the_same_way(cfg, lag_s):
+    """AIS next to the track for 20 epochs, then reported 3 km away: with the causal
+    test (lag 0) the MMSI is taken at the first epoch the held sum of log-likelihood
+    ratios reaches Wald's A (not before) and dropped when it falls to B (the old +-300 s
+    vote named all 60 epochs); with a 60 s lag both decisions reach back to the start
+    of their evidence: named exactly while the AIS was beside the track."""
+    cfg = replace(cfg, ais=replace(cfg.ais, identity_lag_s=lag_s))
     n, near = 60, 20
     tracks = _tracks({7: [(0.0, 0.0)] * n})
     ais = _ais(cfg, [(k * EPOCH_S, 10.0 if k < near else 3000.0, 0.0, None, None)
@@ -146,7 +151,11 @@ def test_identity_confirmed_by_the_test_and_dropped_the_same_way(cfg):
     first, last = int(np.argmax(s >= hi)), int(np.argmax(s <= lo)) - 1
     assert 0 < first < near < last < n - 1
     got = _identity(cfg, tracks, ais, 7)
-    assert got == [None] * first + [555] * (last + 1 - first) + [None] * (n - 1 - last)
+    if lag_s == 0:
+        assert got == [None] * first + [555] * (last + 1 - first) + [None] * (n - 1 - last)
+    else:
+        assert first * EPOCH_S <= lag_s and (last + 1 - near) * EPOCH_S <= lag_s
+        assert got == [555] * near + [None] * (n - near)
 
 
 def test_stray_matches_never_name_a_ship_without_ais(cfg):
@@ -180,6 +189,7 @@ def test_two_tracks_in_one_gate_give_no_identity(cfg):
 @pytest.mark.parametrize(("key", "value", "message"), [
     ("stray_match_probability", 0.96, "must be below match_probability"),
     ("missed_identification_probability", 0.9995, "must be below 1"),
+    ("identity_lag_s", 301.0, "must be at most identity_window_s"),
 ])
 def test_identity_test_parameters_are_checked(tmp_path, key, value, message):
     """The cross-field checks of the [ais] test parameters (each alone is in (0, 1))."""
