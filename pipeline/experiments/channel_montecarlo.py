@@ -3,8 +3,9 @@
 
 One seed = the ``channel`` scenario with a compressed fault schedule (:func:`mc_faults`:
 every maritime fault kind once, 90 s each, 60 s apart, radar and AIS faults in turn)
-run through the maritime stage twice (``[channel_integrity] exclusion`` on and off) from
-the same simulated reports, the same scenario without faults (the false-alarm share and
+run through the maritime stage twice (``[channel_integrity] exclusion`` on, with the
+configured ``[registration]``, and off, every report fused as reported) from the same
+simulated reports, the same scenario without faults (the false-alarm share and
 the fault-free accuracy of each radar), and the ``ownship`` scenario with a GNSS outage
 and a GNSS position jump through the nav stage (and without them). Everything from the
 simulators onwards is the production code in memory: AIS and the own ship's NMEA go
@@ -127,9 +128,13 @@ def maritime_inputs(cfg: Config, seed: int, start_ns: int, duration_s: float
 
 
 def _with_exclusion(cfg: Config, on: bool) -> Config:
+    """``cfg`` with exclusion on (as configured, registration included) or off: every
+    report fused as reported (no exclusion, no registration: the unprotected picture)."""
     mc = maritime_config(cfg)
     fam = dict(cfg.families)
-    fam["maritime"] = replace(mc, integrity=replace(mc.integrity, exclusion=on))
+    reg = mc.registration if on else replace(mc.registration, enabled=False)
+    fam["maritime"] = replace(mc, integrity=replace(mc.integrity, exclusion=on),
+                              registration=reg)
     return replace(cfg, families=fam)
 
 
