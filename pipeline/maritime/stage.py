@@ -4,7 +4,10 @@ Composes the pure steps for the epochs of one window: alignment to the regional 
 two-step synchronisation (multi-radar paper eq. 7-13), track-to-track association
 (two-radar identification paper eq. 7-16), channel integrity of every radar and AIS
 transponder (airfield paper eq. 21-23; a channel in fault is left out of the fusion and
-the identification), fusion (multi-radar paper eq. 14), geodetic
+the identification), online registration and estimated accuracy of each radar from the
+integrity's residuals (issue 38: a biased radar corrected and fused again, a degraded
+one down-weighted; ``pipeline.maritime.registration``), fusion (multi-radar paper eq.
+14), geodetic
 position, sectors, cross-track deviation (eq. 1-6), AIS identification, accuracy
 against truth (or AIS), SIAP per sector and cross-track error per leg.
 
