@@ -152,10 +152,13 @@ class RegistrationEvidence:
     sum tr(S^-1 P) (P: the radar's own covariance: how much of S is the radar's),
     ``n_ais`` of the tracks tested against their AIS report (the rest: against two or
     more other radars);
-    ``blocked``: the group's coverage or scan check failed there (an outage, blanked
-    azimuths: no correction readmits it); ``excluded`` after the epoch's check. Per row
-    of ``associations``: its epoch ``row_k``, group ``row_group`` and ``H`` (n, 2, 3),
-    d(position)/d(range bias, azimuth bias, time offset). ``G``, ``C``: sectors, sites."""
+    ``blocked``: the group's scan check failed there (no scan published: an outage no
+    correction readmits); ``excluded`` after the epoch's check. Per row
+    of ``associations``: its epoch ``row_k``, group ``row_group``, ``H`` (n, 2, 3),
+    d(position)/d(range bias, azimuth bias, time offset), its leave-one-out residual
+    ``row_r`` (n, 2) and its covariance ``row_innov_cov`` (n, 3) (NaN: no other radar,
+    no AIS report on the track), ``row_tested`` (in the test: its AIS report or two
+    other radars), its own covariance ``row_cov`` (n, 3). ``G``, ``C``: sectors, sites."""
 
     epochs: np.ndarray
     A: np.ndarray
@@ -169,6 +172,10 @@ class RegistrationEvidence:
     row_k: np.ndarray
     row_group: np.ndarray
     H: np.ndarray
+    row_r: np.ndarray
+    row_innov_cov: np.ndarray
+    row_tested: np.ndarray
+    row_cov: np.ndarray
     G: int
     C: int
 
@@ -921,6 +928,9 @@ def check_channels(
                  np.zeros(n_rep, bool), np.zeros(n_rep, bool), np.full((n_rep, 2), np.nan),
                  np.full(n_rep, -1, np.int64))
     used = np.ones(assoc.height, bool)
+    row_r = np.full((assoc.height, 2), np.nan)
+    row_innov_cov = np.full((assoc.height, 3), np.nan)
+    row_tested = np.zeros(assoc.height, bool)
     # an epoch without radar rows, AIS references or reports, with no radar group out of
     # service and no scan down, decides nothing and changes no state: skipped (an hour of
     # sparse AIS without radar: its ~1,100 epochs cost 0.4 CPU-s, now the few with reports)
@@ -963,6 +973,7 @@ def check_channels(
                                inv, T, thr)
         grp = _radar_groups(xi, r, S, rad.P[a:b], checkable, has_ais[inv], rad.H[a:b], g,
                             n_groups, thr)
+        row_r[a:b], row_innov_cov[a:b], row_tested[a:b] = r, S, checkable
         # -- coverage: ships trusted channels see in the site's range, the site misses; a
         # radar excluded or failing in any sector is no witness anywhere (a registration
         # fault splits its tracks off the others' where it is not tested)
@@ -1014,7 +1025,8 @@ def check_channels(
     evidence = RegistrationEvidence(
         epochs=epochs, A=ro.A.reshape(K, n_groups, 3, 3), b=ro.b, nis=ro.nis, n=ro.n,
         trace=ro.trace, n_ais=ro.n_ais, blocked=ro.checked & ro.eta & (ro.check == 3),
-        excluded=ro.excluded, row_k=k_row, row_group=rad.group, H=rad.H, G=G, C=C)
+        excluded=ro.excluded, row_k=k_row, row_group=rad.group, H=rad.H, row_r=row_r,
+        row_innov_cov=row_innov_cov, row_tested=row_tested, row_cov=rad.P, G=G, C=C)
     return IntegrityResult(health=health, associations=assoc.with_columns(
         pl.Series("used", used)), ais_excluded=ais_excluded, evidence=evidence)
 

@@ -51,14 +51,18 @@ the same rule, else 1), clipped to [``MIN_SCALE``, ``max_scale``]: a degraded ra
 down-weighted smoothly, a radar as good as its sigmas keeps them.
 
 **Exclusion only on the integrity test**: a radar group the integrity excluded is fused
-again at an epoch where its corrected and rescaled residuals pass the same NIS-sum test
-(N~_k 2n / (2n + (s - 1) T_k) < chi2_2n(1 - radar_q / 4), in the group where it has
-tracks tested and over the site), unless its scan check fails at that epoch (an
-outage) or its variance scale exceeds ``readmit_max_scale`` (a radar much noisier than
-its sigmas stays excluded: the scale of the tracks still tested underestimates it, the
-association having split the worst ones off). A coverage failure does not block it: a
-bias or a noisy radar splits tracks off the association, which the coverage check
-counts as missed ships; in blanked azimuths the radar has no reports to fuse.
+again at an epoch where its corrected and rescaled residuals, xi_i = (r_i - H_i theta)^T
+(S_i + (s - 1) P_i)^-1 (r_i - H_i theta), pass the same NIS-sum test (sum xi_i <
+chi2_2n(1 - radar_q / 4)) with no outlier among them (xi_i > chi2_2(1 - outlier_q): the
+integrity leaves a minority of outliers out of its sum, a readmission may not), in the
+group where it has tracks tested and over the site; of its rows, those whose own xi_i
+is no outlier (a row with no other channel on its track is not gated); unless its scan
+check fails at that epoch (an outage) or its variance scale exceeds
+``readmit_max_scale`` (a radar much noisier than its sigmas stays excluded: the scale of
+the tracks still tested underestimates it, the association having split the worst ones
+off). A coverage failure does not block it: a bias or a noisy radar splits tracks off
+the association, which the coverage check counts as missed ships; in blanked azimuths
+the radar has no reports to fuse.
 """
 
 from __future__ import annotations
@@ -203,38 +207,57 @@ def _scale(v: np.ndarray, theta: np.ndarray, corr: float, rc: RegistrationConfig
     return np.clip(np.where(applied, s, 1.0), MIN_SCALE, rc.max_scale), applied
 
 
-def _readmitted(cur: np.ndarray, theta: np.ndarray, scale: np.ndarray,
-                ev: RegistrationEvidence, radar_q: float, max_scale: float) -> np.ndarray:
-    """(K, n_groups): excluded by the integrity, passing the NIS-sum test with the
-    corrected and rescaled residuals of the epoch (module docstring), its scan check
-    passing at the epoch, its variance scale at most ``max_scale``."""
-    K = ev.n.shape[0]
+def _readmitted(ev: RegistrationEvidence, theta_row: np.ndarray, scale: np.ndarray,
+                rc: RegistrationConfig, radar_q: float, outlier_q: float
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """(group (K, n_groups), row (n,)) readmission: a group excluded by the integrity
+    whose corrected and rescaled residuals of the epoch, xi_i = (r_i - H_i theta)^T
+    (S_i + (s - 1) P_i)^-1 (r_i - H_i theta) over its tracks tested, pass the NIS-sum
+    test with no outlier (xi_i above chi2_2(1 - outlier_q)) in the group and over the
+    site, whose scan check passes and whose variance scale is at most
+    ``readmit_max_scale``; and of its rows, those without an outlier residual against the
+    other channels (a row without any other channel on its track is not gated)."""
+    K, ng = ev.n.shape
     C, G1 = ev.C, ev.G + 1
-    nis = _corrected_nis(cur, np.repeat(theta, G1, axis=1))
-    n = cur[..., _N]
-    dof = 2 * n
-    with np.errstate(divide="ignore", invalid="ignore"):
-        scaled = np.where(n > 0, nis * dof / (dof + (scale - 1.0) * cur[..., _TRACE]), 0.0)
-    n_max = int(max(n.max(initial=0), n.reshape(K, C, G1).sum(axis=2).max(initial=0)))
+    gid = ev.row_k * ng + ev.row_group
+    s_row = scale.reshape(-1)[gid]
+    r = ev.row_r - np.einsum("nij,nj->ni", ev.H, theta_row)
+    S = ev.row_innov_cov + (s_row - 1.0)[:, None] * ev.row_cov
+    with np.errstate(invalid="ignore", divide="ignore"):
+        det = S[:, 0] * S[:, 1] - S[:, 2] ** 2
+        xi = (S[:, 1] * r[:, 0] ** 2 - 2 * S[:, 2] * r[:, 0] * r[:, 1]
+              + S[:, 0] * r[:, 1] ** 2) / det
+    gated = np.isfinite(xi)
+    outlier = gated & (xi > chi2_ppf(1.0 - outlier_q, 2))
+    tested = ev.row_tested & gated
+    sums = np.stack([np.bincount(gid, weights=w, minlength=K * ng) for w in (
+        tested, np.where(tested, xi, 0.0), tested & outlier)], axis=-1).reshape(K, ng, 3)
+    site = sums.reshape(K, C, G1, 3).sum(axis=2)
+    n_max = int(max(sums[..., 0].max(initial=0), site[..., 0].max(initial=0)))
     d2 = np.r_[np.inf, chi2_ppf(1.0 - radar_q / 4.0, 2 * np.arange(1, n_max + 1))]
-    ni = n.astype(np.int64)
-    group_ok = (ni == 0) | (scaled < d2[ni])
-    n_site = ni.reshape(K, C, G1).sum(axis=2)
-    site_ok = (n_site > 0) & (scaled.reshape(K, C, G1).sum(axis=2) < d2[n_site])
-    return (ev.excluded & ~ev.blocked & group_ok & np.repeat(site_ok, G1, axis=1)
-            & (scale <= max_scale))
+
+    def passing(v: np.ndarray) -> np.ndarray:
+        n = v[..., 0].astype(np.int64)
+        return (v[..., 1] < d2[n]) & (v[..., 2] == 0)
+
+    group_ok = (sums[..., 0] == 0) | passing(sums)
+    site_ok = (site[..., 0] > 0) & passing(site)
+    group = (ev.excluded & ~ev.blocked & group_ok & np.repeat(site_ok, G1, axis=1)
+             & (scale <= rc.readmit_max_scale))
+    return group, group.reshape(-1)[gid] & ~outlier
 
 
 def register(
     associations: pl.DataFrame, ev: RegistrationEvidence, rc: RegistrationConfig, *,
-    radar_q: float, epoch_period_s: float, sites: list[str], sector_names: list[str],
+    radar_q: float, outlier_q: float, epoch_period_s: float, sites: list[str],
+    sector_names: list[str],
 ) -> Registration:
     """Estimate, apply and tabulate each radar's registration and variance scale.
 
     Consumes ``associations`` (``IntegrityResult.associations``: rows in the order of
     ``ev``'s rows, with x_enu_m, y_enu_m, P_xx, P_yy, P_xy, used) and ``ev`` (its
-    evidence); ``radar_q``: the integrity's false-alarm probability (the readmission
-    test's thresholds)."""
+    evidence); ``radar_q``, ``outlier_q``: the integrity's false-alarm probabilities (the
+    readmission test's thresholds)."""
     K, ng = ev.n.shape
     C, G1 = ev.C, ev.G + 1
     w = max(1, round(rc.window_s / epoch_period_s))
@@ -261,10 +284,10 @@ def register(
     scale = np.where(s_group_ok, s_group, np.where(np.repeat(s_site_ok, G1, axis=1), s_site_g,
                                                    1.0))
     scale_ok = s_group_ok | np.repeat(s_site_ok, G1, axis=1)
-    readmit = _readmitted(cur, theta_used, scale, ev, radar_q, rc.readmit_max_scale)
     rk, rg = ev.row_k, ev.row_group
     rs = rg // G1
-    used = associations["used"].to_numpy() | readmit[rk, rg]
+    readmit, readmit_row = _readmitted(ev, theta_used[rk, rs], scale, rc, radar_q, outlier_q)
+    used = associations["used"].to_numpy() | readmit_row
     out = associations.with_columns(pl.Series("used", used))
     corrected = _correct(out, ev.H, theta_used[rk, rs], P_used[rk, rs], scale[rk, rg])
     present = np.bincount(rk * ng + rg, minlength=K * ng).reshape(K, ng) > 0

@@ -125,7 +125,8 @@ def stage(tables: Inputs, window: Window, cfg: Config) -> Outputs:
     registration = pl.DataFrame()
     if mc.registration.enabled:
         reg = register(associated, integrity.evidence, mc.registration,
-                       radar_q=mc.integrity.radar_q, epoch_period_s=mc.sync.epoch_period_s,
+                       radar_q=mc.integrity.radar_q, outlier_q=mc.integrity.outlier_q,
+                       epoch_period_s=mc.sync.epoch_period_s,
                        sites=[s.site_id for s in cfg.radar_sites],
                        sector_names=[s.name for s in cfg.sectors])
         associated, fusable, registration = reg.associations, reg.corrected, reg.table
