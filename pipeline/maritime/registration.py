@@ -51,13 +51,15 @@ the same rule, else 1), clipped to [``MIN_SCALE``, ``max_scale``]: a degraded ra
 down-weighted smoothly, a radar as good as its sigmas keeps them.
 
 **Exclusion only on the integrity test**: a radar group the integrity excluded is fused
-again at an epoch where its corrected and rescaled residuals, xi_i = (r_i - H_i theta)^T
-(S_i + (s - 1) P_i)^-1 (r_i - H_i theta), pass the same NIS-sum test (sum xi_i <
-chi2_2n(1 - radar_q / 4)) with no outlier among them (xi_i > chi2_2(1 - outlier_q): the
-integrity leaves a minority of outliers out of its sum, a readmission may not), in the
-group where it has tracks tested and over the site; of its rows, those whose own xi_i
-is no outlier (a row with no other channel on its track is not gated); unless its scan
-check fails at that epoch (an outage) or its variance scale exceeds
+again at an epoch where its site's registration is applied (the correction explains the
+failure: a radar that is only noisier than its sigmas stays excluded; its scale down-
+weights it where the integrity keeps it) and its corrected and rescaled residuals, xi_i
+= (r_i - H_i theta)^T (S_i + (s - 1) P_i)^-1 (r_i - H_i theta), pass the same NIS-sum
+test (sum xi_i < chi2_2n(1 - radar_q / 4)) with no outlier among them (xi_i > chi2_2(1 -
+outlier_q): the integrity leaves a minority of outliers out of its sum, a readmission
+may not), in the group where it has tracks tested and over the site; of its rows, those
+whose own xi_i is no outlier (a row with no other channel on its track is not gated);
+unless its scan check fails at that epoch (an outage) or its variance scale exceeds
 ``readmit_max_scale`` (a radar much noisier than its sigmas stays excluded: the scale of
 the tracks still tested underestimates it, the association having split the worst ones
 off). A coverage failure does not block it: a bias or a noisy radar splits tracks off
@@ -208,10 +210,12 @@ def _scale(v: np.ndarray, theta: np.ndarray, corr: float, rc: RegistrationConfig
 
 
 def _readmitted(ev: RegistrationEvidence, theta_row: np.ndarray, scale: np.ndarray,
-                rc: RegistrationConfig, radar_q: float, outlier_q: float
+                applied: np.ndarray, rc: RegistrationConfig, radar_q: float, outlier_q: float
                 ) -> tuple[np.ndarray, np.ndarray]:
     """(group (K, n_groups), row (n,)) readmission: a group excluded by the integrity
-    whose corrected and rescaled residuals of the epoch, xi_i = (r_i - H_i theta)^T
+    whose site's registration is applied (a correction explains the failure; a radar
+    only noisier than its sigmas stays excluded) and whose corrected and rescaled
+    residuals of the epoch, xi_i = (r_i - H_i theta)^T
     (S_i + (s - 1) P_i)^-1 (r_i - H_i theta) over its tracks tested, pass the NIS-sum
     test with no outlier (xi_i above chi2_2(1 - outlier_q)) in the group and over the
     site, whose scan check passes and whose variance scale is at most
@@ -242,7 +246,7 @@ def _readmitted(ev: RegistrationEvidence, theta_row: np.ndarray, scale: np.ndarr
 
     group_ok = (sums[..., 0] == 0) | passing(sums)
     site_ok = (site[..., 0] > 0) & passing(site)
-    group = (ev.excluded & ~ev.blocked & group_ok & np.repeat(site_ok, G1, axis=1)
+    group = (ev.excluded & ~ev.blocked & group_ok & np.repeat(site_ok & applied, G1, axis=1)
              & (scale <= rc.readmit_max_scale))
     return group, group.reshape(-1)[gid] & ~outlier
 
@@ -286,7 +290,8 @@ def register(
     scale_ok = s_group_ok | np.repeat(s_site_ok, G1, axis=1)
     rk, rg = ev.row_k, ev.row_group
     rs = rg // G1
-    readmit, readmit_row = _readmitted(ev, theta_used[rk, rs], scale, rc, radar_q, outlier_q)
+    readmit, readmit_row = _readmitted(ev, theta_used[rk, rs], scale, applied, rc, radar_q,
+                                       outlier_q)
     used = associations["used"].to_numpy() | readmit_row
     out = associations.with_columns(pl.Series("used", used))
     corrected = _correct(out, ev.H, theta_used[rk, rs], P_used[rk, rs], scale[rk, rg])

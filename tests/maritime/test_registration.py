@@ -126,3 +126,28 @@ def test_azimuth_bias_estimated(world):
             DEFAULT_START_NS + round(t0 * NS), DEFAULT_START_NS + round(t1 * NS)))
     assert float(reg["azimuth_bias_rad"].median()) == pytest.approx(math.radians(1.0),
                                                                     rel=0.15)
+
+
+def test_degraded_radar_down_weighted_by_its_estimated_accuracy(world):
+    # 1.3x its sigmas (1.69x in variance): the integrity keeps it; its variance scale is
+    # estimated from the residuals and the fused sigma becomes honest again
+    out = _run(world, _fault("radar_noise", "R1", factor=1.3))
+    t0, t1 = (DEFAULT_START_NS + round(s * NS) for s in (FAULT[0] + 40.0, sum(FAULT)))
+    during = pl.col("time_ns").is_between(t0, t1)
+    h = out[True]["maritime_channel_health"].filter((pl.col("channel") == "R1") & during)
+    assert h["excluded"].mean() < 0.1
+    reg = out[True]["sensor_registration"].filter((pl.col("site_id") == "R1") & during)
+    assert reg["scale_applied"].mean() > 0.8
+    assert 1.4 < float(reg["variance_scale"].median()) < 2.1
+    assert not reg["registration_applied"].any()
+
+    def fused(on: bool) -> pl.DataFrame:
+        return out[on]["track_errors"].filter((pl.col("source") == "fused") & during
+                                              & (pl.col("reference") == "truth"))
+
+    assert fused(True)["nees"].mean() < fused(False)["nees"].mean() - 0.5
+    assert _rms(fused(True)["error_m"].to_numpy()) <= 1.01 * _rms(
+        fused(False)["error_m"].to_numpy())
+    # the healthy radar keeps its sigmas
+    r2 = out[True]["sensor_registration"].filter((pl.col("site_id") == "R2") & during)
+    assert r2["scale_applied"].mean() < 0.2
