@@ -3,8 +3,9 @@
 
 One seed = the ``channel`` scenario with a compressed fault schedule (:func:`mc_faults`:
 every maritime fault kind once, 90 s each, 60 s apart, radar and AIS faults in turn)
-run through the maritime stage twice (``[channel_integrity] exclusion`` on and off) from
-the same simulated reports, the same scenario without faults (the false-alarm share and
+run through the maritime stage twice (``[channel_integrity] exclusion`` on, with the
+configured ``[registration]``, and off, every report fused as reported) from the same
+simulated reports, the same scenario without faults (the false-alarm share and
 the fault-free accuracy of each radar), and the ``ownship`` scenario with a GNSS outage
 and a GNSS position jump through the nav stage (and without them). Everything from the
 simulators onwards is the production code in memory: AIS and the own ship's NMEA go
@@ -127,9 +128,13 @@ def maritime_inputs(cfg: Config, seed: int, start_ns: int, duration_s: float
 
 
 def _with_exclusion(cfg: Config, on: bool) -> Config:
+    """``cfg`` with exclusion on (as configured, registration included) or off: every
+    report fused as reported (no exclusion, no registration: the unprotected picture)."""
     mc = maritime_config(cfg)
     fam = dict(cfg.families)
-    fam["maritime"] = replace(mc, integrity=replace(mc.integrity, exclusion=on))
+    reg = mc.registration if on else replace(mc.registration, enabled=False)
+    fam["maritime"] = replace(mc, integrity=replace(mc.integrity, exclusion=on),
+                              registration=reg)
     return replace(cfg, families=fam)
 
 
@@ -147,6 +152,11 @@ def run_seed(unit: McUnit) -> dict[str, pl.DataFrame]:
                                              duration)
     clean = maritime_stage(clean_inputs, window, _with_exclusion(cfg, True))
     rows = _fault_rows(cfg, truth, on, off, clean, inputs["ais_reports"])
+    scene = _points(clean["track_errors"], "fused", window.start_ns, window.end_ns)
+    rows = rows.with_columns(pl.lit(_rms(scene)).alias("clean_scene_fused_rms_m"),
+                             pl.lit(_p95(scene)).alias("clean_scene_fused_p95_m"),
+                             pl.lit(float(scene["nees"].mean() or np.nan)).alias(
+                                 "clean_scene_fused_nees"))
     rows = rows.hstack(_identification_rows(
         truth, judged_points(on, sc.radar_track_truth, sc.vessels),
         judged_points(clean, clean_sc.radar_track_truth, clean_sc.vessels)))
@@ -203,6 +213,11 @@ def _rms(points: pl.DataFrame) -> float:
     return float(np.sqrt(np.mean(v**2))) if v.size else float("nan")
 
 
+def _p95(points: pl.DataFrame) -> float:
+    v = points["error_m"].to_numpy()
+    return float(np.quantile(v, 0.95)) if v.size else float("nan")
+
+
 def _accuracy(on: dict, off: dict, clean: dict, sites: list[str], t0: int, t1: int
               ) -> dict[str, float]:
     """RMS errors during a fault on the same points: the (time, vessel) pairs fused in
@@ -213,17 +228,58 @@ def _accuracy(on: dict, off: dict, clean: dict, sites: list[str], t0: int, t1: i
     f_off = _points(off["track_errors"], "fused", t0, t1)
     f_clean = _points(clean["track_errors"], "fused", t0, t1)
     common = f_on.select(key).join(f_off.select(key), on=key).join(f_clean.select(key), on=key)
-    radar = {s: _rms(_points(clean["track_errors"], s, t0, t1).join(common, on=key))
-             for s in sites}
+    alone = {s: _points(clean["track_errors"], s, t0, t1).join(common, on=key) for s in sites}
+    radar = {s: _rms(v) for s, v in alone.items()}
     return {
         "points": common.height,
         "fused_rms_on_m": _rms(f_on.join(common, on=key)),
+        "fused_p95_on_m": _p95(f_on.join(common, on=key)),
+        "clean_best_radar_p95_m": float(np.nanmin([_p95(v) for v in alone.values()])),
         "fused_rms_off_m": _rms(f_off.join(common, on=key)),
         "clean_fused_rms_m": _rms(f_clean.join(common, on=key)),
         "fused_nees_on": float(f_on.join(common, on=key)["nees"].mean() or np.nan),
         "fused_nees_off": float(f_off.join(common, on=key)["nees"].mean() or np.nan),
         **{f"clean_{s}_rms_m": v for s, v in radar.items()},
         "clean_best_radar_rms_m": float(np.nanmin(list(radar.values()))),
+    }
+
+
+#: the ``sensor_registration`` estimate and sigma of each registration fault kind
+REGISTRATION_OF = {
+    "radar_range_bias": ("range_bias_m", "sigma_range_bias_m"),
+    "radar_azimuth_bias": ("azimuth_bias_rad", "sigma_azimuth_bias_rad"),
+    "radar_time_offset": ("time_offset_s", "sigma_time_offset_s"),
+}
+Z95 = 1.959963984540054
+
+
+def _registration(on: dict, clean: dict, f: dict) -> dict[str, float | bool | None]:
+    """For a range, azimuth or clock fault: whether the faulted site's estimate at the
+    middle of the fault holds the injected value in its 95 % interval
+    (``registration_within_95``), the share of the fault's epochs from the first
+    ``window_s`` on where it does, and the share of the same epochs of the fault-free
+    run whose interval holds 0 (``clean_registration_within_share``)."""
+    cols = REGISTRATION_OF.get(f["kind"])
+    if cols is None or "sensor_registration" not in on or not on["sensor_registration"].height:
+        return {}
+    est, sig = cols
+    t0, t1 = f["start_ns"], f["end_ns"]
+    settle = t0 + (t1 - t0) // 3
+
+    def within(reg: pl.DataFrame, value: float) -> pl.DataFrame:
+        return (reg.filter((pl.col("site_id") == f["channel"])
+                           & pl.col("time_ns").is_between(settle, t1, closed="left"))
+                .unique("time_ns").sort("time_ns")
+                .select("time_ns", ((pl.col(est) - value).abs() <= Z95 * pl.col(sig))
+                        .alias("within")))
+
+    fault, free = within(on["sensor_registration"], f["value"]), within(
+        clean["sensor_registration"], 0.0)
+    mid = fault.filter(pl.col("time_ns") >= (t0 + t1) // 2).head(1)["within"]
+    return {
+        "registration_within_95": bool(mid[0]) if mid.len() else None,
+        "registration_within_share": float(fault["within"].mean() or np.nan),
+        "clean_registration_within_share": float(free["within"].mean() or np.nan),
     }
 
 
@@ -253,6 +309,7 @@ def _fault_rows(cfg: Config, truth: pl.DataFrame, on: dict, off: dict, clean: di
             "detected_within_3": delay is not None and delay <= DETECT_WITHIN,
             "flagged_share_during": float(during["eta"].mean()) if during.height else None,
             **_accuracy(on, off, clean, sites, t0, t1),
+            **_registration(on, clean, f),
         })
     return pl.DataFrame(rows)
 
@@ -364,6 +421,18 @@ def _identification_shares(f: pl.DataFrame) -> list[pl.Expr]:
     ]
 
 
+def _registration_shares(f: pl.DataFrame) -> list[pl.Expr]:
+    """The share of runs whose registration estimate at mid-fault holds the injected
+    value in its 95 % interval, the median share of the fault's epochs where it does,
+    and of the fault-free run's where it holds 0 (:func:`_registration`)."""
+    if "registration_within_95" not in f.columns:
+        return []
+    return [pl.col("registration_within_95").mean().alias("registration_within_95"),
+            pl.col("registration_within_share").median().alias("registration_within_share"),
+            pl.col("clean_registration_within_share").median().alias(
+                "clean_registration_within_share")]
+
+
 def summarise(res: dict[str, pl.DataFrame]) -> pl.DataFrame:
     """One row per fault kind: channels faulted (runs), share detected within 3 scans /
     reports / fixes, share detected during the fault, median and worst delay, fused RMS
@@ -386,7 +455,12 @@ def summarise(res: dict[str, pl.DataFrame]) -> pl.DataFrame:
         pl.col("fused_nees_off").median().alias("fused_nees_off"),
         (pl.col("fused_rms_on_m") <= pl.col("clean_best_radar_rms_m")).mean().alias(
             "share_on_le_best_radar"),
+        pl.col("fused_p95_on_m").median().alias("fused_p95_on_m"),
+        pl.col("clean_best_radar_p95_m").median().alias("clean_best_radar_p95_m"),
+        (pl.col("fused_p95_on_m") <= pl.col("clean_best_radar_p95_m")).mean().alias(
+            "share_on_p95_le_best_radar"),
         *_identification_shares(f),
+        *_registration_shares(f),
     ).with_columns(pl.lit(None, pl.Float64).alias("false_alarm_share"),
                    pl.lit(None, pl.Float64).alias("q"))
     fa = res["false_alarms"].group_by("sensor_kind").agg(

@@ -34,7 +34,7 @@ TIMEOUT_WHY = ("a track coasts for a few scans to minutes; a timeout beyond an h
 
 SECTIONS = (
     "sync", "association", "siap", "radar_bias", "fairway", "channel_integrity", "channel_faults",
-    "reference",
+    "reference", "registration",
 )
 
 
@@ -257,6 +257,45 @@ class ChannelIntegrityConfig:
 
 
 @dataclass(frozen=True)
+class RegistrationConfig:
+    """``[registration]``: online registration and estimated accuracy of each radar
+    (``pipeline.maritime.registration``, issue 38): each site's range bias, azimuth bias
+    and clock offset estimated by weighted least squares over the channel integrity's
+    leave-one-out residuals of the epochs within ``window_s`` before or after (or both),
+    applied before fusion; each (site, sector)'s variance scale from the same residuals.
+
+    - ``enabled``: false fuses the reports as reported (the integrity's exclusions alone);
+    - ``window_s``: each one-sided window, s; at most the unit's look-ahead
+      (``[ais] identity_window_s``) so that results do not depend on where units are cut;
+    - ``decorrelation_s``: how long a radar track's errors stay correlated (the tracker
+      smooths over scans): the window's information is divided by this many epochs;
+    - ``jump_q``: false-alarm probability of the test that the windows before and after
+      an epoch disagree (a registration jump: the estimate takes the side that fits);
+    - ``apply_q``: an estimate is applied once it differs from zero at this probability
+      (chi2(3)), a variance scale once the corrected NIS leaves its chi-square tails at it;
+    - ``min_tracks``: track-epochs in the window before an estimate or a scale is used;
+    - ``max_scale``: the largest variance scale;
+    - ``readmit_max_scale``: a radar the integrity excluded is fused again (its corrected
+      and rescaled residuals passing) only while its variance scale is at most this: a
+      radar much noisier than its sigmas stays excluded."""
+
+    enabled: bool = setting(True)
+    window_s: float = setting(40.0, ge=1.0, le=300.0, why=(
+        "at least a scan; at most the unit's look-ahead (identity_window_s, 300 s by "
+        "default) for results that do not depend on where units are cut"))
+    decorrelation_s: float = setting(30.0, ge=0.0, le=600.0, why=(
+        "a radar tracker smooths over a few to tens of scans"))
+    jump_q: float = false_alarm(0.001)
+    apply_q: float = false_alarm(0.01)
+    min_tracks: int = count(20)
+    max_scale: float = setting(100.0, ge=1.0, le=1e4, why=(
+        "a radar 100x worse in variance than its sigmas (10x in sigma) is a fault"))
+    readmit_max_scale: float = setting(2.0, ge=1.0, le=1e4, why=(
+        "a radar 1.4x as noisy as its sigmas (2x in variance) adds little to the other "
+        "radars and its tracks split off the association"))
+
+
+@dataclass(frozen=True)
 class ReferenceConfig:
     """``[reference]``: the reconstructed reference of vessels carrying AIS
     (``pipeline.maritime.reference``, issue 37): the two motion models of the IMM (white
@@ -305,6 +344,7 @@ class MaritimeConfig:
     # the channel scenario's fault schedule: config/scenarios/channel.toml, never a site's
     faults: tuple[ChannelFault, ...] = setting([], key="channel_faults", scenario="channel")
     reference: ReferenceConfig = setting({}, factory=ReferenceConfig)
+    registration: RegistrationConfig = setting({}, factory=RegistrationConfig)
 
 
 def maritime_config(cfg: Config) -> MaritimeConfig:
@@ -349,6 +389,11 @@ def parse_maritime(doc: Document, core: Config | None) -> MaritimeConfig | None:
                 if site not in sites:
                     doc.problem(("radar_bias", part, site),
                                 f"no radar site {site!r} (sites: {', '.join(sorted(sites))})")
+        if m.registration.window_s > core.ais.identity_window_s:
+            doc.problem(("registration", "window_s"),
+                        f"{m.registration.window_s:g} s is beyond the unit's look-ahead "
+                        f"([ais] identity_window_s = {core.ais.identity_window_s:g} s): "
+                        "results would depend on where units are cut")
         sectors = {s.name for s in core.sectors}
         for i, f in enumerate(m.faults):
             if f.sensor_kind == "radar" and f.site_id not in sites:

@@ -112,7 +112,7 @@ from pipeline.units import NS
 
 #: wide prior on (range bias m, azimuth bias rad, time offset s): conditions A when the
 #: tracks' geometry leaves a parameter unobservable (e.g. every ship stationary)
-_THETA_PRIOR = np.array([1.0e3, 0.2, 100.0])
+THETA_PRIOR = np.array([1.0e3, 0.2, 100.0])
 
 HEALTH_COLUMNS = (
     "time_ns", "channel", "sensor_kind", "sector", "check", "targets", "nis", "dof", "d1",
@@ -132,12 +132,52 @@ class IntegrityResult:
       site_id) with ``used`` (bool): fused (its radar was in service in its sector after
       that epoch's check);
     - ``ais_excluded``: (mmsi, time_ns) of the AIS reports sent while their transponder was
-      excluded (left out of identification).
+      excluded (left out of identification);
+    - ``evidence``: the registration test's sums per epoch and radar group, the
+      evidence :mod:`pipeline.maritime.registration` estimates and corrects from.
     """
 
     health: pl.DataFrame
     associations: pl.DataFrame
     ais_excluded: pl.DataFrame
+    evidence: RegistrationEvidence
+
+
+@dataclass(frozen=True, eq=False)
+class RegistrationEvidence:
+    """Per epoch k and radar group (site * (G + 1) + sector; G: outside every sector) the
+    sums of the leave-one-out residuals of the group's tracks tested (outliers of a
+    minority left out): ``A`` = sum H^T S^-1 H (K, n_groups, 3, 3, no prior), ``b`` =
+    sum H^T S^-1 r (K, n_groups, 3), ``nis`` = sum r^T S^-1 r, ``n`` tracks, ``trace`` =
+    sum tr(S^-1 P) (P: the radar's own covariance: how much of S is the radar's),
+    ``n_ais`` of the tracks tested against their AIS report (the rest: against two or
+    more other radars);
+    ``blocked``: the group's scan check failed there (no scan published: an outage no
+    correction readmits); ``excluded`` after the epoch's check. Per row
+    of ``associations``: its epoch ``row_k``, group ``row_group``, ``H`` (n, 2, 3),
+    d(position)/d(range bias, azimuth bias, time offset), its leave-one-out residual
+    ``row_r`` (n, 2) and its covariance ``row_innov_cov`` (n, 3) (NaN: no other radar,
+    no AIS report on the track), ``row_tested`` (in the test: its AIS report or two
+    other radars), its own covariance ``row_cov`` (n, 3). ``G``, ``C``: sectors, sites."""
+
+    epochs: np.ndarray
+    A: np.ndarray
+    b: np.ndarray
+    nis: np.ndarray
+    n: np.ndarray
+    trace: np.ndarray
+    n_ais: np.ndarray
+    blocked: np.ndarray
+    excluded: np.ndarray
+    row_k: np.ndarray
+    row_group: np.ndarray
+    H: np.ndarray
+    row_r: np.ndarray
+    row_innov_cov: np.ndarray
+    row_tested: np.ndarray
+    row_cov: np.ndarray
+    G: int
+    C: int
 
 
 # --- the inputs as arrays (computed once, before the epoch loop) -----------------------
@@ -795,6 +835,10 @@ class _RadarOut:
     expected: np.ndarray
     missed: np.ndarray
     outliers: np.ndarray
+    A: np.ndarray  # (K, n_groups, 9) sum H^T S^-1 H
+    b: np.ndarray  # (K, n_groups, 3) sum H^T S^-1 r
+    trace: np.ndarray  # (K, n_groups) sum tr(S^-1 P)
+    n_ais: np.ndarray  # (K, n_groups) tracks tested against their AIS report
 
 
 @dataclass(eq=False)
@@ -875,13 +919,18 @@ def check_channels(
     ro = _RadarOut(*(np.zeros((K, n_groups), t) for t in (bool, bool, bool, np.int8,
                                                             np.int64, float, float)),
                    np.full((K, n_groups, 3), np.nan),
-                   *(np.zeros((K, n_groups), np.int64) for _ in range(3)))
+                   *(np.zeros((K, n_groups), np.int64) for _ in range(3)),
+                   np.zeros((K, n_groups, 9)), np.zeros((K, n_groups, 3)),
+                   np.zeros((K, n_groups)), np.zeros((K, n_groups)))
     n_rep = ais.rep_m.size
     ao = _AisOut(np.zeros(n_rep, bool), np.zeros(n_rep, np.int8), np.full(n_rep, np.nan),
                  np.full(n_rep, np.nan),
                  np.zeros(n_rep, bool), np.zeros(n_rep, bool), np.full((n_rep, 2), np.nan),
                  np.full(n_rep, -1, np.int64))
     used = np.ones(assoc.height, bool)
+    row_r = np.full((assoc.height, 2), np.nan)
+    row_innov_cov = np.full((assoc.height, 3), np.nan)
+    row_tested = np.zeros(assoc.height, bool)
     # an epoch without radar rows, AIS references or reports, with no radar group out of
     # service and no scan down, decides nothing and changes no state: skipped (an hour of
     # sparse AIS without radar: its ~1,100 epochs cost 0.4 CPU-s, now the few with reports)
@@ -922,7 +971,9 @@ def check_channels(
                                      np.where(checkable[:, None], S, _UNIT)), np.nan)
         checkable &= ~_ais_odd(xi, tot, own, info, rad.xy[a:b], rad.P[a:b], n_other, has_ais,
                                inv, T, thr)
-        grp = _radar_groups(xi, r, S, checkable, rad.H[a:b], g, n_groups, thr)
+        grp = _radar_groups(xi, r, S, rad.P[a:b], checkable, has_ais[inv], rad.H[a:b], g,
+                            n_groups, thr)
+        row_r[a:b], row_innov_cov[a:b], row_tested[a:b] = r, S, checkable
         # -- coverage: ships trusted channels see in the site's range, the site misses; a
         # radar excluded or failing in any sector is no witness anywhere (a registration
         # fault splits its tracks off the others' where it is not tested)
@@ -970,8 +1021,14 @@ def check_channels(
     excl = ao.excluded
     ais_excluded = pl.DataFrame({"mmsi": ais.mmsi[ais.rep_m[excl]], "time_ns": ais.rep_t[excl]},
                                 schema={"mmsi": pl.Int64, "time_ns": pl.Int64})
+    k_row = np.repeat(np.arange(K), np.diff(rad.bounds))
+    evidence = RegistrationEvidence(
+        epochs=epochs, A=ro.A.reshape(K, n_groups, 3, 3), b=ro.b, nis=ro.nis, n=ro.n,
+        trace=ro.trace, n_ais=ro.n_ais, blocked=ro.checked & ro.eta & (ro.check == 3),
+        excluded=ro.excluded, row_k=k_row, row_group=rad.group, H=rad.H, row_r=row_r,
+        row_innov_cov=row_innov_cov, row_tested=row_tested, row_cov=rad.P, G=G, C=C)
     return IntegrityResult(health=health, associations=assoc.with_columns(
-        pl.Series("used", used)), ais_excluded=ais_excluded)
+        pl.Series("used", used)), ais_excluded=ais_excluded, evidence=evidence)
 
 
 def _release(st: _State, readmitted: np.ndarray, mmsi_near: np.ndarray, G: int) -> None:
@@ -994,11 +1051,12 @@ def _lookup(tracks: np.ndarray, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray
 
 
 def _radar_groups(
-    xi: np.ndarray, r: np.ndarray, S: np.ndarray, checkable: np.ndarray, H: np.ndarray,
-    g: np.ndarray, n_groups: int, thr: _Tables,
+    xi: np.ndarray, r: np.ndarray, S: np.ndarray, P: np.ndarray, checkable: np.ndarray,
+    with_ais: np.ndarray, H: np.ndarray, g: np.ndarray, n_groups: int, thr: _Tables,
 ) -> dict[str, np.ndarray]:
     """Per (site, sector) group: tracks tested (outliers of a minority left out), NIS
-    sum, outliers left out, registration statistic T and theta_hat."""
+    sum, outliers left out, registration statistic T and theta_hat, and the sums A, b
+    and sum tr(S^-1 P) of :class:`RegistrationEvidence`."""
     out = checkable & (xi > thr.outlier)
     counts = _sums(g, np.column_stack([checkable, out]), n_groups)
     drop = 2 * counts[:, 1] < counts[:, 0]
@@ -1014,11 +1072,13 @@ def _radar_groups(
     # is ~4x slower on these 2-long contractions; the same products, the same sums)
     HtSiH = HtSi[:, :, 0, None] * Hk[:, None, 0, :] + HtSi[:, :, 1, None] * Hk[:, None, 1, :]
     HtSir = HtSi[:, :, 0] * rk[:, 0, None] + HtSi[:, :, 1] * rk[:, 1, None]
+    Pk = P[kept]
+    trace = (Sk[:, 1] * Pk[:, 0] - 2 * Sk[:, 2] * Pk[:, 2] + Sk[:, 0] * Pk[:, 1]) / det
     terms = np.concatenate([np.ones((gk.size, 1)), xi[kept, None], HtSiH.reshape(-1, 9),
-                            HtSir], axis=1)
+                            HtSir, trace[:, None], with_ais[kept, None]], axis=1)
     tot = _sums(gk, terms, n_groups)
     nk = tot[:, 0].astype(np.int64)
-    A = tot[:, 2:11].reshape(-1, 3, 3) + np.diag(_THETA_PRIOR**-2.0)
+    A = tot[:, 2:11].reshape(-1, 3, 3) + np.diag(THETA_PRIOR**-2.0)
     bvec = tot[:, 11:14]
     theta = np.linalg.solve(A, bvec[..., None])[..., 0]
     stat = np.einsum("ni,ni->n", bvec, theta)
@@ -1026,7 +1086,8 @@ def _radar_groups(
     stat[few] = np.nan
     theta[few] = np.nan
     return {"n": nk, "nis": tot[:, 1], "outliers": np.where(drop, counts[:, 1], 0).astype(
-        np.int64), "T": stat, "theta": theta}
+        np.int64), "T": stat, "theta": theta, "A": tot[:, 2:11], "b": bvec,
+        "trace": tot[:, 14], "n_ais": tot[:, 15]}
 
 
 def _ais_odd(xi: np.ndarray, tot: np.ndarray, own: np.ndarray, info: np.ndarray,
@@ -1126,7 +1187,8 @@ def _radar_decisions(
     ro.checked[k], ro.eta[k], ro.n[k], ro.nis[k], ro.T[k] = checked, flagged, n, nis, grp["T"]
     ro.check[k] = np.where(scan_flag, 3, np.where(cov_flag, 2, np.where(
         bias_flag, 1, np.where(site_flag, 4, np.where(nis_dec, 0, 2)))))
-    ro.theta[k] = grp["theta"]
+    ro.theta[k], ro.A[k], ro.b[k], ro.trace[k] = grp["theta"], grp["A"], grp["b"], grp["trace"]
+    ro.n_ais[k] = grp["n_ais"]
     ro.expected[k], ro.missed[k], ro.outliers[k] = expected, missed, grp["outliers"]
     return below, checked
 

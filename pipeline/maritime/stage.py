@@ -4,7 +4,10 @@ Composes the pure steps for the epochs of one window: alignment to the regional 
 two-step synchronisation (multi-radar paper eq. 7-13), track-to-track association
 (two-radar identification paper eq. 7-16), channel integrity of every radar and AIS
 transponder (airfield paper eq. 21-23; a channel in fault is left out of the fusion and
-the identification), fusion (multi-radar paper eq. 14), geodetic
+the identification), online registration and estimated accuracy of each radar from the
+integrity's residuals (issue 38: a biased radar corrected and fused again, a degraded
+one down-weighted; ``pipeline.maritime.registration``), fusion (multi-radar paper eq.
+14), geodetic
 position, sectors, cross-track deviation (eq. 1-6), AIS identification, accuracy
 against truth (or AIS), SIAP per sector and cross-track error per leg.
 
@@ -35,6 +38,7 @@ from pipeline.maritime.fuse import fuse
 from pipeline.maritime.identity import identify
 from pipeline.maritime.integrity import check_channels
 from pipeline.maritime.reference import reconstruct, truth_reference
+from pipeline.maritime.registration import register
 from pipeline.maritime.score import score_tracks
 from pipeline.maritime.siap import siap_by_sector
 from pipeline.maritime.stitch import (
@@ -57,7 +61,9 @@ DERIVED_TABLES = ("associations", "system_tracks", "identifications", "track_err
 AUDIT_TABLES = ("siap_by_sector", "cross_track_by_leg", "radar_detection")
 # channel integrity (issue 22): every radar per sector and every AIS transponder
 INTEGRITY_TABLES = ("maritime_channel_health",)
-OUTPUTS = DERIVED_TABLES + AUDIT_TABLES + INTEGRITY_TABLES
+# online registration and estimated accuracy of each radar (issue 38)
+REGISTRATION_TABLES = ("sensor_registration",)
+OUTPUTS = DERIVED_TABLES + AUDIT_TABLES + INTEGRITY_TABLES + REGISTRATION_TABLES
 
 
 def continuity_margins_s(cfg: Config) -> tuple[float, float]:
@@ -115,8 +121,16 @@ def stage(tables: Inputs, window: Window, cfg: Config) -> Outputs:
     integrity = check_channels(
         associated, aligned, ais, epochs_ns=epochs, start_ns=track_start_ns, cfg=cfg, mc=mc
     )
-    associated = integrity.associations
-    fused = fuse(associated.filter(pl.col("used")))
+    associated, fusable = integrity.associations, integrity.associations
+    registration = pl.DataFrame()
+    if mc.registration.enabled:
+        reg = register(associated, integrity.evidence, mc.registration,
+                       radar_q=mc.integrity.radar_q, outlier_q=mc.integrity.outlier_q,
+                       epoch_period_s=mc.sync.epoch_period_s,
+                       sites=[s.site_id for s in cfg.radar_sites],
+                       sector_names=[s.name for s in cfg.sectors])
+        associated, fusable, registration = reg.associations, reg.corrected, reg.table
+    fused = fuse(fusable.filter(pl.col("used")))
     fused = add_geodetic(fused, cfg.region)
     fused = assign_sectors(fused, cfg.sectors, cfg.region)
     fused = cross_track(fused, cfg.fairway_legs, cfg.region, mc.max_cross_track_m)
@@ -162,6 +176,8 @@ def stage(tables: Inputs, window: Window, cfg: Config) -> Outputs:
         "cross_track_by_leg": cross,
         "radar_detection": detection,
         "maritime_channel_health": integrity.health.filter(own),
+        "sensor_registration": registration.filter(own) if registration.height
+        else registration,
         "rejects": _unknown_site_rejects(unknown, start_ns, end_ns),
         LEAD_ASSOCIATIONS: lead.select("time_ns", "site_id", "local_track_id",
                                        "system_track_id"),

@@ -23,7 +23,7 @@ from pipeline.warehouse.delta import read_table, table_path
 
 MIN = 60 * NS
 PER_EPOCH = ("associations", "system_tracks", "identifications", "track_errors",
-             "maritime_channel_health")
+             "maritime_channel_health", "sensor_registration")
 
 
 def _table(wh, name: str) -> pl.DataFrame:

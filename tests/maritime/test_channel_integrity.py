@@ -136,7 +136,9 @@ def test_registration_test_recovers_the_bias_and_is_chi2_3():
         biased_run = trial % 2 == 1
         r = noise + (np.einsum("nij,j->ni", H, theta) if biased_run else 0.0)
         xi = integ._d2(r, S)
-        g = integ._radar_groups(xi, r, S, np.ones(n, bool), H, np.zeros(n, np.int64), 1, thr)
+        P = S * 0.6  # the radar's own share of S
+        g = integ._radar_groups(xi, r, S, P, np.ones(n, bool), np.ones(n, bool), H,
+                                np.zeros(n, np.int64), 1, thr)
         if biased_run:
             thetas.append(g["theta"][0])
         else:
@@ -144,9 +146,15 @@ def test_registration_test_recovers_the_bias_and_is_chi2_3():
             # two paths: the weighted least squares of the stacked system
             W = np.linalg.inv(np.stack([[S[:, 0], S[:, 2]], [S[:, 2], S[:, 1]]], -1)
                               .transpose(1, 0, 2))
-            A = np.einsum("nji,njk,nkl->il", H, W, H) + np.diag(integ._THETA_PRIOR ** -2.0)
+            A = np.einsum("nji,njk,nkl->il", H, W, H)
             b = np.einsum("nji,njk,nk->i", H, W, r)
-            np.testing.assert_allclose(g["theta"][0], np.linalg.solve(A, b), rtol=1e-9)
+            np.testing.assert_allclose(g["theta"][0], np.linalg.solve(
+                A + np.diag(integ.THETA_PRIOR ** -2.0), b), rtol=1e-9)
+            # the registration's evidence (issue 38): A without the prior, b, tr(S^-1 P)
+            np.testing.assert_allclose(g["A"][0].reshape(3, 3), A, rtol=1e-9)
+            np.testing.assert_allclose(g["b"][0], b, rtol=1e-9)
+            assert g["trace"][0] == pytest.approx(0.6 * 2 * n, rel=1e-9)
+            assert g["n_ais"][0] == n
     assert 2.6 < np.mean(stats) < 3.4  # chi2(3) under H0
     est = np.array(thetas)
     assert abs(est[:, 0].mean() - 40.0) < 3.0 and abs(est[:, 2].mean() - 2.0) < 0.3
@@ -254,5 +262,8 @@ def test_dense_ais_candidates_give_the_same_decisions(cfg, data, monkeypatch):
             from polars.testing import assert_frame_equal
 
             assert_frame_equal(a, b, check_exact=True)
+        elif isinstance(a, integ.RegistrationEvidence):
+            for f in a.__dataclass_fields__:
+                np.testing.assert_array_equal(getattr(a, f), getattr(b, f), err_msg=f)
         else:
             np.testing.assert_array_equal(a, b)

@@ -23,7 +23,7 @@ from pipeline.maritime.stitch import join_units, unit_seam
 from pipeline.units import NS
 
 PER_EPOCH = ("associations", "system_tracks", "identifications", "track_errors",
-             "maritime_channel_health")
+             "maritime_channel_health", "sensor_registration")
 START_S, END_S = 300, 2300
 CUTS_S = (450, 750, 1290, 1500, 1830)  # inside faults (config/surveil.toml)
 
@@ -51,6 +51,9 @@ def test_units_cut_inside_faults_give_the_one_pass_rows(scenario):
     cut = batch_by_units(scenario, CUTS_S)
     assert one["maritime_channel_health"]["eta"].sum() > 0  # faults were detected
     assert one["system_tracks"]["mmsi"].is_not_null().mean() > 0.5
+    # registration corrected the faulted radars and fused them again (issue 38)
+    reg = one["sensor_registration"]
+    assert reg["registration_applied"].any() and reg["readmitted"].any()
     for name in PER_EPOCH:
         a, b = (t.sort(t.columns) for t in (cut[name], one[name]))
         try:

@@ -802,6 +802,45 @@ def test_radar_bias_by_site(world):
         == [900, 900]
 
 
+@covers("sensor_registration")
+def test_sensor_registration(world):
+    r = table(world, "sensor_registration").with_columns(
+        pl.col("sector").fill_null(OUTSIDE))
+    z = 1.959964
+
+    def interval(est: str, sigma: str, unit: float = 1.0) -> list[pl.Expr]:
+        return [(pl.col(est) * unit).mean().alias(f"{est}_mean"),
+                ((pl.col(est) - z * pl.col(sigma)) * unit).mean().alias(f"{est}_low"),
+                ((pl.col(est) + z * pl.col(sigma)) * unit).mean().alias(f"{est}_high")]
+
+    want = r.group_by("site", "site_id", "sector").agg(
+        pl.len().alias("epochs"),
+        pl.col("registration_applied").mean().alias("registration_applied_share"),
+        *interval("range_bias_m", "sigma_range_bias_m"),
+        *interval("azimuth_bias_rad", "sigma_azimuth_bias_rad", 180.0 / math.pi),
+        *interval("time_offset_s", "sigma_time_offset_s"),
+        pl.col("variance_scale").mean().alias("variance_scale_mean"),
+        pl.col("variance_scale").max().alias("variance_scale_max"),
+        pl.col("scale_applied").mean().alias("scale_applied_share"),
+        (pl.col("tracks_ais").sum() / pl.col("tracks").sum()).alias("ais_track_share"),
+        pl.col("readmitted").mean().alias("readmitted_share"),
+    ).rename({"range_bias_m_mean": "range_bias_m", "range_bias_m_low": "range_ci_low_m",
+              "range_bias_m_high": "range_ci_high_m", "azimuth_bias_rad_mean": "azimuth_bias_deg",
+              "azimuth_bias_rad_low": "azimuth_ci_low_deg",
+              "azimuth_bias_rad_high": "azimuth_ci_high_deg", "time_offset_s_mean": "time_offset_s",
+              "time_offset_s_low": "time_ci_low_s", "time_offset_s_high": "time_ci_high_s"})
+    # the channel scene's two radars report in every sector
+    assert {"R1", "R2"} <= set(want["site_id"])
+    got = report(world, "sensor_registration")
+    same(got, want, ["site", "site_id", "sector"], atol=0.0051, azimuth_bias_deg=5.1e-5,
+         azimuth_ci_low_deg=5.1e-5, azimuth_ci_high_deg=5.1e-5, time_offset_s=5.1e-4,
+         time_ci_low_s=5.1e-4, time_ci_high_s=5.1e-4, variance_scale_mean=5.1e-4,
+         variance_scale_max=5.1e-4, registration_applied_share=5.1e-5,
+         scale_applied_share=5.1e-5, ais_track_share=5.1e-5, readmitted_share=5.1e-5)
+    # the scene's radar faults (a range bias of R2 among them) are estimated and applied
+    assert got["registration_applied_share"].max() > 0
+
+
 # --- channel faults -------------------------------------------------------------------------
 
 

@@ -1,0 +1,348 @@
+"""Online registration and estimated accuracy of each radar, applied before fusion
+(issue 38 items 1-2): the fused picture should not be worse than the best radar when
+one radar has a range, azimuth or clock bias or degraded noise.
+
+The evidence is the channel integrity's (:mod:`pipeline.maritime.integrity`): per epoch
+k and radar group (site c, sector g) the leave-one-out residuals r_i = p_i - p_ref of
+the tracks tested against the picture without the radar (their AIS report where the
+track carries one, two or more other radars otherwise), S_i = P_i + P_ref, and the
+registration model of the integrity's test (airfield paper eq. 21-23 on the residual of
+multi-radar paper eq. 14),
+
+.. math:: r_i = H_i \\theta + e_i, \\quad H_i = [u_r, \\rho u_{az}, -v], \\quad
+          \\theta = (b_r, b_{az}, \\Delta t)
+
+summed per epoch and group: A_k = sum H^T S^-1 H, b_k = sum H^T S^-1 r, the NIS sum
+N_k = sum r^T S^-1 r, the tracks n_k and T_k = sum tr(S^-1 P_i).
+
+**Registration** (per site, every sector's evidence: a range, azimuth or clock fault is
+the site's). Over a window W of epochs, the weighted least-squares estimate with the
+integrity's wide prior P_0,
+
+.. math:: \\hat\\theta_W = (A_W + P_0^{-1})^{-1} b_W, \\qquad
+          P_{\\theta,W} = f_W (A_W + P_0^{-1})^{-1}, \\qquad
+          f_W = c \\max(1, \\tilde N_W / (2 n_W - 3))
+
+with A_W, b_W, N_W the sums over W, the corrected NIS sum
+N~_W = N_W - 2 theta^T b_W + theta^T A_W theta, and c = ``decorrelation_s`` / epoch
+period (at most the window's epochs): a radar tracker's errors are correlated over
+many scans, so an epoch carries 1/c of an independent sample. Three windows per epoch:
+the ``window_s`` before it (past), after it (future), both. Both, unless the past and
+future estimates disagree (d = (theta_p - theta_f)^T (P_p + P_f)^-1 (theta_p - theta_f)
+above chi2_3(1 - ``jump_q``): a registration jump), then the side whose corrected NIS
+per dof is the smaller (the side that does not straddle the jump). The estimate is
+applied once the window holds ``min_tracks`` track-epochs and it differs from zero,
+theta^T P_theta^-1 theta >= chi2_3(1 - ``apply_q``) (else nothing is corrected: a
+clean radar's reports stay as reported). Windows only (no filter over the whole
+recording): a unit's lead-in and look-ahead (``continuity_margins_s``, >= 300 s) hold
+every window, so results do not depend on where units are cut.
+
+**Correction**: each report of site c at epoch k, p <- p - H theta, P <- s P + H P_theta
+H^T (the estimate's own error, honest NEES).
+
+**Estimated accuracy** (per site and sector, the site's window): covariance matching of
+the corrected residuals, E[N~] = 2n + (s - 1) T for a radar whose covariance is s P,
+
+.. math:: s = 1 + (\\tilde N_W - 2 n_W) / T_W
+
+used when the window holds ``min_tracks`` track-epochs and N~_W / c leaves the
+equal-tail chi-square interval of 2 n_W / c dof at ``apply_q`` (else the site's s by
+the same rule, else 1), clipped to [``MIN_SCALE``, ``max_scale``]: a degraded radar is
+down-weighted smoothly, a radar as good as its sigmas keeps them.
+
+**Exclusion only on the integrity test**: a radar group the integrity excluded is fused
+again at an epoch where its site's registration is applied (the correction explains the
+failure: a radar that is only noisier than its sigmas stays excluded; its scale down-
+weights it where the integrity keeps it) and its corrected and rescaled residuals, xi_i
+= (r_i - H_i theta)^T (S_i + (s - 1) P_i)^-1 (r_i - H_i theta), pass the same NIS-sum
+test (sum xi_i < chi2_2n(1 - radar_q / 4)) with no outlier among them (xi_i > chi2_2(1 -
+outlier_q): the integrity leaves a minority of outliers out of its sum, a readmission
+may not), in the group where it has tracks tested and over the site; of its rows, those
+whose own xi_i is no outlier (a row with no other channel on its track is not gated);
+unless its scan check fails at that epoch (an outage) or its variance scale exceeds
+``readmit_max_scale`` (a radar much noisier than its sigmas stays excluded: the scale of
+the tracks still tested underestimates it, the association having split the worst ones
+off). A coverage failure does not block it: a bias or a noisy radar splits tracks off
+the association, which the coverage check counts as missed ships; in blanked azimuths
+the radar has no reports to fuse.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import polars as pl
+from numpy.lib.stride_tricks import sliding_window_view
+
+from pipeline.filters.quantiles import chi2_ppf, normal_ppf
+from pipeline.maritime.config import RegistrationConfig
+from pipeline.maritime.integrity import THETA_PRIOR, RegistrationEvidence
+
+MIN_SCALE = 0.25
+"""The smallest variance scale: a radar at most twice as accurate as its sigmas say."""
+
+PAST, FUTURE, BOTH = 0, 1, 2
+_SIDES = ("past", "future", "both")
+_A, _B, _NIS, _N, _TRACE, _NAIS = slice(0, 9), slice(9, 12), 12, 13, 14, 15
+
+
+@dataclass(frozen=True, eq=False)
+class Registration:
+    """What :func:`register` returns: ``associations`` (the input rows, ``used`` with the
+    readmitted ones), ``corrected`` (the same rows as fused: positions corrected,
+    covariances rescaled and widened) and ``table`` (``sensor_registration`` rows)."""
+
+    associations: pl.DataFrame
+    corrected: pl.DataFrame
+    table: pl.DataFrame
+
+
+@dataclass(frozen=True, eq=False)
+class _Fit:
+    """A window's estimate per (epoch, site): theta (K, C, 3), its covariance P (K, C, 3,
+    3), corrected NIS sum, tracks and tracks against AIS."""
+
+    theta: np.ndarray
+    P: np.ndarray
+    nis: np.ndarray
+    n: np.ndarray
+    n_ais: np.ndarray
+
+
+def _evidence(ev: RegistrationEvidence) -> np.ndarray:
+    """(K, n_groups, 16) the sums A (9), b (3), NIS, tracks, trace, tracks with AIS."""
+    K, ng = ev.n.shape
+    return np.concatenate([ev.A.reshape(K, ng, 9), ev.b, ev.nis[..., None],
+                           ev.n[..., None].astype(float), ev.trace[..., None],
+                           ev.n_ais[..., None]], axis=2)
+
+
+def _windows(x: np.ndarray, w: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(past, future, both) sums over epochs k-w..k, k..k+w, k-w..k+w of ``x`` (K, ...):
+    each sum of the same terms in the same order wherever the series starts."""
+    pad = np.zeros((w, *x.shape[1:]))
+    win = sliding_window_view(np.concatenate([pad, x, pad]), w + 1, axis=0)
+    past = win[: x.shape[0]].sum(axis=-1)
+    future = win[w:].sum(axis=-1)
+    return past, future, past + future - x
+
+
+def _corrected_nis(v: np.ndarray, theta: np.ndarray) -> np.ndarray:
+    """N - 2 theta^T b + theta^T A theta of sums ``v`` (..., 16), >= 0."""
+    A = v[..., _A].reshape(*v.shape[:-1], 3, 3)
+    quad = np.einsum("...i,...ij,...j->...", theta, A, theta)
+    return np.maximum(v[..., _NIS] - 2 * np.einsum("...i,...i->...", theta, v[..., _B]) + quad,
+                      0.0)
+
+
+def _fit(v: np.ndarray, corr: float) -> _Fit:
+    """The weighted least-squares estimate of sums ``v`` (K, C, 16) (module docstring)."""
+    A = v[..., _A].reshape(*v.shape[:-1], 3, 3) + np.diag(THETA_PRIOR**-2.0)
+    cov = np.linalg.inv(A)
+    theta = np.einsum("...ij,...j->...i", cov, v[..., _B])
+    nis = _corrected_nis(v, theta)
+    n = v[..., _N]
+    f = corr * np.maximum(1.0, nis / np.maximum(2 * n - 3, 1.0))
+    return _Fit(theta, cov * f[..., None, None], nis, n, v[..., _NAIS])
+
+
+def _mahalanobis(x: np.ndarray, P: np.ndarray) -> np.ndarray:
+    return np.einsum("...i,...i->...", x, np.linalg.solve(P, x[..., None])[..., 0])
+
+
+def _choose(fits: tuple[_Fit, _Fit, _Fit], cur: np.ndarray, corr: float,
+            rc: RegistrationConfig) -> np.ndarray:
+    """(K, C) the window of each epoch and site: both, unless past and future disagree
+    (a jump; tested without the decorrelation factor: a false jump costs half the
+    window, a missed one a wrong correction), then the side whose estimate fits the
+    epoch's own residuals the better."""
+    past, future, _ = fits
+    d = corr * _mahalanobis(past.theta - future.theta, past.P + future.P)
+    enough = (past.n >= rc.min_tracks) & (future.n >= rc.min_tracks)
+    jump = enough & (d > chi2_ppf(1.0 - rc.jump_q, 3))
+    side = np.where(_corrected_nis(cur, past.theta) <= _corrected_nis(cur, future.theta),
+                    PAST, FUTURE)
+    return np.where(jump, side, BOTH)
+
+
+def _choose_scale(wins: tuple[np.ndarray, ...], cur: np.ndarray, theta: np.ndarray,
+                  corr: float, rc: RegistrationConfig) -> np.ndarray:
+    """(K, C) the window of each epoch and site for the variance scale: both, unless the
+    corrected NIS per dof before and after differ (an F test of 2n / corr dof each side
+    at ``jump_q``: the radar's noise changed), then the side whose NIS per dof is
+    nearer the epoch's own (in ratio)."""
+    per_dof = [_corrected_nis(v, theta) / np.maximum(2 * v[..., _N], 1.0)
+               for v in (*wins[:2], cur)]
+    dof = [np.maximum(2 * v[..., _N] / corr, 1.0) for v in wins[:2]]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        log_f = np.log(np.maximum(per_dof[0], 1e-9) / np.maximum(per_dof[1], 1e-9))
+        # log of an F(d1, d2) variable: about normal, variance 2/d1 + 2/d2
+        z = log_f / np.sqrt(2 / dof[0] + 2 / dof[1])
+        near = [np.abs(np.log(np.maximum(per_dof[2], 1e-9) / np.maximum(p, 1e-9)))
+                for p in per_dof[:2]]
+    enough = (wins[0][..., _N] >= rc.min_tracks) & (wins[1][..., _N] >= rc.min_tracks)
+    jump = enough & (np.abs(z) > normal_ppf(1.0 - rc.jump_q / 2))
+    return np.where(jump, np.where(near[0] <= near[1], PAST, FUTURE), BOTH)
+
+
+def _pick(x: list[np.ndarray], side: np.ndarray) -> np.ndarray:
+    """x[side] elementwise; ``side`` (K, C) broadcast over x's trailing axes."""
+    stacked = np.stack(x)
+    idx = side.reshape(1, *side.shape, *([1] * (stacked.ndim - 1 - side.ndim)))
+    return np.take_along_axis(stacked, np.broadcast_to(idx, (1, *stacked.shape[1:])),
+                              axis=0)[0]
+
+
+def _scale(v: np.ndarray, theta: np.ndarray, corr: float, rc: RegistrationConfig
+           ) -> tuple[np.ndarray, np.ndarray]:
+    """(scale, applied) of sums ``v`` (..., 16) with the correction ``theta`` (...,
+    3): covariance matching of the corrected residuals (module docstring)."""
+    nis = _corrected_nis(v, theta)
+    dof = 2 * v[..., _N]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = 1.0 + (nis - dof) / v[..., _TRACE]
+        eff = np.maximum(dof / corr, 1e-9)
+        lo, hi = chi2_ppf(rc.apply_q / 2, eff), chi2_ppf(1.0 - rc.apply_q / 2, eff)
+    stat = nis / corr
+    applied = (v[..., _N] >= rc.min_tracks) & ((stat <= lo) | (stat >= hi))
+    return np.clip(np.where(applied, s, 1.0), MIN_SCALE, rc.max_scale), applied
+
+
+def _readmitted(ev: RegistrationEvidence, theta_row: np.ndarray, scale: np.ndarray,
+                applied: np.ndarray, rc: RegistrationConfig, radar_q: float, outlier_q: float
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """(group (K, n_groups), row (n,)) readmission: a group excluded by the integrity
+    whose site's registration is applied (a correction explains the failure; a radar
+    only noisier than its sigmas stays excluded) and whose corrected and rescaled
+    residuals of the epoch, xi_i = (r_i - H_i theta)^T
+    (S_i + (s - 1) P_i)^-1 (r_i - H_i theta) over its tracks tested, pass the NIS-sum
+    test with no outlier (xi_i above chi2_2(1 - outlier_q)) in the group and over the
+    site, whose scan check passes and whose variance scale is at most
+    ``readmit_max_scale``; and of its rows, those without an outlier residual against the
+    other channels (a row without any other channel on its track is not gated)."""
+    K, ng = ev.n.shape
+    C, G1 = ev.C, ev.G + 1
+    gid = ev.row_k * ng + ev.row_group
+    s_row = scale.reshape(-1)[gid]
+    r = ev.row_r - np.einsum("nij,nj->ni", ev.H, theta_row)
+    S = ev.row_innov_cov + (s_row - 1.0)[:, None] * ev.row_cov
+    with np.errstate(invalid="ignore", divide="ignore"):
+        det = S[:, 0] * S[:, 1] - S[:, 2] ** 2
+        xi = (S[:, 1] * r[:, 0] ** 2 - 2 * S[:, 2] * r[:, 0] * r[:, 1]
+              + S[:, 0] * r[:, 1] ** 2) / det
+    gated = np.isfinite(xi)
+    outlier = gated & (xi > chi2_ppf(1.0 - outlier_q, 2))
+    tested = ev.row_tested & gated
+    sums = np.stack([np.bincount(gid, weights=w, minlength=K * ng) for w in (
+        tested, np.where(tested, xi, 0.0), tested & outlier)], axis=-1).reshape(K, ng, 3)
+    site = sums.reshape(K, C, G1, 3).sum(axis=2)
+    n_max = int(max(sums[..., 0].max(initial=0), site[..., 0].max(initial=0)))
+    d2 = np.r_[np.inf, chi2_ppf(1.0 - radar_q / 4.0, 2 * np.arange(1, n_max + 1))]
+
+    def passing(v: np.ndarray) -> np.ndarray:
+        n = v[..., 0].astype(np.int64)
+        return (v[..., 1] < d2[n]) & (v[..., 2] == 0)
+
+    group_ok = (sums[..., 0] == 0) | passing(sums)
+    site_ok = (site[..., 0] > 0) & passing(site)
+    group = (ev.excluded & ~ev.blocked & group_ok & np.repeat(site_ok & applied, G1, axis=1)
+             & (scale <= rc.readmit_max_scale))
+    return group, group.reshape(-1)[gid] & ~outlier
+
+
+def register(
+    associations: pl.DataFrame, ev: RegistrationEvidence, rc: RegistrationConfig, *,
+    radar_q: float, outlier_q: float, epoch_period_s: float, sites: list[str],
+    sector_names: list[str],
+) -> Registration:
+    """Estimate, apply and tabulate each radar's registration and variance scale.
+
+    Consumes ``associations`` (``IntegrityResult.associations``: rows in the order of
+    ``ev``'s rows, with x_enu_m, y_enu_m, P_xx, P_yy, P_xy, used) and ``ev`` (its
+    evidence); ``radar_q``, ``outlier_q``: the integrity's false-alarm probabilities (the
+    readmission test's thresholds)."""
+    K, ng = ev.n.shape
+    C, G1 = ev.C, ev.G + 1
+    w = max(1, round(rc.window_s / epoch_period_s))
+    corr = float(np.clip(rc.decorrelation_s / epoch_period_s, 1.0, 2 * w + 1))
+    cur = _evidence(ev)
+    per_site = cur.reshape(K, C, G1, 16).sum(axis=2)
+    site_wins = _windows(per_site, w)
+    fits = tuple(_fit(v, corr) for v in site_wins)
+    side = _choose(fits, per_site, corr, rc)
+    theta = _pick([f.theta for f in fits], side)
+    P = _pick([f.P for f in fits], side)
+    n, n_ais = _pick([f.n for f in fits], side), _pick([f.n_ais for f in fits], side)
+    applied = (n >= rc.min_tracks) & (_mahalanobis(theta, P) >= chi2_ppf(1.0 - rc.apply_q, 3))
+    theta_used = np.where(applied[..., None], theta, 0.0)
+    P_used = np.where(applied[..., None, None], P, 0.0)
+    # the variance scale per (site, sector) on the site's window; else the site's
+    side_s = _choose_scale(site_wins, per_site, theta_used, corr, rc)
+    site_win = _pick(list(site_wins), side_s)
+    group_win = _pick(list(_windows(cur, w)), np.repeat(side_s, G1, axis=1))
+    theta_g = np.repeat(theta_used, G1, axis=1)
+    s_group, s_group_ok = _scale(group_win, theta_g, corr, rc)
+    s_site, s_site_ok = _scale(site_win, theta_used, corr, rc)
+    s_site_g = np.repeat(s_site, G1, axis=1)
+    scale = np.where(s_group_ok, s_group, np.where(np.repeat(s_site_ok, G1, axis=1), s_site_g,
+                                                   1.0))
+    scale_ok = s_group_ok | np.repeat(s_site_ok, G1, axis=1)
+    rk, rg = ev.row_k, ev.row_group
+    rs = rg // G1
+    readmit, readmit_row = _readmitted(ev, theta_used[rk, rs], scale, applied, rc, radar_q,
+                                       outlier_q)
+    used = associations["used"].to_numpy() | readmit_row
+    out = associations.with_columns(pl.Series("used", used))
+    corrected = _correct(out, ev.H, theta_used[rk, rs], P_used[rk, rs], scale[rk, rg])
+    present = np.bincount(rk * ng + rg, minlength=K * ng).reshape(K, ng) > 0
+    table = _table(ev, present, theta, P, applied, side, n, n_ais, scale, scale_ok,
+                   group_win[..., _N], readmit, sites, sector_names)
+    return Registration(out, corrected, table)
+
+
+def _correct(df: pl.DataFrame, H: np.ndarray, theta: np.ndarray, P_theta: np.ndarray,
+             scale: np.ndarray) -> pl.DataFrame:
+    """p <- p - H theta, P <- s P + H P_theta H^T per row."""
+    dp = np.einsum("nij,nj->ni", H, theta)
+    HPH = np.einsum("nij,njk,nlk->nil", H, P_theta, H)
+    return df.with_columns(
+        (pl.col("x_enu_m") - dp[:, 0]).alias("x_enu_m"),
+        (pl.col("y_enu_m") - dp[:, 1]).alias("y_enu_m"),
+        (pl.col("P_xx") * scale + HPH[:, 0, 0]).alias("P_xx"),
+        (pl.col("P_yy") * scale + HPH[:, 1, 1]).alias("P_yy"),
+        (pl.col("P_xy") * scale + HPH[:, 0, 1]).alias("P_xy"),
+    )
+
+
+def _table(ev: RegistrationEvidence, present: np.ndarray, theta: np.ndarray, P: np.ndarray,
+           applied: np.ndarray, side: np.ndarray, n: np.ndarray, n_ais: np.ndarray,
+           scale: np.ndarray, scale_ok: np.ndarray, scale_n: np.ndarray,
+           readmit: np.ndarray, sites: list[str], sector_names: list[str]) -> pl.DataFrame:
+    """``sensor_registration`` rows: one per epoch and (site, sector) with reports."""
+    G1 = ev.G + 1
+    kk, gg = np.nonzero(present)
+    cc = gg // G1
+    names = [*sector_names, None]
+    sigma = np.sqrt(np.diagonal(P, axis1=-2, axis2=-1))[kk, cc]
+    th = theta[kk, cc]
+    return pl.DataFrame({
+        "time_ns": ev.epochs[kk],
+        "site_id": pl.Series([sites[i] for i in cc.tolist()], dtype=pl.String),
+        "sector": pl.Series([names[i] for i in (gg % G1).tolist()], dtype=pl.String),
+        "range_bias_m": th[:, 0],
+        "azimuth_bias_rad": th[:, 1],
+        "time_offset_s": th[:, 2],
+        "sigma_range_bias_m": sigma[:, 0],
+        "sigma_azimuth_bias_rad": sigma[:, 1],
+        "sigma_time_offset_s": sigma[:, 2],
+        "window": pl.Series([_SIDES[i] for i in side[kk, cc].tolist()], dtype=pl.String),
+        "tracks": n[kk, cc].astype(np.int32),
+        "tracks_ais": n_ais[kk, cc].astype(np.int32),
+        "registration_applied": applied[kk, cc],
+        "variance_scale": scale[kk, gg],
+        "scale_tracks": scale_n[kk, gg].astype(np.int32),
+        "scale_applied": scale_ok[kk, gg],
+        "readmitted": readmit[kk, gg],
+    }, schema_overrides={"time_ns": pl.Int64}).sort("time_ns", "site_id", "sector",
+                                                    nulls_last=True)

@@ -1,0 +1,153 @@
+"""Online registration and estimated accuracy of each radar before fusion (issue 38
+items 1-2, pipeline/maritime/registration.py) on the simulated channel scene: a radar
+range bias is estimated within its own interval and corrected, so the faulted radar is
+fused again and the fused picture beats the one that excluded it; a clean scene is not
+made worse."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import polars as pl
+import pytest
+
+from pipeline.experiments.channel_montecarlo import maritime_inputs
+from pipeline.families import load_config
+from pipeline.family import Window
+from pipeline.maritime.config import ChannelFault, maritime_config, with_faults
+from pipeline.maritime.stage import stage
+from pipeline.simulate import DEFAULT_START_NS
+from pipeline.simulate.scenarios import with_scenario
+from pipeline.units import NS
+
+DURATION_S = 600.0
+FAULT = (240.0, 180.0)  # start, duration, s
+SEED = 1007
+
+
+def _registration(cfg, on: bool):
+    mc = maritime_config(cfg)
+    fam = dict(cfg.families)
+    fam["maritime"] = replace(mc, registration=replace(mc.registration, enabled=on))
+    return replace(cfg, families=fam)
+
+
+@pytest.fixture(scope="module")
+def world():
+    return with_scenario(load_config(), ["channel"])
+
+
+def _run(cfg, faults):
+    cfg = with_faults(cfg, faults)
+    window = Window(DEFAULT_START_NS, DEFAULT_START_NS + round(DURATION_S * NS))
+    inputs, _ = maritime_inputs(cfg, SEED, window.start_ns, DURATION_S)
+    return {on: stage(inputs, window, _registration(cfg, on)) for on in (False, True)}
+
+
+def _fault(kind: str, site: str, **size) -> tuple[ChannelFault, ...]:
+    return (ChannelFault(kind, FAULT[0], FAULT[1], site_id=site, **size),)
+
+
+@pytest.fixture(scope="module")
+def range_bias(world):
+    return _run(world, _fault("radar_range_bias", "R2", range_bias_m=80.0))
+
+
+@pytest.fixture(scope="module")
+def clean(world):
+    return _run(world, ())
+
+
+def _fused(out, t0_s: float, t1_s: float) -> np.ndarray:
+    e = out["track_errors"].filter(
+        (pl.col("source") == "fused") & (pl.col("reference") == "truth")
+        & pl.col("time_ns").is_between(DEFAULT_START_NS + round(t0_s * NS),
+                                       DEFAULT_START_NS + round(t1_s * NS), closed="left"))
+    return e["error_m"].drop_nulls().to_numpy()
+
+
+def _rms(v: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(v**2)))
+
+
+def test_range_bias_corrected_beats_excluding_the_radar(range_bias):
+    # from one window after the onset to the end of the fault
+    t0, t1 = FAULT[0] + 40.0, FAULT[0] + FAULT[1]
+    off, on = _fused(range_bias[False], t0, t1), _fused(range_bias[True], t0, t1)
+    assert _rms(on) < 0.8 * _rms(off), (_rms(on), _rms(off))
+    assert np.quantile(on, 0.95) < np.quantile(off, 0.95)
+    # the integrity still excludes R2 on its raw reports; the corrected ones are fused
+    a = range_bias[True]["associations"].filter(
+        (pl.col("site_id") == "R2") & pl.col("time_ns").is_between(
+            DEFAULT_START_NS + round(t0 * NS), DEFAULT_START_NS + round(t1 * NS)))
+    assert a["used"].mean() > 0.8
+    assert range_bias[False]["associations"].filter(
+        (pl.col("site_id") == "R2") & pl.col("time_ns").is_between(
+            DEFAULT_START_NS + round(t0 * NS), DEFAULT_START_NS + round(t1 * NS))
+    )["used"].mean() < 0.2
+
+
+def test_range_bias_estimate_within_its_interval(range_bias):
+    reg = range_bias[True]["sensor_registration"]
+    mid = DEFAULT_START_NS + round((FAULT[0] + FAULT[1] / 2) * NS)
+    r2 = reg.filter((pl.col("site_id") == "R2") & pl.col("time_ns").is_between(
+        mid - 60 * NS, mid + 60 * NS)).unique("time_ns")
+    assert r2["registration_applied"].all()
+    err = (r2["range_bias_m"] - 80.0).abs() / r2["sigma_range_bias_m"]
+    assert (err <= 1.96).mean() >= 0.9
+    assert float(r2["sigma_range_bias_m"].median()) < 10.0
+    # the other radar's estimate stays unapplied (no bias there)
+    r1 = reg.filter(pl.col("site_id") == "R1")
+    assert r1["registration_applied"].mean() < 0.1
+    # before the fault nothing is applied to R2 either
+    before = reg.filter((pl.col("site_id") == "R2") & (pl.col("time_ns") < DEFAULT_START_NS
+                                                       + round((FAULT[0] - 45) * NS)))
+    assert before["registration_applied"].mean() < 0.1
+
+
+def test_clean_scene_not_worse(clean):
+    off, on = _fused(clean[False], 0.0, DURATION_S), _fused(clean[True], 0.0, DURATION_S)
+    assert _rms(on) <= _rms(off) * 1.01, (_rms(on), _rms(off))
+    nees = clean[True]["track_errors"].filter(
+        (pl.col("source") == "fused") & (pl.col("reference") == "truth"))["nees"].mean()
+    assert 1.5 < nees < 2.6
+    reg = clean[True]["sensor_registration"]
+    assert reg["registration_applied"].mean() < 0.1
+
+
+def test_azimuth_bias_estimated(world):
+    out = _run(world, _fault("radar_azimuth_bias", "R1", azimuth_bias_rad=math.radians(1.0)))
+    t0, t1 = FAULT[0] + 40.0, FAULT[0] + FAULT[1]
+    assert _rms(_fused(out[True], t0, t1)) < 0.8 * _rms(_fused(out[False], t0, t1))
+    reg = out[True]["sensor_registration"].filter(
+        (pl.col("site_id") == "R1") & pl.col("time_ns").is_between(
+            DEFAULT_START_NS + round(t0 * NS), DEFAULT_START_NS + round(t1 * NS)))
+    assert float(reg["azimuth_bias_rad"].median()) == pytest.approx(math.radians(1.0),
+                                                                    rel=0.15)
+
+
+def test_degraded_radar_down_weighted_by_its_estimated_accuracy(world):
+    # 1.3x its sigmas (1.69x in variance): the integrity keeps it; its variance scale is
+    # estimated from the residuals and the fused sigma becomes honest again
+    out = _run(world, _fault("radar_noise", "R1", factor=1.3))
+    t0, t1 = (DEFAULT_START_NS + round(s * NS) for s in (FAULT[0] + 40.0, sum(FAULT)))
+    during = pl.col("time_ns").is_between(t0, t1)
+    h = out[True]["maritime_channel_health"].filter((pl.col("channel") == "R1") & during)
+    assert h["excluded"].mean() < 0.1
+    reg = out[True]["sensor_registration"].filter((pl.col("site_id") == "R1") & during)
+    assert reg["scale_applied"].mean() > 0.8
+    assert 1.4 < float(reg["variance_scale"].median()) < 2.1
+    assert not reg["registration_applied"].any()
+
+    def fused(on: bool) -> pl.DataFrame:
+        return out[on]["track_errors"].filter((pl.col("source") == "fused") & during
+                                              & (pl.col("reference") == "truth"))
+
+    assert fused(True)["nees"].mean() < fused(False)["nees"].mean() - 0.5
+    assert _rms(fused(True)["error_m"].to_numpy()) <= 1.01 * _rms(
+        fused(False)["error_m"].to_numpy())
+    # the healthy radar keeps its sigmas
+    r2 = out[True]["sensor_registration"].filter((pl.col("site_id") == "R2") & during)
+    assert r2["scale_applied"].mean() < 0.2
