@@ -221,6 +221,50 @@ def radar_bias(rows: list[dict[str, Any]]) -> go.Figure | None:
                    height=330)
 
 
+_REGISTRATION_PANELS = (
+    ("range bias, m", "range_bias_m", "range_ci_low_m", "range_ci_high_m"),
+    ("azimuth bias, deg", "azimuth_bias_deg", "azimuth_ci_low_deg", "azimuth_ci_high_deg"),
+    ("clock offset, s", "time_offset_s", "time_ci_low_s", "time_ci_high_s"),
+    ("variance scale (largest sector)", "variance_scale_max", None, None),
+)
+
+
+def registration_over_time(rows: list[dict[str, Any]], start_ns: int, end_ns: int
+                           ) -> go.Figure | None:
+    """Each radar's online registration per minute (range, azimuth, clock; the 95 %
+    interval as a band, markers where the estimate was applied) and its variance scale."""
+    if not rows:
+        return None
+    fig = make_subplots(rows=len(_REGISTRATION_PANELS), cols=1, shared_xaxes=True,
+                        vertical_spacing=0.05,
+                        subplot_titles=[p[0] for p in _REGISTRATION_PANELS])
+    sites = sorted({r["site_id"] for r in rows})
+    for k, site in enumerate(sites):
+        sel = [r for r in rows if r["site_id"] == site]
+        colour = SOURCE_COLOURS[k % len(SOURCE_COLOURS)]
+        t = [r["minute_utc"] for r in sel]
+        applied = [r["registration_applied_share"] > 0 for r in sel]
+        for row, (_, v, lo, hi) in enumerate(_REGISTRATION_PANELS, start=1):
+            if lo is not None:  # the interval as a band under the estimate
+                fig.add_scatter(x=t + t[::-1], y=[r[hi] for r in sel] + [r[lo] for r in sel][::-1],
+                                fill="toself", fillcolor=colour, opacity=0.18, mode="none",
+                                hoverinfo="skip", showlegend=False, row=row, col=1)
+            fig.add_scatter(
+                x=t, y=[r[v] for r in sel], name=site, legendgroup=site, showlegend=row == 1,
+                mode="lines+markers", line=dict(color=colour, width=1.5),
+                marker=dict(size=[7 if a else 3 for a in applied], color=colour),
+                customdata=[[r["registration_applied_share"], r["readmitted_share"]]
+                            for r in sel],
+                hovertemplate="%{x|%H:%M} UTC: %{y}<br>applied %{customdata[0]}, fused "
+                              "although excluded %{customdata[1]}<extra>" + site + "</extra>",
+                row=row, col=1)
+    fig = _layout(fig, "Online registration per radar (reported − true; large markers: "
+                  "applied before fusion)", height=190 * len(_REGISTRATION_PANELS))
+    fig.update_xaxes(type="date", range=[_dt(start_ns), _dt(end_ns)])
+    fig.update_xaxes(title_text="time, UTC", row=len(_REGISTRATION_PANELS), col=1)
+    return fig
+
+
 # --- airfield, own ship, gaps -------------------------------------------------------------
 
 

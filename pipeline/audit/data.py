@@ -28,6 +28,8 @@ AUDIT_REPORTS = (
     "surface_accuracy_by_area", "channel_faults_by_sector", "fault_timeline", "nav_quality",
     "nav_heading_error", "gap_forecasts", "gap_forecast_calibration", "map_tracks",
     "channel_fault_episodes", "ais_traffic", "ais_quality",
+    # online registration (issue 38)
+    "registration_over_time", "sensor_registration",
     # evaluation without truth (issue 37)
     "detection_by_sector", "radar_coverage", "track_continuity", "latency_by_sensor",
     "error_decomposition", "false_tracks", "dubious_tracks", "reference_quality",

@@ -127,6 +127,14 @@ def sections(data: AuditData) -> list[Section]:
     add("bias", "Radar registration bias",
         "Range, azimuth and time bias of each site estimated from AIS, with 95% intervals.",
         ("radar_bias_by_site",), charts.radar_bias(rows("radar_bias_by_site")))
+    add("registration", "Online registration and estimated accuracy",
+        "Each radar's range bias, azimuth bias and clock offset as the batch estimated them "
+        "from AIS ships and radar overlap (95% interval as a band; large markers: the minutes "
+        "the estimate was removed from the reports before fusion) and the variance scale on "
+        "its reports' covariance (1: the configured sigmas).",
+        ("registration_over_time", "sensor_registration"),
+        charts.registration_over_time(rows("registration_over_time"), data.start_ns,
+                                      data.end_ns))
     add("airfield", "Airfield surface accuracy (ED-87)",
         "95th percentile of each channel's and the fused tracks' error per ED-87 area class, "
         "with the area's limit (red bars) and the sensor level (dashed).",

@@ -1,0 +1,38 @@
+-- name: registration_over_time
+-- description: each radar's online registration and estimated accuracy per minute (issue
+--   38; pipeline/maritime/registration.py): the range bias, azimuth bias and clock offset
+--   the batch estimated (reported - true) with their 95 % intervals (estimate -/+ 1.96
+--   sigma, means over the minute's epochs), the share of epochs the estimate was applied
+--   to the reports before fusion, the largest variance scale of the radar's sectors
+--   (1 = the configured sigmas) and the share of epochs it was fused although the
+--   integrity excluded it. The audit's registration time series.
+-- grain: one row per (site, radar site, minute)
+-- params: $start_ns (BIGINT, inclusive), $end_ns (BIGINT, exclusive),
+--         $sector (VARCHAR, NULL = every sector), $site (VARCHAR, NULL = every site)
+-- source table: sensor_registration (written by `surveil batch`)
+SELECT
+    site::VARCHAR                                                         AS site,
+    site_id::VARCHAR                                                      AS site_id,
+    make_timestamp(((time_ns // 60000000000) * 60000000)::BIGINT)::TIMESTAMP AS minute_utc,  -- start of the minute
+    count(DISTINCT time_ns)::BIGINT                                       AS epochs,
+    round(avg(registration_applied::INTEGER), 4)::DOUBLE                  AS registration_applied_share,
+    round(avg(range_bias_m), 2)::DOUBLE                                   AS range_bias_m,
+    round(avg(range_bias_m - 1.959964 * sigma_range_bias_m), 2)::DOUBLE   AS range_ci_low_m,
+    round(avg(range_bias_m + 1.959964 * sigma_range_bias_m), 2)::DOUBLE   AS range_ci_high_m,
+    round(avg(degrees(azimuth_bias_rad)), 4)::DOUBLE                      AS azimuth_bias_deg,
+    round(avg(degrees(azimuth_bias_rad - 1.959964 * sigma_azimuth_bias_rad)), 4)::DOUBLE
+                                                                          AS azimuth_ci_low_deg,
+    round(avg(degrees(azimuth_bias_rad + 1.959964 * sigma_azimuth_bias_rad)), 4)::DOUBLE
+                                                                          AS azimuth_ci_high_deg,
+    round(avg(time_offset_s), 3)::DOUBLE                                  AS time_offset_s,
+    round(avg(time_offset_s - 1.959964 * sigma_time_offset_s), 3)::DOUBLE AS time_ci_low_s,
+    round(avg(time_offset_s + 1.959964 * sigma_time_offset_s), 3)::DOUBLE AS time_ci_high_s,
+    round(max(variance_scale), 3)::DOUBLE                                 AS variance_scale_max,
+    round(avg(readmitted::INTEGER), 4)::DOUBLE                            AS readmitted_share
+FROM sensor_registration
+WHERE time_ns >= $start_ns
+  AND time_ns < $end_ns
+  AND (CAST($sector AS VARCHAR) IS NULL OR coalesce(sector, '(outside sectors)') = CAST($sector AS VARCHAR))
+  AND (CAST($site AS VARCHAR) IS NULL OR site = CAST($site AS VARCHAR))
+GROUP BY site, site_id, time_ns // 60000000000
+ORDER BY site, site_id, minute_utc;
