@@ -45,7 +45,7 @@ from pipeline.families import FAMILIES, family
 from pipeline.family import Family
 from pipeline.signals import deferred_interrupts
 from pipeline.warehouse.crashpoints import crash_point
-from pipeline.warehouse.delta import require_readable
+from pipeline.warehouse.delta import require_readable, shared_handles
 from pipeline.warehouse.location import as_location
 from pipeline.warehouse.sites import sites_in
 from pipeline.warehouse.views import rebuild_views_file, warm_up
@@ -83,6 +83,14 @@ def run_batch(
     exit 2)."""
     if end_ns <= start_ns:
         raise ValueError("--to must be after --from")
+    with shared_handles():  # each table's log read once per version
+        return _run_batch(cfg, warehouse, start_ns, end_ns, executor_kind, families,
+                          progress, site, resume, ignore_place)
+
+
+def _run_batch(cfg: Config, warehouse: Path, start_ns: int, end_ns: int,
+               executor_kind: str | None, families: tuple[str, ...] | None, progress: Any,
+               site: str | None, resume: bool, ignore_place: bool) -> SitesSummary:
     fams = FAMILIES if families is None else tuple(family(name) for name in families)
     require_readable(warehouse, [*(i.table for f in fams for i in f.inputs(cfg)),
                                  *(n for f in fams for n in f.outputs),
@@ -223,13 +231,14 @@ def retire_window(cfg: Config, warehouse: Path, *, site: str, start_ns: int, end
     overlaps: a site left without data there (its files now name another site: a
     half-written file read before its site metadata was) owns no rows there. One commit
     per table, as a batch's (:func:`~pipeline.batch.commit.commit_batch` of no unit)."""
-    start_ns, end_ns, _ = owned_window(warehouse, start_ns, end_ns, site,
-                                       unit_is_live(warehouse, cfg, site))
-    summary = BatchSummary(start_ns=start_ns, end_ns=end_ns, site=site)
-    with deferred_interrupts():
-        commit_batch(warehouse, [], summary, FAMILIES, [])
-    with deferred_interrupts():
-        rebuild_views_file(warehouse)
+    with shared_handles():
+        start_ns, end_ns, _ = owned_window(warehouse, start_ns, end_ns, site,
+                                           unit_is_live(warehouse, cfg, site))
+        summary = BatchSummary(start_ns=start_ns, end_ns=end_ns, site=site)
+        with deferred_interrupts():
+            commit_batch(warehouse, [], summary, FAMILIES, [])
+        with deferred_interrupts():
+            rebuild_views_file(warehouse)
     return summary
 
 
