@@ -173,7 +173,10 @@ def run_site(
     # a skipped family plans no unit; its tables are still committed (empty) for the window
     units = plan_units(warehouse, cfg, start_ns, end_ns, staging,
                        tuple(f for f in fams if f.name in scope.run), committed_cuts, site)
-    edge_before = trailing_digests(warehouse, fams, end_ns, site)
+    # no committed unit starts at the window's end (the batch in time order): nothing
+    # continues its last rows, so neither their digests nor a promise are needed
+    continued = units_after(warehouse, [f.name for f in fams], end_ns, site) is not None
+    edge_before = trailing_digests(warehouse, fams, end_ns, site) if continued else {}
     summary = BatchSummary(start_ns=start_ns, end_ns=end_ns, units_total=len(units),
                            requested=None if requested == (start_ns, end_ns) else requested,
                            site=site, notes=list(scope.notes))
@@ -207,18 +210,20 @@ def run_site(
         staging.rmtree()
         return summary
     t0 = time.perf_counter()
-    record = promise_continuation(warehouse, site, end_ns, edge_before)
+    record = promise_continuation(warehouse, site, end_ns, edge_before) if continued else None
     with deferred_interrupts():  # the window's commit is whole or not begun
         commit_batch(warehouse, manifests, summary, fams, units)
     summary.commit_s = time.perf_counter() - t0
     crash_point("batch.continuation")
-    edge_after = trailing_digests(warehouse, fams, end_ns, site)
-    changed = [name for name, digest in edge_after.items() if digest != edge_before.get(name)]
-    summary.next_window = units_after(warehouse, changed, end_ns, site)
-    if summary.next_window is None:
-        drop_record(record)
-    else:
-        summary.continuation = record
+    if record is not None:
+        edge_after = trailing_digests(warehouse, fams, end_ns, site)
+        changed = [name for name, digest in edge_after.items()
+                   if digest != edge_before.get(name)]
+        summary.next_window = units_after(warehouse, changed, end_ns, site)
+        if summary.next_window is None:
+            drop_record(record)
+        else:
+            summary.continuation = record
     staging.rmtree()
     staging.parent.rmdir_if_empty()  # only when empty: another job may be staging
     return summary
