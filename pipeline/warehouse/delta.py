@@ -93,8 +93,9 @@ def shared_handles() -> Iterator[None]:
     file). A shared table is handed out again only while it is what a fresh open would
     give: still at that version, the version's log entry the same file (its mtime), and,
     for the latest version, no next entry yet. So every commit, this job's or another's,
-    is seen. A job scopes it (``run_batch``): its first open of a table reads the whole
-    log, so a table damaged before the job still stops it. Nested: the outer scope's."""
+    is seen. A job scopes it (``run_batch``; ``surveil run``, over its batches): its first
+    open of a table reads the whole log, so a table damaged before the job still stops
+    it. Nested: the outer scope's."""
     global _handles
     with _handles_lock:
         outer = _handles is not None
