@@ -4,10 +4,12 @@ Guarantee kept here: **ids continue across the trailing edge, even when the job 
 killed.** The units committed after a window stitched their ids to the window's old last
 rows. When a batch changes those rows (the family's seam digest of the rows just before
 the window's end differs), the next committed units are batched again, and so on until a
-window ends as it ended before (``pipeline.batch.driver``). That promise is written down
-before the window's commit (``_continue/``, with the digests of the rows at its end as
-they were: :func:`promise_continuation`); a job killed between the commit and the end of
-the chain leaves the record, and the next batch of the site runs the chain first
+window ends as it ended before (``pipeline.batch.driver``; a window no committed unit
+starts at the end of, the usual batch in time order, has nothing to compare or promise).
+That promise is written down before the window's commit (``_continue/``, with the
+digests of the rows at its end as they were: :func:`promise_continuation`); a job killed
+between the commit and the end of the chain leaves the record, and the next batch of the
+site runs the chain first
 (:func:`left_continuations`).
 """
 

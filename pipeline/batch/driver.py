@@ -45,7 +45,7 @@ from pipeline.families import FAMILIES, family
 from pipeline.family import Family
 from pipeline.signals import deferred_interrupts
 from pipeline.warehouse.crashpoints import crash_point
-from pipeline.warehouse.delta import require_readable
+from pipeline.warehouse.delta import require_readable, shared_handles
 from pipeline.warehouse.location import as_location
 from pipeline.warehouse.sites import sites_in
 from pipeline.warehouse.views import rebuild_views_after_commits, rebuild_views_file, warm_up
@@ -83,6 +83,14 @@ def run_batch(
     exit 2)."""
     if end_ns <= start_ns:
         raise ValueError("--to must be after --from")
+    with shared_handles():  # each table's log read once per version
+        return _run_batch(cfg, warehouse, start_ns, end_ns, executor_kind, families,
+                          progress, site, resume, ignore_place)
+
+
+def _run_batch(cfg: Config, warehouse: Path, start_ns: int, end_ns: int,
+               executor_kind: str | None, families: tuple[str, ...] | None, progress: Any,
+               site: str | None, resume: bool, ignore_place: bool) -> SitesSummary:
     fams = FAMILIES if families is None else tuple(family(name) for name in families)
     require_readable(warehouse, [*(i.table for f in fams for i in f.inputs(cfg)),
                                  *(n for f in fams for n in f.outputs),
@@ -161,7 +169,10 @@ def run_site(
     # a skipped family plans no unit; its tables are still committed (empty) for the window
     units = plan_units(warehouse, cfg, start_ns, end_ns, staging,
                        tuple(f for f in fams if f.name in scope.run), committed_cuts, site)
-    edge_before = trailing_digests(warehouse, fams, end_ns, site)
+    # no committed unit starts at the window's end (the batch in time order): nothing
+    # continues its last rows, so neither their digests nor a promise are needed
+    continued = units_after(warehouse, [f.name for f in fams], end_ns, site) is not None
+    edge_before = trailing_digests(warehouse, fams, end_ns, site) if continued else {}
     summary = BatchSummary(start_ns=start_ns, end_ns=end_ns, units_total=len(units),
                            requested=None if requested == (start_ns, end_ns) else requested,
                            site=site, notes=list(scope.notes))
@@ -195,18 +206,20 @@ def run_site(
         staging.rmtree()
         return summary
     t0 = time.perf_counter()
-    record = promise_continuation(warehouse, site, end_ns, edge_before)
+    record = promise_continuation(warehouse, site, end_ns, edge_before) if continued else None
     with deferred_interrupts():  # the window's commit is whole or not begun
         commit_batch(warehouse, manifests, summary, fams, units)
     summary.commit_s = time.perf_counter() - t0
     crash_point("batch.continuation")
-    edge_after = trailing_digests(warehouse, fams, end_ns, site)
-    changed = [name for name, digest in edge_after.items() if digest != edge_before.get(name)]
-    summary.next_window = units_after(warehouse, changed, end_ns, site)
-    if summary.next_window is None:
-        drop_record(record)
-    else:
-        summary.continuation = record
+    if record is not None:
+        edge_after = trailing_digests(warehouse, fams, end_ns, site)
+        changed = [name for name, digest in edge_after.items()
+                   if digest != edge_before.get(name)]
+        summary.next_window = units_after(warehouse, changed, end_ns, site)
+        if summary.next_window is None:
+            drop_record(record)
+        else:
+            summary.continuation = record
     staging.rmtree()
     staging.parent.rmdir_if_empty()  # only when empty: another job may be staging
     return summary
@@ -219,13 +232,14 @@ def retire_window(cfg: Config, warehouse: Path, *, site: str, start_ns: int, end
     overlaps: a site left without data there (its files now name another site: a
     half-written file read before its site metadata was) owns no rows there. One commit
     per table, as a batch's (:func:`~pipeline.batch.commit.commit_batch` of no unit)."""
-    start_ns, end_ns, _ = owned_window(warehouse, start_ns, end_ns, site,
-                                       unit_is_live(warehouse, cfg, site))
-    summary = BatchSummary(start_ns=start_ns, end_ns=end_ns, site=site)
-    with deferred_interrupts():
-        commit_batch(warehouse, [], summary, FAMILIES, [])
-    with deferred_interrupts():
-        rebuild_views_file(warehouse)
+    with shared_handles():
+        start_ns, end_ns, _ = owned_window(warehouse, start_ns, end_ns, site,
+                                           unit_is_live(warehouse, cfg, site))
+        summary = BatchSummary(start_ns=start_ns, end_ns=end_ns, site=site)
+        with deferred_interrupts():
+            commit_batch(warehouse, [], summary, FAMILIES, [])
+        with deferred_interrupts():
+            rebuild_views_file(warehouse)
     return summary
 
 

@@ -46,7 +46,7 @@ from pipeline.ingest.archive import ImportResult, import_recordings, scan_folder
 from pipeline.ingest.driver import run_ingest
 from pipeline.ingest.plan import IngestUsageError, expand_paths
 from pipeline.units import iso
-from pipeline.warehouse.delta import read_table
+from pipeline.warehouse.delta import read_table, shared_handles
 from pipeline.warehouse.location import as_location
 from pipeline.warehouse.runs import record_run
 
@@ -193,6 +193,21 @@ def run_nightly(cfg: Config, warehouse: Path, *, folders: list[str] | None = Non
     summary.failures += [f"ingest {path}: {status}" for path, status in summary.files.items()
                          if status == "quarantined"]
     moved = _moved_sites(warehouse, before, summary)
+    with shared_handles():  # each table's log read once per version over the run's batches
+        _batch_pending(cfg, warehouse, summary, moved, site=site,
+                       executor_kind=executor_kind, progress=progress,
+                       ignore_place=ignore_place)
+    summary.ended_at_ns = time.time_ns()
+    if not summary.nothing_to_do:
+        record_run(warehouse, cfg, summary)
+    return summary
+
+
+def _batch_pending(cfg: Config, warehouse: Path, summary: RunSummary,
+                   moved: list[tuple[str, int, int]], *, site: str | None,
+                   executor_kind: str | None, progress: Any, ignore_place: bool) -> None:
+    """The chains killed jobs left, then every pending window (each site's alone), into
+    ``summary``."""
     # chains a killed job left (the rows at a window's end changed, the units after it
     # not batched again): done first, even when no window is pending
     resumed = resume_continuations(cfg, warehouse, site=site, executor_kind=executor_kind,
@@ -226,10 +241,6 @@ def run_nightly(cfg: Config, warehouse: Path, *, folders: list[str] | None = Non
         summary.batches.append(batch)
         summary.failures += [f"batch [{iso(start)}, {iso(end)}): {u}"
                              for u in batch.failed_units]
-    summary.ended_at_ns = time.time_ns()
-    if not summary.nothing_to_do:
-        record_run(warehouse, cfg, summary)
-    return summary
 
 
 def _ledger_sites(warehouse: Path) -> dict[str, tuple[str, int | None, int | None]]:

@@ -51,6 +51,7 @@ from pipeline.tables import SITE, conform, constant_strings, spec
 from pipeline.threads import WRITER_NICE, helper_pool
 from pipeline.warehouse.delta import (
     checkpoint_if_due,
+    committed,
     open_delta,
     replace_source_file,
     table_exists,
@@ -668,6 +669,7 @@ def _swap(warehouse: Path, name: str, dt: DeltaTable, staged: list[StagedFile],
             raise
     finally:
         scratch.rmtree()
+    committed(uri, dt)
     checkpoint_if_due(dt, version)
     return "swap"
 

@@ -115,6 +115,34 @@ def test_changed_rows_at_a_windows_end_carry_on_into_the_next_units(e2e, tmp_pat
     assert [c for s in res.by_site.values() for c in s.continued] == []
 
 
+def test_a_window_nothing_continues_reads_no_rows_at_its_end(e2e, tmp_path, monkeypatch):
+    """A window with no committed unit starting at its end (a site batched in time
+    order) reads no seam there, before or after its commit, and promises nothing
+    (``_continue/``); one with units after it compares its end's rows (as above)."""
+    import pipeline.batch.driver
+
+    wh = tmp_path / "wh"
+    shutil.copytree(e2e.warehouse, wh)
+    for name in (*DERIVED, "batch_units"):
+        shutil.rmtree(table_path(wh, name), ignore_errors=True)
+    read_at: list[int] = []
+    digests = pipeline.batch.driver.trailing_digests
+
+    def counted(warehouse, fams, end_ns, site):
+        read_at.append(end_ns)
+        return digests(warehouse, fams, end_ns, site)
+
+    monkeypatch.setattr(pipeline.batch.driver, "trailing_digests", counted)
+    seam = e2e.start_ns + 10 * MIN
+    for start, end in ((e2e.start_ns, seam), (seam, e2e.end_ns)):
+        assert run_batch(e2e.cfg, wh, start_ns=start, end_ns=end,
+                         executor_kind="serial").exit_code == 0
+    assert read_at == [] and not (wh / "_continue").exists()
+    res = run_batch(e2e.cfg, wh, start_ns=e2e.start_ns, end_ns=seam, executor_kind="serial")
+    assert res.exit_code == 0 and read_at == [seam, seam]
+    assert [c for s in res.by_site.values() for c in s.continued] == []  # ends as before
+
+
 class _Killed(BaseException):
     pass
 
