@@ -40,6 +40,7 @@ error is not included (negligible for truth; for AIS, NEES measures consistency 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 import polars as pl
@@ -53,6 +54,7 @@ from pipeline.maritime.config import ReferenceConfig
 from pipeline.maritime.identity import ais_at_epochs
 from pipeline.maritime.reference import Reference, match_by_members, match_points
 from pipeline.maritime.sync import NS, expand_ranges
+from pipeline.spatial import pairs_within
 
 MIN_DECOMPOSITION_SPEED_MPS = 0.5
 """Below this reference speed the course is noise: no along/across-track error."""
@@ -95,6 +97,93 @@ _ERROR_SCHEMA = {
 }
 
 
+@dataclass(frozen=True)
+class TruthPairing:
+    """A unit's track points paired with the simulated truth once, for the scoring here
+    and the SIAP measures (:func:`pipeline.maritime.siap.siap_by_sector`): the truth at
+    the unit's epochs (:func:`truth_at_epochs`, prolonged by ``extrapolate_s``, with
+    ``sampled`` false on the prolonged rows; ordered by (time, vessel)), the track points
+    (time_ns, system_track_id, x_enu_m, y_enu_m: the system tracks at those epochs, in
+    their order) and every (point ``i``, truth row ``j``) of one epoch within ``near_m``
+    (a grid join, :func:`pipeline.spatial.pairs_within`; ``dist_m``; sorted by (i, j));
+    ``epochs_ns``: the epochs, sorted.
+    The scoring takes each point's nearest truth from these pairs (a point with none
+    looks farther), SIAP its gated candidates."""
+
+    truths: pl.DataFrame
+    points: pl.DataFrame
+    i: np.ndarray
+    j: np.ndarray
+    dist_m: np.ndarray
+    near_m: float
+    extrapolate_s: float
+    epochs_ns: np.ndarray
+
+    def nearest(self, t: np.ndarray, track: np.ndarray, x: np.ndarray, y: np.ndarray,
+                max_dist_m: float) -> np.ndarray | None:
+        """Row of ``truths`` nearest to each point (t, track: one of ``points``; x, y)
+        within ``max_dist_m`` (ties: smaller vessel id), -1: none, as
+        :func:`nearest_truth` finds it; None when a point is not among ``points``."""
+        p = _row_of_any(self.points["time_ns"].to_numpy(),
+                        self.points["system_track_id"].to_numpy(), t, track)
+        if (p < 0).any():
+            return None
+        vessel = self.truths["vessel_id"].to_numpy()
+        best = _nearest_of_pairs(self.i, self.j, self.dist_m, vessel, self.points.height,
+                                 max_dist_m)[p]
+        rest = np.flatnonzero(best < 0)
+        if rest.size and self.near_m < max_dist_m:  # nothing within near_m: look farther
+            tt, epochs = self.truths["time_ns"].to_numpy(), self.epochs_ns
+            rx, ry = self.truths["ref_x_m"].to_numpy(), self.truths["ref_y_m"].to_numpy()
+            reach = max_dist_m * (1 + 1e-9) + 1e-6
+            i, j, d2 = pairs_within(np.searchsorted(epochs, t[rest]), x[rest], y[rest], reach,
+                                    np.searchsorted(epochs, tt), rx, ry, cell_m=reach)
+            best[rest] = _nearest_of_pairs(i, j, np.sqrt(d2), vessel, rest.size, max_dist_m)
+        return best
+
+
+def pair_with_truth(system_tracks: pl.DataFrame, truth: pl.DataFrame, epochs_ns: np.ndarray,
+                    region: RegionConfig, *, near_m: float, extrapolate_s: float = 10.0
+                    ) -> TruthPairing:
+    """The :class:`TruthPairing` of the system tracks at ``epochs_ns`` with ``truth``."""
+    epochs = np.unique(np.asarray(epochs_ns, np.int64))
+    at = truth_at_epochs(truth, epochs, region, extrapolate_s=extrapolate_s, velocity=True,
+                         sampled=True)
+    at = at[np.argsort(at["time_ns"].to_numpy(), kind="stable")]
+    points = system_tracks.filter(pl.col("time_ns").is_in(epochs)).select(
+        "time_ns", "system_track_id", "x_enu_m", "y_enu_m")
+    tt = points["time_ns"].to_numpy()
+    reach = near_m * (1 + 1e-9) + 1e-6
+    i, j, d2 = pairs_within(np.searchsorted(epochs, tt), points["x_enu_m"].to_numpy(),
+                            points["y_enu_m"].to_numpy(), reach,
+                            np.searchsorted(epochs, at["time_ns"].to_numpy()),
+                            at["ref_x_m"].to_numpy(), at["ref_y_m"].to_numpy(), cell_m=reach)
+    return TruthPairing(at, points, i, j, np.sqrt(d2), near_m, extrapolate_s, epochs)
+
+
+def _nearest_of_pairs(i: np.ndarray, j: np.ndarray, dist: np.ndarray, vessel: np.ndarray,
+                      n: int, max_dist_m: float) -> np.ndarray:
+    """For each of n points, the ``j`` of its pair (``i``) nearest within ``max_dist_m``
+    (ties: smaller ``vessel[j]``), -1: none."""
+    out = np.full(n, -1, np.int64)
+    ok = dist <= max_dist_m
+    i, j, dist = i[ok], j[ok], dist[ok]
+    order = np.lexsort((vessel[j], dist, i))
+    first = order[np.r_[True, i[order][1:] != i[order][:-1]]] if order.size else order
+    out[i[first]] = j[first]
+    return out
+
+
+def _row_of_any(t: np.ndarray, s: np.ndarray, qt: np.ndarray, qs: np.ndarray) -> np.ndarray:
+    """:func:`_row_of` for rows (t, s) in any order."""
+    ordered = t.size < 2 or bool(np.all((t[1:] > t[:-1]) | ((t[1:] == t[:-1]) & (s[1:] > s[:-1]))))
+    if ordered:
+        return _row_of(t, s, qt, qs)
+    order = np.lexsort((s, t))
+    row = _row_of(t[order], s[order], qt, qs)
+    return np.where(row >= 0, order[np.maximum(row, 0)], -1)
+
+
 def score_tracks(
     system_tracks: pl.DataFrame,
     associations: pl.DataFrame,
@@ -109,6 +198,7 @@ def score_tracks(
     reference: Reference | None = None,
     reference_cfg: ReferenceConfig | None = None,
     sites: Sequence[RadarSite] = (),
+    pairing: TruthPairing | None = None,
 ) -> pl.DataFrame:
     """Errors of fused and radar points against truth (else the reconstructed
     ``reference``, else AIS), track_errors columns.
@@ -117,13 +207,14 @@ def score_tracks(
     sigma_y_m, cov_xy_m2, optional sector, mmsi (AIS reference only); associations:
     time_ns, system_track_id, site_id, x_enu_m, y_enu_m, P_xx/P_yy/P_xy (or the sigma
     form), optional sector; truth: time_ns, vessel_id, mmsi, lat_deg, lon_deg. ``sites``:
-    the radar sites (range/azimuth errors of their points).
+    the radar sites (range/azimuth errors of their points). ``pairing``: the system
+    tracks already paired with this truth (:func:`pair_with_truth`, shared with SIAP).
     """
     fused = _with_sector(system_tracks, sectors, region)
     radar = _with_sector(associations, sectors, region)
     if truth is not None and truth.height:
         out = _truth_errors(fused, radar, truth, region, max_reference_distance_m,
-                            truth_extrapolation_s)
+                            truth_extrapolation_s, pairing)
         return _decompose(out, sites, region)
     if reference is not None:
         rcfg = reference_cfg or ReferenceConfig()
@@ -258,9 +349,11 @@ def _truth_errors(
     region: RegionConfig,
     max_dist_m: float,
     extrapolate_s: float,
+    pairing: TruthPairing | None = None,
 ) -> pl.DataFrame:
     """track_errors rows against truth, built positionally: the nearest truth vessel of
-    each fused point (:func:`nearest_truth`) is also the reference of the radar points of
+    each fused point (:func:`nearest_truth`, or the ``pairing``'s) is also the reference
+    of the radar points of
     its (epoch, system track), found by ``searchsorted`` on the fused keys (associations
     and system tracks are both sorted by (time_ns, system_track_id)); the rows come out
     in (time_ns, system_track_id, source) order without a join."""
@@ -269,10 +362,16 @@ def _truth_errors(
     fused = fused.sort("time_ns", "system_track_id")
     ft = fused["time_ns"].to_numpy()
     fs = fused["system_track_id"].to_numpy()
-    at = truth_at_epochs(truth, np.unique(ft), region, extrapolate_s=extrapolate_s,
-                         velocity=True)
-    ref_row = nearest_truth(ft, fused["x_enu_m"].to_numpy(), fused["y_enu_m"].to_numpy(),
-                            at, max_dist_m)
+    fx, fy = fused["x_enu_m"].to_numpy(), fused["y_enu_m"].to_numpy()
+    if pairing is not None and pairing.extrapolate_s != extrapolate_s:
+        raise ValueError("score_tracks: the pairing prolongs the truth by another time")
+    ref_row = None if pairing is None else pairing.nearest(ft, fs, fx, fy, max_dist_m)
+    if ref_row is None:
+        at = truth_at_epochs(truth, np.unique(ft), region, extrapolate_s=extrapolate_s,
+                             velocity=True)
+        ref_row = nearest_truth(ft, fx, fy, at, max_dist_m)
+    else:
+        at = pairing.truths
     ref_x, ref_y = at["ref_x_m"].to_numpy(), at["ref_y_m"].to_numpy()
     ref_vx, ref_vy = at["ref_vx_mps"].to_numpy(), at["ref_vy_mps"].to_numpy()
     ref_id, ref_mmsi = at["vessel_id"], at["mmsi"]
@@ -385,6 +484,7 @@ def truth_at_epochs(
     *,
     extrapolate_s: float = 0.0,
     velocity: bool = False,
+    sampled: bool = False,
 ) -> pl.DataFrame:
     """Truth interpolated linearly to each epoch inside each vessel's sampled span, and
     extrapolated linearly (velocity of its last two samples) up to ``extrapolate_s``
@@ -393,7 +493,8 @@ def truth_at_epochs(
 
     Returns time_ns (epoch), vessel_id, mmsi, ref_x_m, ref_y_m (regional ENU, m), and
     with ``velocity`` ref_vx_mps, ref_vy_mps: that of the segment interpolated (0 for a
-    vessel with one sample).
+    vessel with one sample); with ``sampled`` a column of that name, false on the rows
+    past a vessel's last sample.
     """
     epochs = np.unique(np.asarray(epochs_ns, np.int64))
     tr = (
@@ -433,6 +534,8 @@ def truth_at_epochs(
     if velocity:
         cols["ref_vx_mps"] = (x[b] - x[a]) / dt * NS
         cols["ref_vy_mps"] = (y[b] - y[a]) / dt * NS
+    if sampled:
+        cols["sampled"] = ~last[row] | (e == t[row])
     return pl.DataFrame(
         cols, schema_overrides={"time_ns": pl.Int64, "vessel_id": pl.Int64, "mmsi": pl.Int64})
 
