@@ -163,13 +163,18 @@ def pair_with_truth(system_tracks: pl.DataFrame, truth: pl.DataFrame, epochs_ns:
 
 def _nearest_of_pairs(i: np.ndarray, j: np.ndarray, dist: np.ndarray, vessel: np.ndarray,
                       n: int, max_dist_m: float) -> np.ndarray:
-    """For each of n points, the ``j`` of its pair (``i``) nearest within ``max_dist_m``
-    (ties: smaller ``vessel[j]``), -1: none."""
+    """For each of n points, the ``j`` of its pair (``i``, sorted) nearest within
+    ``max_dist_m`` (ties: smaller ``vessel[j]``, one row per vessel and epoch), -1: none."""
     out = np.full(n, -1, np.int64)
     ok = dist <= max_dist_m
     i, j, dist = i[ok], j[ok], dist[ok]
-    order = np.lexsort((vessel[j], dist, i))
-    first = order[np.r_[True, i[order][1:] != i[order][:-1]]] if order.size else order
+    if i.size == 0:
+        return out
+    start = np.flatnonzero(np.r_[True, i[1:] != i[:-1]])
+    count = np.diff(np.r_[start, i.size])
+    nearest = dist == np.repeat(np.minimum.reduceat(dist, start), count)
+    v = np.where(nearest, vessel[j], np.iinfo(np.int64).max)
+    first = nearest & (v == np.repeat(np.minimum.reduceat(v, start), count))
     out[i[first]] = j[first]
     return out
 
@@ -296,50 +301,69 @@ def _reconstructed_errors(fused: pl.DataFrame, radar: pl.DataFrame, ref: Referen
     ref_row = match_by_members(f_of_r, owner, fused.height, ft, fused["x_enu_m"].to_numpy(),
                                fused["y_enu_m"].to_numpy(), at)
     cols = {k: at[k].to_numpy() for k in ("x", "y", "vx", "vy", "var_x", "var_y", "p95_m")}
-    parts = []
-    for pts, f_rows, source in (
-        (fused, np.arange(fused.height), pl.lit("fused")),
-        (radar, f_of_r, pl.col("site_id")),
-    ):
+    ref = {"x": cols["x"], "y": cols["y"], "vx": cols["vx"], "vy": cols["vy"],
+           "p95": cols["p95_m"], "var": cols["var_x"] + cols["var_y"]}
+    return _scored_points(fused, radar, f_of_r, ref_row, ref, at["mmsi"], at["mmsi"],
+                          "reconstructed")
+
+
+def _scored_points(fused: pl.DataFrame, radar: pl.DataFrame, f_of_r: np.ndarray,
+                   ref_row: np.ndarray, ref: dict[str, np.ndarray], ref_id: pl.Series,
+                   ref_mmsi: pl.Series, kind: str) -> pl.DataFrame:
+    """The rows of every fused point with a reference (``ref_row``: its row of the
+    reference arrays ``ref``: x, y, vx, vy and optionally p95, var; -1: none) and of the
+    radar points of its (epoch, system track) (``f_of_r``: a radar row's fused row)
+    against the same one, in (time_ns, system_track_id, source) order: the fused rows
+    are sorted by (time, track), so a fused row and a source's rank as a string order
+    all of them at once; every column is gathered in that order once."""
+    names = sorted({"fused", *radar["site_id"].unique().to_list()})
+    parts, rows, f_sel, rank = [], [], [], []
+    for pts, f_rows in ((fused, np.arange(fused.height)), (radar, f_of_r)):
         if pts.height == 0:
             continue
-        k = np.where(f_rows >= 0, ref_row[np.maximum(f_rows, 0)], -1)
-        sel = np.flatnonzero(k >= 0)
-        k = k[sel]
-        pxx, pyy, pxy = (p[sel] for p in position_covariance(pts))
-        ex = pts["x_enu_m"].to_numpy()[sel] - cols["x"][k]
-        ey = pts["y_enu_m"].to_numpy()[sel] - cols["y"][k]
-        nees = (pyy * ex * ex - 2.0 * pxy * ex * ey + pxx * ey * ey) / (pxx * pyy - pxy**2)
-        rows = pts.select("time_ns", "system_track_id", source.alias("source"), "sector")[sel]
-        mmsi = at["mmsi"].gather(k)
-        parts.append(rows.with_columns(
-            pl.lit("reconstructed").alias("reference"),
-            mmsi.alias("reference_id"),
-            mmsi.alias("reference_mmsi"),
-            pl.Series("error_east_m", ex),
-            pl.Series("error_north_m", ey),
-            pl.Series("error_m", np.hypot(ex, ey)),
-            pl.Series("nees", nees),
-            pl.Series("reference_p95_m", cols["p95_m"][k]),
-            pl.Series("_ref_x", cols["x"][k]),
-            pl.Series("_ref_y", cols["y"][k]),
-            pl.Series("_ref_vx", cols["vx"][k]),
-            pl.Series("_ref_vy", cols["vy"][k]),
-            pl.Series("_ref_var", cols["var_x"][k] + cols["var_y"][k]),
-        ))
-    if not parts:
+        # (radar rows without a fused row have no reference: as the join of the AIS path)
+        sel = np.flatnonzero(np.where(f_rows >= 0, ref_row[np.maximum(f_rows, 0)], -1) >= 0)
+        parts.append(pts)
+        rows.append(sel)
+        f_sel.append(f_rows[sel])
+        rank.append(np.full(sel.size, names.index("fused")) if pts is fused else
+                    pts["site_id"].gather(sel).replace_strict(
+                        names, list(range(len(names))), return_dtype=pl.Int64).to_numpy())
+    f_all, rank_all = np.concatenate(f_sel), np.concatenate(rank)
+    if f_all.size == 0:
         return pl.DataFrame(schema=_ERROR_SCHEMA)
-    return _in_key_order(pl.concat(parts))
+    order = np.argsort(f_all * len(names) + rank_all, kind="stable")
 
+    def ordered(per_part: list[np.ndarray]) -> np.ndarray:
+        return np.concatenate([v[sel] for v, sel in zip(per_part, rows, strict=True)])[order]
 
-def _in_key_order(out: pl.DataFrame) -> pl.DataFrame:
-    """(time, track) order is shared; within it sources sort as strings."""
-    sources = out["source"]
-    names = sorted(sources.unique().to_list())
-    rank = sources.replace_strict(names, list(range(len(names))), return_dtype=pl.Int32)
-    order = np.lexsort((rank.to_numpy(), out["system_track_id"].to_numpy(),
-                        out["time_ns"].to_numpy()))
-    return out[order]
+    def column(name: str) -> np.ndarray:
+        return ordered([p[name].to_numpy() for p in parts])
+
+    covariances = [position_covariance(p) for p in parts]
+    P_xx, P_yy, P_xy = (ordered([c[n] for c in covariances]) for n in range(3))
+    k = ref_row[f_all[order]]
+    ex = column("x_enu_m") - ref["x"][k]
+    ey = column("y_enu_m") - ref["y"][k]
+    nees = (P_yy * ex * ex - 2.0 * P_xy * ex * ey + P_xx * ey * ey) / (P_xx * P_yy - P_xy**2)
+    out = pl.DataFrame({
+        "time_ns": column("time_ns"),
+        "system_track_id": column("system_track_id"),
+        "source": pl.Series(names).gather(rank_all[order]),
+        "sector": pl.concat([p["sector"].gather(sel) for p, sel in zip(parts, rows, strict=True)]
+                            ).gather(order),
+        "reference": pl.Series([kind]).new_from_index(0, order.size),
+        "reference_id": ref_id.gather(k),
+        "reference_mmsi": ref_mmsi.gather(k),
+        "error_east_m": ex, "error_north_m": ey, "error_m": np.hypot(ex, ey), "nees": nees,
+    })
+    extra = {"reference_p95_m": ref["p95"][k]} if "p95" in ref else {}
+    return out.with_columns(
+        *(pl.Series(n, v) for n, v in extra.items()),
+        pl.Series("_ref_x", ref["x"][k]), pl.Series("_ref_y", ref["y"][k]),
+        pl.Series("_ref_vx", ref["vx"][k]), pl.Series("_ref_vy", ref["vy"][k]),
+        pl.Series("_ref_var", ref["var"][k]) if "var" in ref else pl.lit(0.0).alias("_ref_var"),
+    )
 
 
 def _truth_errors(
@@ -372,46 +396,12 @@ def _truth_errors(
         ref_row = nearest_truth(ft, fx, fy, at, max_dist_m)
     else:
         at = pairing.truths
-    ref_x, ref_y = at["ref_x_m"].to_numpy(), at["ref_y_m"].to_numpy()
-    ref_vx, ref_vy = at["ref_vx_mps"].to_numpy(), at["ref_vy_mps"].to_numpy()
-    ref_id, ref_mmsi = at["vessel_id"], at["mmsi"]
+    ref = {"x": at["ref_x_m"].to_numpy(), "y": at["ref_y_m"].to_numpy(),
+           "vx": at["ref_vx_mps"].to_numpy(), "vy": at["ref_vy_mps"].to_numpy()}
     # radar rows -> their fused row
-    rt = radar["time_ns"].to_numpy()
-    rs = radar["system_track_id"].to_numpy()
-    f_of_r = _row_of(ft, fs, rt, rs)
-    parts = []
-    for pts, f_rows, source in (
-        (fused, np.arange(fused.height), pl.lit("fused")),
-        (radar, f_of_r, pl.col("site_id")),
-    ):
-        if pts.height == 0:
-            continue
-        # (radar rows without a fused row have no reference: as the join of the AIS path)
-        k = np.where(f_rows >= 0, ref_row[np.maximum(f_rows, 0)], -1)
-        sel = np.flatnonzero(k >= 0)
-        k = k[sel]
-        P_xx, P_yy, P_xy = (p[sel] for p in position_covariance(pts))
-        ex = pts["x_enu_m"].to_numpy()[sel] - ref_x[k]
-        ey = pts["y_enu_m"].to_numpy()[sel] - ref_y[k]
-        nees = (P_yy * ex * ex - 2.0 * P_xy * ex * ey + P_xx * ey * ey) / (P_xx * P_yy - P_xy**2)
-        rows = pts.select("time_ns", "system_track_id", source.alias("source"), "sector")[sel]
-        parts.append(rows.with_columns(
-            pl.lit("truth").alias("reference"),
-            ref_id.gather(k).alias("reference_id"),
-            ref_mmsi.gather(k).alias("reference_mmsi"),
-            pl.Series("error_east_m", ex),
-            pl.Series("error_north_m", ey),
-            pl.Series("error_m", np.hypot(ex, ey)),
-            pl.Series("nees", nees),
-            pl.Series("_ref_x", ref_x[k]),
-            pl.Series("_ref_y", ref_y[k]),
-            pl.Series("_ref_vx", ref_vx[k]),
-            pl.Series("_ref_vy", ref_vy[k]),
-            pl.lit(0.0).alias("_ref_var"),
-        ))
-    if not parts:
-        return pl.DataFrame(schema=_ERROR_SCHEMA)
-    return _in_key_order(pl.concat(parts))
+    f_of_r = _row_of(ft, fs, radar["time_ns"].to_numpy(), radar["system_track_id"].to_numpy())
+    return _scored_points(fused, radar, f_of_r, ref_row, ref, at["vessel_id"], at["mmsi"],
+                          "truth")
 
 
 def _row_of(t: np.ndarray, s: np.ndarray, qt: np.ndarray, qs: np.ndarray) -> np.ndarray:
