@@ -9,8 +9,8 @@ pairs (a, b) of the same group with |p_a - p_b| <= reach_a: the same pairs as a 
 (n_a, n_b) distance matrix per group, without building one.
 
 Used where per-epoch dense matrices made the batch quadratic in the number of targets:
-AIS-to-track gating (identity), truth references (score), track-to-truth candidates
-(siap).
+AIS-to-track gating (identity), the track-to-truth pairing that the scoring and SIAP
+share (score), the channel integrity's candidates.
 """
 
 from __future__ import annotations

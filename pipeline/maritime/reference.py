@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import polars as pl
@@ -130,6 +131,15 @@ class Reference:
         t = np.rint(f.t[cells] * NS).astype(np.int64) + self.t0_ns
         return t, f.ps[..., 0][cells], f.ps[..., 1][cells], np.cumsum(n) - n, n
 
+    @cached_property
+    def _flat_knots(self) -> tuple[np.ndarray, ...]:
+        """The knots' time (s), x, y, vx, vy flat, row after row, and each row's first
+        (flat gathers, 1-D, rather than (row, col) fancy indexing of the padded grids)."""
+        f, n = self.fit, self.pk.lengths
+        cells = n[:, None] > np.arange(f.t.shape[1])[None, :]
+        return (f.t[cells], f.ps[..., 0][cells], f.ps[..., 1][cells], f.vs[..., 0][cells],
+                f.vs[..., 1][cells], np.cumsum(n) - n)
+
     def position(self, row: np.ndarray, t_ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The reference position (x, y, m) of rows ``row`` at ``t_ns`` interpolated
         linearly between its smoothed knots (moved on with the knot velocity outside the
@@ -139,13 +149,9 @@ class Reference:
         tq = (np.asarray(t_ns, np.int64) - self.t0_ns) / NS
         if row.size == 0:
             return np.empty(0), np.empty(0)
-        f, n = self.fit, self.pk.lengths
-        col = _last_at_or_before(f.t, n, row, tq)
-        # flat gathers (1-D) rather than (row, col) fancy indexing of the padded grids
-        cells = n[:, None] > np.arange(f.t.shape[1])[None, :]
-        t_k, x_k, y_k = f.t[cells], f.ps[..., 0][cells], f.ps[..., 1][cells]
-        vx_k, vy_k = f.vs[..., 0][cells], f.vs[..., 1][cells]
-        start = np.cumsum(n) - n
+        n = self.pk.lengths
+        col = _last_at_or_before(self.fit.t, n, row, tq)
+        t_k, x_k, y_k, vx_k, vy_k, start = self._flat_knots
         k = start[row] + np.clip(col, 0, None)
         last = start[row] + n[row] - 1
         k1 = np.minimum(k + 1, last)
@@ -376,8 +382,9 @@ def ref_rows_of(ref: Reference, target: np.ndarray, t_ns: np.ndarray) -> np.ndar
     row, idx = expand_ranges(lo, hi)
     inside = (t_ns[row] >= f[idx]) & (t_ns[row] <= la[idx])
     row, idx = row[inside], idx[inside]
-    u, first_of = np.unique(row, return_index=True)  # the first matching row wins
-    out[u] = order[idx[first_of]]
+    # the first matching row wins (``row`` is sorted: expand_ranges repeats in order)
+    first_of = np.flatnonzero(np.r_[True, row[1:] != row[:-1]]) if row.size else row
+    out[row[first_of]] = order[idx[first_of]]
     return out
 
 

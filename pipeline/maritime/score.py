@@ -40,6 +40,7 @@ error is not included (negligible for truth; for AIS, NEES measures consistency 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 import polars as pl
@@ -53,6 +54,7 @@ from pipeline.maritime.config import ReferenceConfig
 from pipeline.maritime.identity import ais_at_epochs
 from pipeline.maritime.reference import Reference, match_by_members, match_points
 from pipeline.maritime.sync import NS, expand_ranges
+from pipeline.spatial import pairs_within
 
 MIN_DECOMPOSITION_SPEED_MPS = 0.5
 """Below this reference speed the course is noise: no along/across-track error."""
@@ -95,6 +97,98 @@ _ERROR_SCHEMA = {
 }
 
 
+@dataclass(frozen=True)
+class TruthPairing:
+    """A unit's track points paired with the simulated truth once, for the scoring here
+    and the SIAP measures (:func:`pipeline.maritime.siap.siap_by_sector`): the truth at
+    the unit's epochs (:func:`truth_at_epochs`, prolonged by ``extrapolate_s``, with
+    ``sampled`` false on the prolonged rows; ordered by (time, vessel)), the track points
+    (time_ns, system_track_id, x_enu_m, y_enu_m: the system tracks at those epochs, in
+    their order) and every (point ``i``, truth row ``j``) of one epoch within ``near_m``
+    (a grid join, :func:`pipeline.spatial.pairs_within`; ``dist_m``; sorted by (i, j));
+    ``epochs_ns``: the epochs, sorted.
+    The scoring takes each point's nearest truth from these pairs (a point with none
+    looks farther), SIAP its gated candidates."""
+
+    truths: pl.DataFrame
+    points: pl.DataFrame
+    i: np.ndarray
+    j: np.ndarray
+    dist_m: np.ndarray
+    near_m: float
+    extrapolate_s: float
+    epochs_ns: np.ndarray
+
+    def nearest(self, t: np.ndarray, track: np.ndarray, x: np.ndarray, y: np.ndarray,
+                max_dist_m: float) -> np.ndarray | None:
+        """Row of ``truths`` nearest to each point (t, track: one of ``points``; x, y)
+        within ``max_dist_m`` (ties: smaller vessel id), -1: none, as
+        :func:`nearest_truth` finds it; None when a point is not among ``points``."""
+        p = _row_of_any(self.points["time_ns"].to_numpy(),
+                        self.points["system_track_id"].to_numpy(), t, track)
+        if (p < 0).any():
+            return None
+        vessel = self.truths["vessel_id"].to_numpy()
+        best = _nearest_of_pairs(self.i, self.j, self.dist_m, vessel, self.points.height,
+                                 max_dist_m)[p]
+        rest = np.flatnonzero(best < 0)
+        if rest.size and self.near_m < max_dist_m:  # nothing within near_m: look farther
+            tt, epochs = self.truths["time_ns"].to_numpy(), self.epochs_ns
+            rx, ry = self.truths["ref_x_m"].to_numpy(), self.truths["ref_y_m"].to_numpy()
+            reach = max_dist_m * (1 + 1e-9) + 1e-6
+            i, j, d2 = pairs_within(np.searchsorted(epochs, t[rest]), x[rest], y[rest], reach,
+                                    np.searchsorted(epochs, tt), rx, ry, cell_m=reach)
+            best[rest] = _nearest_of_pairs(i, j, np.sqrt(d2), vessel, rest.size, max_dist_m)
+        return best
+
+
+def pair_with_truth(system_tracks: pl.DataFrame, truth: pl.DataFrame, epochs_ns: np.ndarray,
+                    region: RegionConfig, *, near_m: float, extrapolate_s: float = 10.0
+                    ) -> TruthPairing:
+    """The :class:`TruthPairing` of the system tracks at ``epochs_ns`` with ``truth``."""
+    epochs = np.unique(np.asarray(epochs_ns, np.int64))
+    at = truth_at_epochs(truth, epochs, region, extrapolate_s=extrapolate_s, velocity=True,
+                         sampled=True)
+    at = at[np.argsort(at["time_ns"].to_numpy(), kind="stable")]
+    points = system_tracks.filter(pl.col("time_ns").is_in(epochs)).select(
+        "time_ns", "system_track_id", "x_enu_m", "y_enu_m")
+    tt = points["time_ns"].to_numpy()
+    reach = near_m * (1 + 1e-9) + 1e-6
+    i, j, d2 = pairs_within(np.searchsorted(epochs, tt), points["x_enu_m"].to_numpy(),
+                            points["y_enu_m"].to_numpy(), reach,
+                            np.searchsorted(epochs, at["time_ns"].to_numpy()),
+                            at["ref_x_m"].to_numpy(), at["ref_y_m"].to_numpy(), cell_m=reach)
+    return TruthPairing(at, points, i, j, np.sqrt(d2), near_m, extrapolate_s, epochs)
+
+
+def _nearest_of_pairs(i: np.ndarray, j: np.ndarray, dist: np.ndarray, vessel: np.ndarray,
+                      n: int, max_dist_m: float) -> np.ndarray:
+    """For each of n points, the ``j`` of its pair (``i``, sorted) nearest within
+    ``max_dist_m`` (ties: smaller ``vessel[j]``, one row per vessel and epoch), -1: none."""
+    out = np.full(n, -1, np.int64)
+    ok = dist <= max_dist_m
+    i, j, dist = i[ok], j[ok], dist[ok]
+    if i.size == 0:
+        return out
+    start = np.flatnonzero(np.r_[True, i[1:] != i[:-1]])
+    count = np.diff(np.r_[start, i.size])
+    nearest = dist == np.repeat(np.minimum.reduceat(dist, start), count)
+    v = np.where(nearest, vessel[j], np.iinfo(np.int64).max)
+    first = nearest & (v == np.repeat(np.minimum.reduceat(v, start), count))
+    out[i[first]] = j[first]
+    return out
+
+
+def _row_of_any(t: np.ndarray, s: np.ndarray, qt: np.ndarray, qs: np.ndarray) -> np.ndarray:
+    """:func:`_row_of` for rows (t, s) in any order."""
+    ordered = t.size < 2 or bool(np.all((t[1:] > t[:-1]) | ((t[1:] == t[:-1]) & (s[1:] > s[:-1]))))
+    if ordered:
+        return _row_of(t, s, qt, qs)
+    order = np.lexsort((s, t))
+    row = _row_of(t[order], s[order], qt, qs)
+    return np.where(row >= 0, order[np.maximum(row, 0)], -1)
+
+
 def score_tracks(
     system_tracks: pl.DataFrame,
     associations: pl.DataFrame,
@@ -109,6 +203,7 @@ def score_tracks(
     reference: Reference | None = None,
     reference_cfg: ReferenceConfig | None = None,
     sites: Sequence[RadarSite] = (),
+    pairing: TruthPairing | None = None,
 ) -> pl.DataFrame:
     """Errors of fused and radar points against truth (else the reconstructed
     ``reference``, else AIS), track_errors columns.
@@ -117,13 +212,14 @@ def score_tracks(
     sigma_y_m, cov_xy_m2, optional sector, mmsi (AIS reference only); associations:
     time_ns, system_track_id, site_id, x_enu_m, y_enu_m, P_xx/P_yy/P_xy (or the sigma
     form), optional sector; truth: time_ns, vessel_id, mmsi, lat_deg, lon_deg. ``sites``:
-    the radar sites (range/azimuth errors of their points).
+    the radar sites (range/azimuth errors of their points). ``pairing``: the system
+    tracks already paired with this truth (:func:`pair_with_truth`, shared with SIAP).
     """
     fused = _with_sector(system_tracks, sectors, region)
     radar = _with_sector(associations, sectors, region)
     if truth is not None and truth.height:
         out = _truth_errors(fused, radar, truth, region, max_reference_distance_m,
-                            truth_extrapolation_s)
+                            truth_extrapolation_s, pairing)
         return _decompose(out, sites, region)
     if reference is not None:
         rcfg = reference_cfg or ReferenceConfig()
@@ -205,50 +301,69 @@ def _reconstructed_errors(fused: pl.DataFrame, radar: pl.DataFrame, ref: Referen
     ref_row = match_by_members(f_of_r, owner, fused.height, ft, fused["x_enu_m"].to_numpy(),
                                fused["y_enu_m"].to_numpy(), at)
     cols = {k: at[k].to_numpy() for k in ("x", "y", "vx", "vy", "var_x", "var_y", "p95_m")}
-    parts = []
-    for pts, f_rows, source in (
-        (fused, np.arange(fused.height), pl.lit("fused")),
-        (radar, f_of_r, pl.col("site_id")),
-    ):
+    ref = {"x": cols["x"], "y": cols["y"], "vx": cols["vx"], "vy": cols["vy"],
+           "p95": cols["p95_m"], "var": cols["var_x"] + cols["var_y"]}
+    return _scored_points(fused, radar, f_of_r, ref_row, ref, at["mmsi"], at["mmsi"],
+                          "reconstructed")
+
+
+def _scored_points(fused: pl.DataFrame, radar: pl.DataFrame, f_of_r: np.ndarray,
+                   ref_row: np.ndarray, ref: dict[str, np.ndarray], ref_id: pl.Series,
+                   ref_mmsi: pl.Series, kind: str) -> pl.DataFrame:
+    """The rows of every fused point with a reference (``ref_row``: its row of the
+    reference arrays ``ref``: x, y, vx, vy and optionally p95, var; -1: none) and of the
+    radar points of its (epoch, system track) (``f_of_r``: a radar row's fused row)
+    against the same one, in (time_ns, system_track_id, source) order: the fused rows
+    are sorted by (time, track), so a fused row and a source's rank as a string order
+    all of them at once; every column is gathered in that order once."""
+    names = sorted({"fused", *radar["site_id"].unique().to_list()})
+    parts, rows, f_sel, rank = [], [], [], []
+    for pts, f_rows in ((fused, np.arange(fused.height)), (radar, f_of_r)):
         if pts.height == 0:
             continue
-        k = np.where(f_rows >= 0, ref_row[np.maximum(f_rows, 0)], -1)
-        sel = np.flatnonzero(k >= 0)
-        k = k[sel]
-        pxx, pyy, pxy = (p[sel] for p in position_covariance(pts))
-        ex = pts["x_enu_m"].to_numpy()[sel] - cols["x"][k]
-        ey = pts["y_enu_m"].to_numpy()[sel] - cols["y"][k]
-        nees = (pyy * ex * ex - 2.0 * pxy * ex * ey + pxx * ey * ey) / (pxx * pyy - pxy**2)
-        rows = pts.select("time_ns", "system_track_id", source.alias("source"), "sector")[sel]
-        mmsi = at["mmsi"].gather(k)
-        parts.append(rows.with_columns(
-            pl.lit("reconstructed").alias("reference"),
-            mmsi.alias("reference_id"),
-            mmsi.alias("reference_mmsi"),
-            pl.Series("error_east_m", ex),
-            pl.Series("error_north_m", ey),
-            pl.Series("error_m", np.hypot(ex, ey)),
-            pl.Series("nees", nees),
-            pl.Series("reference_p95_m", cols["p95_m"][k]),
-            pl.Series("_ref_x", cols["x"][k]),
-            pl.Series("_ref_y", cols["y"][k]),
-            pl.Series("_ref_vx", cols["vx"][k]),
-            pl.Series("_ref_vy", cols["vy"][k]),
-            pl.Series("_ref_var", cols["var_x"][k] + cols["var_y"][k]),
-        ))
-    if not parts:
+        # (radar rows without a fused row have no reference: as the join of the AIS path)
+        sel = np.flatnonzero(np.where(f_rows >= 0, ref_row[np.maximum(f_rows, 0)], -1) >= 0)
+        parts.append(pts)
+        rows.append(sel)
+        f_sel.append(f_rows[sel])
+        rank.append(np.full(sel.size, names.index("fused")) if pts is fused else
+                    pts["site_id"].gather(sel).replace_strict(
+                        names, list(range(len(names))), return_dtype=pl.Int64).to_numpy())
+    f_all, rank_all = np.concatenate(f_sel), np.concatenate(rank)
+    if f_all.size == 0:
         return pl.DataFrame(schema=_ERROR_SCHEMA)
-    return _in_key_order(pl.concat(parts))
+    order = np.argsort(f_all * len(names) + rank_all, kind="stable")
 
+    def ordered(per_part: list[np.ndarray]) -> np.ndarray:
+        return np.concatenate([v[sel] for v, sel in zip(per_part, rows, strict=True)])[order]
 
-def _in_key_order(out: pl.DataFrame) -> pl.DataFrame:
-    """(time, track) order is shared; within it sources sort as strings."""
-    sources = out["source"]
-    names = sorted(sources.unique().to_list())
-    rank = sources.replace_strict(names, list(range(len(names))), return_dtype=pl.Int32)
-    order = np.lexsort((rank.to_numpy(), out["system_track_id"].to_numpy(),
-                        out["time_ns"].to_numpy()))
-    return out[order]
+    def column(name: str) -> np.ndarray:
+        return ordered([p[name].to_numpy() for p in parts])
+
+    covariances = [position_covariance(p) for p in parts]
+    P_xx, P_yy, P_xy = (ordered([c[n] for c in covariances]) for n in range(3))
+    k = ref_row[f_all[order]]
+    ex = column("x_enu_m") - ref["x"][k]
+    ey = column("y_enu_m") - ref["y"][k]
+    nees = (P_yy * ex * ex - 2.0 * P_xy * ex * ey + P_xx * ey * ey) / (P_xx * P_yy - P_xy**2)
+    out = pl.DataFrame({
+        "time_ns": column("time_ns"),
+        "system_track_id": column("system_track_id"),
+        "source": pl.Series(names).gather(rank_all[order]),
+        "sector": pl.concat([p["sector"].gather(sel) for p, sel in zip(parts, rows, strict=True)]
+                            ).gather(order),
+        "reference": pl.Series([kind]).new_from_index(0, order.size),
+        "reference_id": ref_id.gather(k),
+        "reference_mmsi": ref_mmsi.gather(k),
+        "error_east_m": ex, "error_north_m": ey, "error_m": np.hypot(ex, ey), "nees": nees,
+    })
+    extra = {"reference_p95_m": ref["p95"][k]} if "p95" in ref else {}
+    return out.with_columns(
+        *(pl.Series(n, v) for n, v in extra.items()),
+        pl.Series("_ref_x", ref["x"][k]), pl.Series("_ref_y", ref["y"][k]),
+        pl.Series("_ref_vx", ref["vx"][k]), pl.Series("_ref_vy", ref["vy"][k]),
+        pl.Series("_ref_var", ref["var"][k]) if "var" in ref else pl.lit(0.0).alias("_ref_var"),
+    )
 
 
 def _truth_errors(
@@ -258,9 +373,11 @@ def _truth_errors(
     region: RegionConfig,
     max_dist_m: float,
     extrapolate_s: float,
+    pairing: TruthPairing | None = None,
 ) -> pl.DataFrame:
     """track_errors rows against truth, built positionally: the nearest truth vessel of
-    each fused point (:func:`nearest_truth`) is also the reference of the radar points of
+    each fused point (:func:`nearest_truth`, or the ``pairing``'s) is also the reference
+    of the radar points of
     its (epoch, system track), found by ``searchsorted`` on the fused keys (associations
     and system tracks are both sorted by (time_ns, system_track_id)); the rows come out
     in (time_ns, system_track_id, source) order without a join."""
@@ -269,50 +386,22 @@ def _truth_errors(
     fused = fused.sort("time_ns", "system_track_id")
     ft = fused["time_ns"].to_numpy()
     fs = fused["system_track_id"].to_numpy()
-    at = truth_at_epochs(truth, np.unique(ft), region, extrapolate_s=extrapolate_s,
-                         velocity=True)
-    ref_row = nearest_truth(ft, fused["x_enu_m"].to_numpy(), fused["y_enu_m"].to_numpy(),
-                            at, max_dist_m)
-    ref_x, ref_y = at["ref_x_m"].to_numpy(), at["ref_y_m"].to_numpy()
-    ref_vx, ref_vy = at["ref_vx_mps"].to_numpy(), at["ref_vy_mps"].to_numpy()
-    ref_id, ref_mmsi = at["vessel_id"], at["mmsi"]
+    fx, fy = fused["x_enu_m"].to_numpy(), fused["y_enu_m"].to_numpy()
+    if pairing is not None and pairing.extrapolate_s != extrapolate_s:
+        raise ValueError("score_tracks: the pairing prolongs the truth by another time")
+    ref_row = None if pairing is None else pairing.nearest(ft, fs, fx, fy, max_dist_m)
+    if ref_row is None:
+        at = truth_at_epochs(truth, np.unique(ft), region, extrapolate_s=extrapolate_s,
+                             velocity=True)
+        ref_row = nearest_truth(ft, fx, fy, at, max_dist_m)
+    else:
+        at = pairing.truths
+    ref = {"x": at["ref_x_m"].to_numpy(), "y": at["ref_y_m"].to_numpy(),
+           "vx": at["ref_vx_mps"].to_numpy(), "vy": at["ref_vy_mps"].to_numpy()}
     # radar rows -> their fused row
-    rt = radar["time_ns"].to_numpy()
-    rs = radar["system_track_id"].to_numpy()
-    f_of_r = _row_of(ft, fs, rt, rs)
-    parts = []
-    for pts, f_rows, source in (
-        (fused, np.arange(fused.height), pl.lit("fused")),
-        (radar, f_of_r, pl.col("site_id")),
-    ):
-        if pts.height == 0:
-            continue
-        # (radar rows without a fused row have no reference: as the join of the AIS path)
-        k = np.where(f_rows >= 0, ref_row[np.maximum(f_rows, 0)], -1)
-        sel = np.flatnonzero(k >= 0)
-        k = k[sel]
-        P_xx, P_yy, P_xy = (p[sel] for p in position_covariance(pts))
-        ex = pts["x_enu_m"].to_numpy()[sel] - ref_x[k]
-        ey = pts["y_enu_m"].to_numpy()[sel] - ref_y[k]
-        nees = (P_yy * ex * ex - 2.0 * P_xy * ex * ey + P_xx * ey * ey) / (P_xx * P_yy - P_xy**2)
-        rows = pts.select("time_ns", "system_track_id", source.alias("source"), "sector")[sel]
-        parts.append(rows.with_columns(
-            pl.lit("truth").alias("reference"),
-            ref_id.gather(k).alias("reference_id"),
-            ref_mmsi.gather(k).alias("reference_mmsi"),
-            pl.Series("error_east_m", ex),
-            pl.Series("error_north_m", ey),
-            pl.Series("error_m", np.hypot(ex, ey)),
-            pl.Series("nees", nees),
-            pl.Series("_ref_x", ref_x[k]),
-            pl.Series("_ref_y", ref_y[k]),
-            pl.Series("_ref_vx", ref_vx[k]),
-            pl.Series("_ref_vy", ref_vy[k]),
-            pl.lit(0.0).alias("_ref_var"),
-        ))
-    if not parts:
-        return pl.DataFrame(schema=_ERROR_SCHEMA)
-    return _in_key_order(pl.concat(parts))
+    f_of_r = _row_of(ft, fs, radar["time_ns"].to_numpy(), radar["system_track_id"].to_numpy())
+    return _scored_points(fused, radar, f_of_r, ref_row, ref, at["vessel_id"], at["mmsi"],
+                          "truth")
 
 
 def _row_of(t: np.ndarray, s: np.ndarray, qt: np.ndarray, qs: np.ndarray) -> np.ndarray:
@@ -385,6 +474,7 @@ def truth_at_epochs(
     *,
     extrapolate_s: float = 0.0,
     velocity: bool = False,
+    sampled: bool = False,
 ) -> pl.DataFrame:
     """Truth interpolated linearly to each epoch inside each vessel's sampled span, and
     extrapolated linearly (velocity of its last two samples) up to ``extrapolate_s``
@@ -393,7 +483,8 @@ def truth_at_epochs(
 
     Returns time_ns (epoch), vessel_id, mmsi, ref_x_m, ref_y_m (regional ENU, m), and
     with ``velocity`` ref_vx_mps, ref_vy_mps: that of the segment interpolated (0 for a
-    vessel with one sample).
+    vessel with one sample); with ``sampled`` a column of that name, false on the rows
+    past a vessel's last sample.
     """
     epochs = np.unique(np.asarray(epochs_ns, np.int64))
     tr = (
@@ -433,6 +524,8 @@ def truth_at_epochs(
     if velocity:
         cols["ref_vx_mps"] = (x[b] - x[a]) / dt * NS
         cols["ref_vy_mps"] = (y[b] - y[a]) / dt * NS
+    if sampled:
+        cols["sampled"] = ~last[row] | (e == t[row])
     return pl.DataFrame(
         cols, schema_overrides={"time_ns": pl.Int64, "vessel_id": pl.Int64, "mmsi": pl.Int64})
 

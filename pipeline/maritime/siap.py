@@ -70,7 +70,7 @@ from pipeline.geometry import assign_sectors, position_covariance
 from pipeline.maritime.associate import gate_threshold
 from pipeline.maritime.config import SiapConfig
 from pipeline.maritime.reference import Reference
-from pipeline.maritime.score import truth_at_epochs
+from pipeline.maritime.score import TruthPairing, truth_at_epochs
 from pipeline.spatial import pairs_within
 from pipeline.units import NS
 
@@ -124,16 +124,38 @@ def truth_states(truth: pl.DataFrame, epochs_ns: np.ndarray, region: RegionConfi
     """Truth at each epoch inside each vessel's sampled span: time_ns, vessel_id, mmsi,
     ref_x_m, ref_y_m (interpolated, regional ENU) and ref_vx_mps, ref_vy_mps (speed
     and course of the nearest earlier truth sample)."""
-    at = truth_at_epochs(truth, epochs_ns, region)
+    return _with_velocity(truth_at_epochs(truth, epochs_ns, region).sort("time_ns"), truth)
+
+
+def _with_velocity(at: pl.DataFrame, truth: pl.DataFrame) -> pl.DataFrame:
+    """Truth states ``at`` (sorted by time) with ref_vx_mps, ref_vy_mps from the speed
+    and course of each vessel's nearest earlier truth sample."""
     vel = truth.select(
         "time_ns",
         pl.col("vessel_id").cast(pl.Int64),
         (pl.col("speed_mps") * pl.col("course_rad").sin()).alias("ref_vx_mps"),
         (pl.col("speed_mps") * pl.col("course_rad").cos()).alias("ref_vy_mps"),
     ).sort("time_ns")
-    return at.sort("time_ns").join_asof(
+    return at.join_asof(
         vel, on="time_ns", by="vessel_id", strategy="backward", check_sortedness=False
     )
+
+
+def _paired(pairing: TruthPairing, truth: pl.DataFrame, tracks: pl.DataFrame,
+            epochs_ns: np.ndarray, cfg: SiapConfig
+            ) -> tuple[pl.DataFrame, tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """:func:`truth_states` and the (track row, truth row, distance) pairs within
+    max_distance_m from the shared ``pairing``: its sampled truth rows (none prolonged
+    past a vessel's last sample), the truth rows renumbered to those kept."""
+    if pairing.points.height != tracks.height or pairing.near_m < cfg.max_distance_m:
+        raise ValueError("siap_by_sector: the pairing is of other tracks or a shorter reach")
+    at = pairing.truths
+    kept = (at["sampled"] & at["time_ns"].is_in(np.asarray(epochs_ns, np.int64))).to_numpy()
+    row = np.cumsum(kept) - 1
+    ok = kept[pairing.j]
+    truths = _with_velocity(
+        at.filter(pl.Series(kept)).drop("ref_vx_mps", "ref_vy_mps", "sampled"), truth)
+    return truths, (pairing.i[ok], row[pairing.j[ok]], pairing.dist_m[ok])
 
 
 def reference_as_truth(reference: Reference, epochs_ns: np.ndarray, region: RegionConfig
@@ -180,7 +202,6 @@ def candidate_pairs(tracks: pl.DataFrame, truths: pl.DataFrame, cfg: SiapConfig)
     use instead of joins). A grid join (``pipeline.spatial``) of the points within
     max_distance_m; the same pairs, values and order as :func:`candidate_pairs_reference`."""
     cell = cfg.max_distance_m
-    gate = gate_threshold(cfg.gate_probability)
     tt, rt = tracks["time_ns"].to_numpy(), truths["time_ns"].to_numpy()
     epochs = np.unique(tt)
     ok = np.isin(rt, epochs)
@@ -188,21 +209,30 @@ def candidate_pairs(tracks: pl.DataFrame, truths: pl.DataFrame, cfg: SiapConfig)
     tx, ty = tracks["x_enu_m"].to_numpy(), tracks["y_enu_m"].to_numpy()
     rx, ry = truths["ref_x_m"].to_numpy(), truths["ref_y_m"].to_numpy()
     reach = cell * (1 + 1e-9) + 1e-6
-    i, j, _ = pairs_within(np.searchsorted(epochs, tt), tx, ty, reach,
-                           np.searchsorted(epochs, rt[jr]), rx[jr], ry[jr], cell_m=reach)
-    j = jr[j]
+    i, j, d2 = pairs_within(np.searchsorted(epochs, tt), tx, ty, reach,
+                            np.searchsorted(epochs, rt[jr]), rx[jr], ry[jr], cell_m=reach)
+    return gated_pairs(tracks, truths, i, jr[j], np.sqrt(d2), cfg)
+
+
+def gated_pairs(tracks: pl.DataFrame, truths: pl.DataFrame, i: np.ndarray, j: np.ndarray,
+                dist: np.ndarray, cfg: SiapConfig) -> pl.DataFrame:
+    """:func:`candidate_pairs` from the pairs (``i``: row of ``tracks``, ``j``: row of
+    ``truths``, of one epoch, sorted by (i, j)) within a reach of at least
+    max_distance_m, ``dist``: their distances: those within max_distance_m and the gate."""
+    gate = gate_threshold(cfg.gate_probability)
+    tx, ty = tracks["x_enu_m"].to_numpy(), tracks["y_enu_m"].to_numpy()
+    rx, ry = truths["ref_x_m"].to_numpy(), truths["ref_y_m"].to_numpy()
     pxx, pyy, pxy = (tracks[c].to_numpy()[i] for c in ("P_xx", "P_yy", "P_xy"))
     dx, dy = tx[i] - rx[j], ty[i] - ry[j]
     det = pxx * pyy - pxy**2
     d2 = (pyy * dx * dx - 2.0 * pxy * dx * dy + pxx * dy * dy) / det
-    dist = np.sqrt(dx * dx + dy * dy)
-    keep = (d2 < gate) & (dist <= cell)
+    keep = (d2 < gate) & (dist <= cfg.max_distance_m)
     i, j, d2, dist = i[keep], j[keep], d2[keep], dist[keep]
     vessel = truths["vessel_id"].to_numpy()[j]
     order = np.lexsort((vessel, i))  # tracks sorted by (time, track): (time, track, vessel)
     i, j = i[order], j[order]
     return pl.DataFrame({
-        "time_ns": tt[i],
+        "time_ns": tracks["time_ns"].to_numpy()[i],
         "system_track_id": tracks["system_track_id"].to_numpy()[i],
         "vessel_id": vessel[order],
         "d2": d2[order],
@@ -344,6 +374,7 @@ def siap_by_sector(
     start_ns: int,
     end_ns: int,
     reference: Reference | None = None,
+    pairing: TruthPairing | None = None,
 ) -> pl.DataFrame:
     """Rows of the ``siap_by_sector`` table for the epochs of the window [start_ns,
     end_ns) (empty without truth and without a reconstructed ``reference``): one row per
@@ -352,19 +383,25 @@ def siap_by_sector(
     truths, column ``reference`` says which. ``epochs_ns`` may reach beyond the window
     (a work unit's lead-in and look-ahead): the track-to-truth hysteresis runs over all
     of them, so it enters the window as it would in one pass, and the track changes and
-    swaps seen there count where they happen; every sum is of the window's epochs."""
+    swaps seen there count where they happen; every sum is of the window's epochs.
+    ``pairing``: these system tracks already paired with this truth at ``epochs_ns``
+    (:func:`pipeline.maritime.score.pair_with_truth`, shared with the scoring)."""
     kind = "truth"
     if (truth is None or truth.height == 0) and reference is not None and len(epochs_ns):
         truth, kind = reference_as_truth(reference, epochs_ns, region), reference.kind
     if truth is None or truth.height == 0 or len(epochs_ns) == 0:
         return empty_siap()
-    truths = assign_sectors(
-        truth_states(truth, epochs_ns, region).rename({"ref_x_m": "x_enu_m", "ref_y_m": "y_enu_m"}),
-        sectors,
-        region,
-    ).rename({"x_enu_m": "ref_x_m", "y_enu_m": "ref_y_m"})
     tracks = _tracks(system_tracks.filter(pl.col("time_ns").is_in(list(epochs_ns))))
-    assoc = associate_to_truth(candidate_pairs(tracks, truths, cfg))
+    if kind == "truth" and pairing is not None:
+        truths, pairs = _paired(pairing, truth, tracks, epochs_ns, cfg)
+    else:
+        truths = truth_states(truth, epochs_ns, region)
+        pairs = None
+    truths = assign_sectors(
+        truths.rename({"ref_x_m": "x_enu_m", "ref_y_m": "y_enu_m"}), sectors, region,
+    ).rename({"x_enu_m": "ref_x_m", "y_enu_m": "ref_y_m"})
+    assoc = associate_to_truth(candidate_pairs(tracks, truths, cfg) if pairs is None
+                               else gated_pairs(tracks, truths, *pairs, cfg))
     primary = assoc.filter(pl.col("primary")).select("time_ns", "vessel_id", "system_track_id")
     tracks, truths, assoc = _in_window(tracks, truths, assoc, start_ns, end_ns)
     if truths.height == 0:

@@ -39,7 +39,7 @@ from pipeline.maritime.identity import identify
 from pipeline.maritime.integrity import check_channels
 from pipeline.maritime.reference import reconstruct, truth_reference
 from pipeline.maritime.registration import register
-from pipeline.maritime.score import score_tracks
+from pipeline.maritime.score import pair_with_truth, score_tracks
 from pipeline.maritime.siap import siap_by_sector
 from pipeline.maritime.stitch import (
     LEAD_ASSOCIATIONS,
@@ -146,9 +146,12 @@ def stage(tables: Inputs, window: Window, cfg: Config) -> Outputs:
     tracked = fused  # SIAP's track-to-truth hysteresis also runs over the margins
     associated, fused = associated.filter(own), fused.filter(own)
     identifications = identifications.filter(own)
+    # one pairing of the tracks with truth for the scoring and SIAP
+    pairing = None if truth is None else pair_with_truth(
+        tracked, truth, epochs, cfg.region, near_m=mc.siap.max_distance_m)
     errors = score_tracks(
         fused, associated, truth=truth, ais_reports=ais, region=cfg.region, sectors=cfg.sectors,
-        reference=reference, reference_cfg=mc.reference, sites=cfg.radar_sites,
+        reference=reference, reference_cfg=mc.reference, sites=cfg.radar_sites, pairing=pairing,
     )
     associations = associated.with_columns(
         pl.col("P_xx").sqrt().alias("sigma_x_m"),
@@ -158,7 +161,7 @@ def stage(tables: Inputs, window: Window, cfg: Config) -> Outputs:
     siap = siap_by_sector(
         tracked, truth, epochs_ns=epochs, epoch_period_s=mc.sync.epoch_period_s,
         region=cfg.region, sectors=cfg.sectors, cfg=mc.siap, start_ns=start_ns, end_ns=end_ns,
-        reference=reference,
+        reference=reference, pairing=pairing,
     )
     detection = _detection(aligned, associations, errors, truth, reference, ais, cfg,
                            start_ns, end_ns)

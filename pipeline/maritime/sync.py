@@ -171,7 +171,7 @@ def _step1(aligned: pl.DataFrame) -> _Scans:
     names = sorted(sites.unique().to_list())
     site = sites.replace_strict(names, list(range(len(names))), return_dtype=pl.Int64).to_numpy()
     track = aligned["local_track_id"].to_numpy()
-    o = np.lexsort((track, t_to, site))
+    o = _by_site_and_time(site, t_to)
     so, to, To = site[o], t_to[o], T[o]
     first = np.r_[True, so[1:] != so[:-1]] if o.size else np.zeros(0, bool)
     gap = np.r_[0, np.diff(to)].astype(float)
@@ -187,14 +187,47 @@ def _step1(aligned: pl.DataFrame) -> _Scans:
     # the latest report of each (site, track, scan): order by (scan, track, time)
     sc_row = np.empty(o.size, np.int64)
     sc_row[o] = scan
-    k = np.lexsort((t, track, sc_row))
-    last = np.r_[(sc_row[k][1:] != sc_row[k][:-1]) | (track[k][1:] != track[k][:-1]), True] \
-        if k.size else np.zeros(0, bool)
+    scan_track = _combined(sc_row, track)
+    if scan_track is None:
+        k = np.lexsort((t, track, sc_row))
+        last = np.r_[(sc_row[k][1:] != sc_row[k][:-1]) | (track[k][1:] != track[k][:-1]), True] \
+            if k.size else np.zeros(0, bool)
+    else:
+        k = np.lexsort((t, scan_track))
+        last = np.r_[scan_track[k][1:] != scan_track[k][:-1], True] if k.size \
+            else np.zeros(0, bool)
     keep = k[last]
     ks = sc_row[keep]
-    final = keep[np.lexsort((track[keep], site[keep], end[ks]))]
+    # (end, site, track) order: the scans by (end, site), then their tracks (one each)
+    scan_rank = np.empty(starts.size, np.int64)
+    scan_rank[np.lexsort((scan_site, end))] = np.arange(starts.size)
+    by_scan = _combined(scan_rank[ks], track[keep])
+    final = keep[np.lexsort((track[keep], site[keep], end[ks])) if by_scan is None
+                 else np.argsort(by_scan)]
     fs = sc_row[final]
     return _Scans(final, dt1[final], t_to[final], end[fs], big_T[fs], nxt[fs])
+
+
+def _combined(major: np.ndarray, minor: np.ndarray) -> np.ndarray | None:
+    """One int64 key ordered as (major, minor) (non-negative ``major``), None when it
+    would not fit in 63 bits."""
+    if minor.size == 0:
+        return np.zeros(0, np.int64)
+    lo, span = int(minor.min()), int(minor.max()) - int(minor.min()) + 1
+    if span.bit_length() + int(major.max()).bit_length() > 62:
+        return None
+    return major * span + (minor - lo)
+
+
+def _by_site_and_time(site: np.ndarray, t_ns: np.ndarray) -> np.ndarray:
+    """An order of the rows by (site, time), ties in any order (the scans do not depend on
+    it): one argsort of a combined key when it fits in 63 bits, else a lexsort."""
+    if t_ns.size == 0:
+        return np.zeros(0, np.int64)
+    t0, span = int(t_ns.min()), int(t_ns.max()) - int(t_ns.min()) + 1
+    if span.bit_length() + int(site.max()).bit_length() > 62:
+        return np.lexsort((t_ns, site))
+    return np.argsort(site * span + (t_ns - t0))
 
 
 def _serve(scans: _Scans, epochs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -208,6 +208,52 @@ def test_stage_siap_pairs_and_cross_track_equal_references() -> None:
     assert_frame_equal(got.drop("_i", "_j"), want, check_exact=True, check_dtypes=False)
 
 
+def test_one_truth_pairing_scores_and_measures_as_each_step_alone() -> None:
+    """The stage pairs its tracks with truth once for the scoring and SIAP: both tables
+    equal, to the bit, what each step finds pairing on its own, with points beyond the
+    pairing's reach (false tracks: the scoring looks farther) and vessels leaving the
+    scene (the truth prolonged for the scoring, not for SIAP)."""
+    from maritime_helpers import scenario_tables
+
+    from pipeline.family import Window
+    from pipeline.maritime import siap
+    from pipeline.maritime.config import maritime_config
+    from pipeline.maritime.stage import stage
+    from pipeline.maritime.sync import epoch_grid
+
+    cfg = load_config()
+    mc = maritime_config(cfg)
+    radar, ais, truth = scenario_tables(cfg, duration_s=600.0, seed=5)
+    start_ns = 1_768_435_200 * 10**9
+    out = stage({"radar_tracks": radar, "ais_reports": ais, "truth": truth},
+                Window(start_ns, start_ns + 600 * 10**9), cfg)
+    fused, assoc = out["system_tracks"], out["associations"]
+    # false tracks 700-1,900 m off a third of the fused points, ids of their own
+    rng = np.random.default_rng(2)
+    far = fused.gather_every(3)
+    far = far.with_columns(pl.col("x_enu_m") + rng.uniform(700, 1900, far.height),
+                           pl.col("system_track_id") + 10**15)
+    fused = pl.concat([fused, far]).sort("time_ns", "system_track_id")
+    last = truth.group_by("vessel_id").agg(pl.col("time_ns").max())
+    assert (last["time_ns"] < start_ns + 590 * 10**9).any()  # some leave: truth prolonged
+    epochs = epoch_grid(start_ns, start_ns + 600 * 10**9, mc.sync.epoch_period_s)
+    pairing = score.pair_with_truth(fused, truth, epochs, cfg.region,
+                                    near_m=mc.siap.max_distance_m)
+    kw = dict(truth=truth, ais_reports=ais, region=cfg.region, sectors=cfg.sectors,
+              sites=cfg.radar_sites)
+    alone = score.score_tracks(fused, assoc, **kw)
+    assert (alone.filter(pl.col("system_track_id") >= 10**15)["error_m"] > 500).sum() > 100
+    assert_frame_equal(score.score_tracks(fused, assoc, **kw, pairing=pairing), alone,
+                       check_exact=True)
+    kw = dict(epochs_ns=epochs, epoch_period_s=mc.sync.epoch_period_s, region=cfg.region,
+              sectors=cfg.sectors, cfg=mc.siap, start_ns=start_ns + 60 * 10**9,
+              end_ns=start_ns + 540 * 10**9)
+    alone = siap.siap_by_sector(fused, truth, **kw)
+    assert alone["associated_track_epochs"].sum() > 1000
+    assert_frame_equal(siap.siap_by_sector(fused, truth, **kw, pairing=pairing), alone,
+                       check_exact=True)
+
+
 @pytest.mark.parametrize("seed", range(4))
 def test_nearest_slots_equal_dense_reference_in_the_gate(seed: int) -> None:
     """Grid-gated AIS -> slot candidates: every gated candidate (d2 < gate) as the dense
