@@ -272,11 +272,11 @@ def main() -> None:
                       for c, (wh, w) in cases.items()}
         print(n, {c: (round(r["wall_s"], 2), round(r["cpu_s"], 2))
                   for c, r in results[n].items()}, flush=True)
-    if a.json:
-        Path(a.json).write_text(json.dumps({"params": params, "cases": {
-            c: {"warehouse": str(wh), "start_ns": w[0], "end_ns": w[1]}
-            for c, (wh, w) in cases.items()}, "results": results,
-            "load_average_1min": os.getloadavg()[0]}, indent=2))
+        if a.json:  # after every report: a run stopped early keeps what it measured
+            Path(a.json).write_text(json.dumps({"params": params, "cases": {
+                c: {"warehouse": str(wh), "start_ns": w[0], "end_ns": w[1]}
+                for c, (wh, w) in cases.items()}, "results": results,
+                "load_average_1min": os.getloadavg()[0]}, indent=2))
     shown = list(cases)
     if a.merge:  # an earlier run's cases (e.g. 7d@7d alone), this run's taking precedence
         earlier = json.loads(Path(a.merge).read_text())["results"]
