@@ -187,7 +187,9 @@ def reader_dataset(warehouse: Path | Location, name: str,
     """The Parquet files of the snapshot readers see of ``name`` as a pyarrow dataset on
     the warehouse's filesystem, in the canonical types but for string columns, read as
     dictionaries (as the files store them; for DuckDB, which scans such a column ~2x
-    cheaper than plain strings); ``None``: no table yet."""
+    cheaper than plain strings), each file with the time range of its Delta statistics
+    (:func:`_time_ranges`: a scan of a window opens only the files it overlaps);
+    ``None``: no table yet."""
     delta_table = _reader_table(warehouse, name, pins)
     if delta_table is None:
         return None
