@@ -20,6 +20,11 @@ analyst's command would: wall and CPU seconds (the process and its children), ov
   an hour's report slower);
 - the first day, in both (goal: the 16 reports <= 60 s in all over a day);
 - the whole week, in the 7-day warehouse.
+
+``--cases`` runs some of these (7d@7d costs about as much as the others together);
+``--merge FILE`` shows an earlier run's cases (its ``--json``) beside this run's. The
+CSV of one window must be the same in both warehouses: the bench says which differ.
+Figures: docs/scale.md, "Reports over a long archive".
 """
 
 from __future__ import annotations
