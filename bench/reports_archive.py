@@ -2,7 +2,8 @@
 a 7-day warehouse of the regional scenario (issue 34, item 3).
 
     .venv/bin/python bench/reports_archive.py --day DIR --config FILE [--days 7]
-        [--workdir DIR] [--json FILE] [--reports a,b,...] [--outputs DIR]
+        [--workdir DIR] [--json FILE] [--reports a,b,...] [--cases ...] [--merge FILE]
+        [--outputs DIR]
 
 ``--day`` is a warehouse holding one batched day (``bench/region_day.py`` leaves one in its
 workdir, ``wh/``, with the archive's ``region.toml`` as ``--config``). The 7-day warehouse
