@@ -286,12 +286,14 @@ def reader_dataset(warehouse: Path | Location, name: str,
     """The Parquet files of the snapshot readers see of ``name`` as a pyarrow dataset on
     the warehouse's filesystem, in the canonical types but for string columns, read as
     dictionaries (as the files store them; for DuckDB, which scans such a column ~2x
-    cheaper than plain strings); ``None``: no table yet."""
+    cheaper than plain strings), each file with the time range of its Delta statistics
+    (:func:`_time_ranges`: a scan of a window opens only the files it overlaps);
+    ``None``: no table yet."""
     delta_table = _reader_table(warehouse, name, pins)
     if delta_table is None:
         return None
     return _snapshot_dataset(delta_table, table_location(warehouse, name), name,
-                             dictionaries=True)
+                             dictionaries=True, time_ranges=True)
 
 
 def read_table(
@@ -356,7 +358,7 @@ def has_rows(warehouse: Path, name: str, start_ns: int, end_ns: int,
 
 
 def _snapshot_dataset(snapshot: DeltaTable, path: Location, name: str,
-                      dictionaries: bool = False) -> pds.Dataset:
+                      dictionaries: bool = False, time_ranges: bool = False) -> pds.Dataset:
     """``snapshot``'s (the version readers see) Parquet files as a plain pyarrow dataset
     on the table's filesystem (hive ``date=`` partitions): the local one, or the
     location's ``S3FileSystem``.
@@ -369,7 +371,11 @@ def _snapshot_dataset(snapshot: DeltaTable, path: Location, name: str,
     The file list comes from the Delta log (so replaced files are never read); the
     reading is Arrow's own. Each file is first checked against the size the log records
     (:func:`pipeline.warehouse.integrity.check_file_sizes`: a ``stat`` each): a file
-    changed outside the pipeline is refused, never read as the table."""
+    changed outside the pipeline is refused, never read as the table.
+
+    ``time_ranges``: each file also carries the range of the table's time column its
+    Delta statistics record (:func:`_time_ranges`), so that a scan filtered on that
+    column opens only the files that overlap its window."""
     check_file_sizes(name, snapshot, path)
     # local paths, percent-encoded as URIs (a space is %20, '#' is %23, '%' is %25)
     schema = spec(name).schema
@@ -385,8 +391,9 @@ def _snapshot_dataset(snapshot: DeltaTable, path: Location, name: str,
             dictionary_columns=strings))
         keep = pa.schema([f.with_type(pa.dictionary(pa.int32(), pa.string()))
                           if f.name in strings else f for f in keep])
+    ranges = _time_ranges(snapshot, spec(name).time_column) if time_ranges else {}
     if not path.is_local:
-        return _object_store_dataset(snapshot, path, keep, parts, fmt)
+        return _object_store_dataset(snapshot, path, keep, parts, fmt, ranges)
     files = [unquote(u) for u in snapshot.file_uris()]
     if not files:
         return pds.dataset([], schema=schema, format=fmt)
@@ -395,17 +402,47 @@ def _snapshot_dataset(snapshot: DeltaTable, path: Location, name: str,
         if parts else None
     )  # fmt: skip
     try:  # (Arrow stats every file here: a missing one is named, not a traceback)
-        return pds.dataset(files, schema=keep, format=fmt, partitioning=partitioning,
-                           partition_base_dir=str(path))  # fmt: skip
+        dataset = pds.dataset(files, schema=keep, format=fmt, partitioning=partitioning,
+                              partition_base_dir=str(path))  # fmt: skip
     except FileNotFoundError:
         require_local_files(path.name, files)
         raise
+    if not ranges:
+        return dataset
+    root = path.fs_path
+    fragments = [f if (r := ranges.get(os.path.relpath(f.path, root))) is None
+                 else fmt.make_fragment(f.path, f.filesystem, f.partition_expression & r)
+                 for f in dataset.get_fragments()]
+    return pds.FileSystemDataset(fragments, keep, fmt, dataset.filesystem)
+
+
+def _time_ranges(snapshot: DeltaTable, time_column: str | None) -> dict[str, pc.Expression]:
+    """Data file (its path in the table, decoded) -> ``min <= time <= max`` of the time
+    column, from the snapshot's Delta statistics, for every file that has them and no
+    null time: a guarantee about every row of the file, which Arrow's scanner holds
+    against a scan's filter before opening the file. A report over one hour of a
+    week-long table then opens that hour's few files, not the footer of every file
+    (one hour of track_errors, 200 ships: 0.19 -> 0.017 CPU-s in a 7-day table of 413
+    files, 0.033 -> 0.010 in a 1-day one of 59)."""
+    if not time_column:
+        return {}
+    adds = pa.table(snapshot.get_add_actions(flatten=True))
+    cols = [f"min.{time_column}", f"max.{time_column}", f"null_count.{time_column}"]
+    if adds.num_rows == 0 or not all(c in adds.column_names for c in cols):
+        return {}
+    t = pds.field(time_column)
+    lo, hi, nulls = (adds[c].to_pylist() for c in cols)
+    return {unquote(rel): (t >= a) & (t <= b)
+            for rel, a, b, n in zip(adds["path"].to_pylist(), lo, hi, nulls, strict=True)
+            if a is not None and b is not None and n == 0}
 
 
 def _object_store_dataset(snapshot: DeltaTable, path: Location, keep: pa.Schema,
-                          parts: list[str], fmt: pds.ParquetFileFormat) -> pds.Dataset:
+                          parts: list[str], fmt: pds.ParquetFileFormat,
+                          ranges: dict[str, pc.Expression]) -> pds.Dataset:
     """The snapshot's files on object storage, each with its size and partition values
-    from the Delta log: reading a file then needs no request to learn its size."""
+    from the Delta log (and its time range from ``ranges``, by decoded path): reading a
+    file then needs no request to learn its size."""
     adds = pa.table(snapshot.get_add_actions(flatten=True))
     if adds.num_rows == 0:
         return pds.dataset([], schema=keep, format=fmt)
@@ -417,6 +454,8 @@ def _object_store_dataset(snapshot: DeltaTable, path: Location, keep: pa.Schema,
             term = pds.field(p) == value.cast(keep.field(p).type) if value.is_valid \
                 else pds.field(p).is_null()
             expr = term if expr is None else expr & term
+        if (r := ranges.get(unquote(rel))) is not None:
+            expr = r if expr is None else expr & r
         fragments.append(fmt.make_fragment(f"{path.fs_path}/{unquote(rel)}", path.fs, expr,
                                            file_size=adds["size_bytes"][i].as_py()))
     return pds.FileSystemDataset(fragments, keep, fmt, path.fs)
