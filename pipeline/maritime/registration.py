@@ -33,12 +33,28 @@ above chi2_3(1 - ``jump_q``): a registration jump), then the side whose correcte
 per dof is the smaller (the side that does not straddle the jump). The estimate is
 applied once the window holds ``min_tracks`` track-epochs and it differs from zero,
 theta^T P_theta^-1 theta >= chi2_3(1 - ``apply_q``) (else nothing is corrected: a
-clean radar's reports stay as reported). Windows only (no filter over the whole
-recording): a unit's lead-in and look-ahead (``continuity_margins_s``, >= 300 s) hold
-every window, so results do not depend on where units are cut.
+clean radar's reports stay as reported), and both its windows lie within the rows (not
+within ``window_s`` of their first or last epoch, where one side is cut short and a
+jump there unseen: a fault from the first epoch on would be corrected before its onset
+too). Windows only (no filter over the whole recording): a unit's lead-in and look-ahead
+(``continuity_margins_s``, >= 300 s) hold every window, so results do not depend on
+where units are cut.
 
-**Correction**: each report of site c at epoch k, p <- p - H theta, P <- s P + H P_theta
-H^T (the estimate's own error, honest NEES).
+**Correction before the association** (the stage's second pass): where the first pass
+(association, integrity, this step on the reports as reported) applied an estimate
+anywhere, :func:`correct_reports` corrects each synchronised report of site c at epoch k,
+p <- p - H theta, P <- P + H P_theta H^T (H of the report as reported, its site's
+geometry and its velocity; the estimate's own error, honest NEES), and association,
+integrity and this step run again on them: the corrected radar's tracks join the other
+radars' system tracks instead of splitting off as tracks of their own (duplicates of the
+ships the other radar tracks). The second pass estimates nothing again
+(``corrected_by``): its variance scale is the covariance matching of the corrected
+residuals (theta = 0 below) and its readmission tests them where the first pass's
+estimate is applied. Where nothing is applied anywhere there is no second pass: the
+rows are the first pass's, to the last digit.
+
+**Correction in the fusion** (each pass): each report of site c at epoch k, p <- p - H
+theta, P <- s P + H P_theta H^T (in the second pass theta = 0: the variance scale).
 
 **Estimated accuracy** (per site and sector, the site's window): covariance matching of
 the corrected residuals, E[N~] = 2n + (s - 1) T for a radar whose covariance is s P,

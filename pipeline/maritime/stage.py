@@ -6,8 +6,11 @@ two-step synchronisation (multi-radar paper eq. 7-13), track-to-track associatio
 transponder (airfield paper eq. 21-23; a channel in fault is left out of the fusion and
 the identification), online registration and estimated accuracy of each radar from the
 integrity's residuals (issue 38: a biased radar corrected and fused again, a degraded
-one down-weighted; ``pipeline.maritime.registration``), fusion (multi-radar paper eq.
-14), geodetic
+one down-weighted; ``pipeline.maritime.registration``; where a registration is applied,
+association, integrity and registration run a second time on the synchronised reports
+corrected by it, so that the corrected radar's tracks join the other radars' system
+tracks; ``maritime_channel_health`` and the AIS exclusions stay the first pass's, the
+channels as reported), fusion (multi-radar paper eq. 14), geodetic
 position, sectors, cross-track deviation (eq. 1-6), AIS identification, accuracy
 against truth (or AIS), SIAP per sector and cross-track error per leg.
 
