@@ -345,6 +345,30 @@ class _Geometry:
         return np.hypot(d[..., 0], d[..., 1]) <= COVERAGE_MARGIN * self.site_range[None, :]
 
 
+def site_positions_enu(cfg: Config) -> np.ndarray:
+    """(C, 2) each radar site's position in the regional frame, m (``cfg.radar_sites``
+    order)."""
+    sx, sy = frames.geodetic_to_enu(
+        np.array([s.lat_deg for s in cfg.radar_sites]),
+        np.array([s.lon_deg for s in cfg.radar_sites]),
+        cfg.region.origin_lat_deg, cfg.region.origin_lon_deg)
+    return np.column_stack([np.atleast_1d(sx), np.atleast_1d(sy)])
+
+
+def registration_jacobian(xy: np.ndarray, site_xy: np.ndarray, vx: np.ndarray, vy: np.ndarray
+                          ) -> np.ndarray:
+    """(n, 2, 3) H = d(position)/d(range bias, azimuth bias, time offset) of reports at
+    ``xy`` (n, 2) seen from ``site_xy`` (n, 2) moving at (``vx``, ``vy``) m/s:
+    [u_r, rho u_az, -v]."""
+    d = xy - site_xy
+    rho = np.maximum(np.hypot(d[:, 0], d[:, 1]), 1.0)
+    H = np.empty((xy.shape[0], 2, 3))
+    H[:, 0, 0], H[:, 1, 0] = d[:, 0] / rho, d[:, 1] / rho  # range bias: line of sight
+    H[:, 0, 1], H[:, 1, 1] = d[:, 1], -d[:, 0]  # azimuth bias (clockwise): rho u_az
+    H[:, 0, 2], H[:, 1, 2] = -vx, -vy  # time offset: the report is dt late
+    return H
+
+
 def _radar_arrays(
     assoc: pl.DataFrame, coasted: pl.DataFrame, epochs: np.ndarray, cfg: Config,
     geo: _Geometry, sector_index: dict[str | None, int],
@@ -365,12 +389,7 @@ def _radar_arrays(
     xy = df.select("x_enu_m", "y_enu_m").to_numpy()
     P = df.select("P_xx", "P_yy", "P_xy").to_numpy()
     vx, vy = frames.velocity_enu(df["speed_mps"].to_numpy(), df["course_rad"].to_numpy())
-    d = xy - geo.site_xy[site]
-    rho = np.maximum(np.hypot(d[:, 0], d[:, 1]), 1.0)
-    H = np.empty((df.height, 2, 3))
-    H[:, 0, 0], H[:, 1, 0] = d[:, 0] / rho, d[:, 1] / rho  # range bias: line of sight
-    H[:, 0, 1], H[:, 1, 1] = d[:, 1], -d[:, 0]  # azimuth bias (clockwise): rho u_az
-    H[:, 0, 2], H[:, 1, 2] = -vx, -vy  # time offset: the report is dt late
+    H = registration_jacobian(xy, geo.site_xy[site], vx, vy)
     t = df["time_ns"].to_numpy()
     bounds = np.searchsorted(t, np.append(epochs, np.iinfo(np.int64).max))
     slot = df["_slot"].to_numpy()
@@ -883,12 +902,8 @@ def check_channels(
     sector_names = [s.name for s in cfg.sectors]
     sector_index: dict[str | None, int] = {n: i for i, n in enumerate(sector_names)}
     sector_index[None] = G
-    sx, sy = frames.geodetic_to_enu(
-        np.array([s.lat_deg for s in cfg.radar_sites]),
-        np.array([s.lon_deg for s in cfg.radar_sites]),
-        cfg.region.origin_lat_deg, cfg.region.origin_lon_deg)
-    geo = _Geometry(np.column_stack([np.atleast_1d(sx), np.atleast_1d(sy)]),
-                    np.array([s.max_range_m for s in cfg.radar_sites]), G)
+    geo = _Geometry(site_positions_enu(cfg), np.array([s.max_range_m for s in cfg.radar_sites]),
+                    G)
     epoch_ns = round(mc.sync.epoch_period_s * NS)
     rad = _radar_arrays(assoc, coasted_reports(aligned), epochs, cfg, geo, sector_index)
     ais = _ais_arrays(ais_reports, epochs, start_ns, cfg, ic, epoch_ns, sector_index, geo, rad)

@@ -33,12 +33,28 @@ above chi2_3(1 - ``jump_q``): a registration jump), then the side whose correcte
 per dof is the smaller (the side that does not straddle the jump). The estimate is
 applied once the window holds ``min_tracks`` track-epochs and it differs from zero,
 theta^T P_theta^-1 theta >= chi2_3(1 - ``apply_q``) (else nothing is corrected: a
-clean radar's reports stay as reported). Windows only (no filter over the whole
-recording): a unit's lead-in and look-ahead (``continuity_margins_s``, >= 300 s) hold
-every window, so results do not depend on where units are cut.
+clean radar's reports stay as reported), and both its windows lie within the rows (not
+within ``window_s`` of their first or last epoch, where one side is cut short and a
+jump there unseen: a fault from the first epoch on would be corrected before its onset
+too). Windows only (no filter over the whole recording): a unit's lead-in and look-ahead
+(``continuity_margins_s``, >= 300 s) hold every window, so results do not depend on
+where units are cut.
 
-**Correction**: each report of site c at epoch k, p <- p - H theta, P <- s P + H P_theta
-H^T (the estimate's own error, honest NEES).
+**Correction before the association** (the stage's second pass): where the first pass
+(association, integrity, this step on the reports as reported) applied an estimate
+anywhere, :func:`correct_reports` corrects each synchronised report of site c at epoch k,
+p <- p - H theta, P <- P + H P_theta H^T (H of the report as reported, its site's
+geometry and its velocity; the estimate's own error, honest NEES), and association,
+integrity and this step run again on them: the corrected radar's tracks join the other
+radars' system tracks instead of splitting off as tracks of their own (duplicates of the
+ships the other radar tracks). The second pass estimates nothing again
+(``corrected_by``): its variance scale is the covariance matching of the corrected
+residuals (theta = 0 below) and its readmission tests them where the first pass's
+estimate is applied. Where nothing is applied anywhere there is no second pass: the
+rows are the first pass's, to the last digit.
+
+**Correction in the fusion** (each pass): each report of site c at epoch k, p <- p - H
+theta, P <- s P + H P_theta H^T (in the second pass theta = 0: the variance scale).
 
 **Estimated accuracy** (per site and sector, the site's window): covariance matching of
 the corrected residuals, E[N~] = 2n + (s - 1) T for a radar whose covariance is s P,
@@ -76,8 +92,9 @@ import polars as pl
 from numpy.lib.stride_tricks import sliding_window_view
 
 from pipeline.filters.quantiles import chi2_ppf, normal_ppf
+from pipeline.frames import velocity_enu
 from pipeline.maritime.config import RegistrationConfig
-from pipeline.maritime.integrity import THETA_PRIOR, RegistrationEvidence
+from pipeline.maritime.integrity import THETA_PRIOR, RegistrationEvidence, registration_jacobian
 
 MIN_SCALE = 0.25
 """The smallest variance scale: a radar at most twice as accurate as its sigmas say."""
@@ -87,15 +104,46 @@ _SIDES = ("past", "future", "both")
 _A, _B, _NIS, _N, _TRACE, _NAIS = slice(0, 9), slice(9, 12), 12, 13, 14, 15
 
 
+REPORTED_COLUMNS = ("x_enu_m", "y_enu_m", "P_xx", "P_yy", "P_xy")
+"""The columns :func:`correct_reports` corrects (kept as reported in ``reported_*``)."""
+
+
+@dataclass(frozen=True, eq=False)
+class Estimate:
+    """Each site's registration per epoch: ``theta`` (K, C, 3), its covariance ``P`` (K,
+    C, 3, 3), the ``side`` of its window, the track-epochs ``n`` and ``n_ais`` in it, and
+    whether it is ``applied`` (K, C); ``epochs`` (K,)."""
+
+    epochs: np.ndarray
+    theta: np.ndarray
+    P: np.ndarray
+    side: np.ndarray
+    n: np.ndarray
+    n_ais: np.ndarray
+    applied: np.ndarray
+
+    @property
+    def theta_used(self) -> np.ndarray:
+        """theta where applied, else 0."""
+        return np.where(self.applied[..., None], self.theta, 0.0)
+
+    @property
+    def cov_used(self) -> np.ndarray:
+        """P where applied, else 0."""
+        return np.where(self.applied[..., None, None], self.P, 0.0)
+
+
 @dataclass(frozen=True, eq=False)
 class Registration:
     """What :func:`register` returns: ``associations`` (the input rows, ``used`` with the
     readmitted ones), ``corrected`` (the same rows as fused: positions corrected,
-    covariances rescaled and widened) and ``table`` (``sensor_registration`` rows)."""
+    covariances rescaled and widened), ``table`` (``sensor_registration`` rows) and the
+    ``estimate`` (what :func:`correct_reports` applies in a second pass)."""
 
     associations: pl.DataFrame
     corrected: pl.DataFrame
     table: pl.DataFrame
+    estimate: Estimate
 
 
 @dataclass(frozen=True, eq=False)
@@ -254,14 +302,18 @@ def _readmitted(ev: RegistrationEvidence, theta_row: np.ndarray, scale: np.ndarr
 def register(
     associations: pl.DataFrame, ev: RegistrationEvidence, rc: RegistrationConfig, *,
     radar_q: float, outlier_q: float, epoch_period_s: float, sites: list[str],
-    sector_names: list[str],
+    sector_names: list[str], corrected_by: Estimate | None = None,
 ) -> Registration:
     """Estimate, apply and tabulate each radar's registration and variance scale.
 
     Consumes ``associations`` (``IntegrityResult.associations``: rows in the order of
     ``ev``'s rows, with x_enu_m, y_enu_m, P_xx, P_yy, P_xy, used) and ``ev`` (its
     evidence); ``radar_q``, ``outlier_q``: the integrity's false-alarm probabilities (the
-    readmission test's thresholds)."""
+    readmission test's thresholds). ``corrected_by``: the first pass's estimate when the
+    reports were corrected by it before the association (the second pass,
+    :func:`correct_reports`): nothing is estimated or corrected again; the variance
+    scale and the readmission test take the residuals as they are (theta = 0), a group
+    readmitted where that estimate is applied, and the table reports that estimate."""
     K, ng = ev.n.shape
     C, G1 = ev.C, ev.G + 1
     w = max(1, round(rc.window_s / epoch_period_s))
@@ -269,14 +321,12 @@ def register(
     cur = _evidence(ev)
     per_site = cur.reshape(K, C, G1, 16).sum(axis=2)
     site_wins = _windows(per_site, w)
-    fits = tuple(_fit(v, corr) for v in site_wins)
-    side = _choose(fits, per_site, corr, rc)
-    theta = _pick([f.theta for f in fits], side)
-    P = _pick([f.P for f in fits], side)
-    n, n_ais = _pick([f.n for f in fits], side), _pick([f.n_ais for f in fits], side)
-    applied = (n >= rc.min_tracks) & (_mahalanobis(theta, P) >= chi2_ppf(1.0 - rc.apply_q, 3))
-    theta_used = np.where(applied[..., None], theta, 0.0)
-    P_used = np.where(applied[..., None, None], P, 0.0)
+    if corrected_by is None:
+        est = _estimate(site_wins, per_site, corr, w, rc, ev.epochs)
+        theta_used, P_used = est.theta_used, est.cov_used
+    else:
+        est = corrected_by
+        theta_used, P_used = np.zeros_like(est.theta), np.zeros_like(est.P)
     # the variance scale per (site, sector) on the site's window; else the site's
     side_s = _choose_scale(site_wins, per_site, theta_used, corr, rc)
     site_win = _pick(list(site_wins), side_s)
@@ -290,15 +340,59 @@ def register(
     scale_ok = s_group_ok | np.repeat(s_site_ok, G1, axis=1)
     rk, rg = ev.row_k, ev.row_group
     rs = rg // G1
-    readmit, readmit_row = _readmitted(ev, theta_used[rk, rs], scale, applied, rc, radar_q,
+    readmit, readmit_row = _readmitted(ev, theta_used[rk, rs], scale, est.applied, rc, radar_q,
                                        outlier_q)
     used = associations["used"].to_numpy() | readmit_row
     out = associations.with_columns(pl.Series("used", used))
     corrected = _correct(out, ev.H, theta_used[rk, rs], P_used[rk, rs], scale[rk, rg])
     present = np.bincount(rk * ng + rg, minlength=K * ng).reshape(K, ng) > 0
-    table = _table(ev, present, theta, P, applied, side, n, n_ais, scale, scale_ok,
-                   group_win[..., _N], readmit, sites, sector_names)
-    return Registration(out, corrected, table)
+    table = _table(ev, present, est, scale, scale_ok, group_win[..., _N], readmit, sites,
+                   sector_names)
+    return Registration(out, corrected, table, est)
+
+
+def _estimate(site_wins: tuple[np.ndarray, ...], per_site: np.ndarray, corr: float, w: int,
+              rc: RegistrationConfig, epochs: np.ndarray) -> Estimate:
+    """Each site's registration on its windows' sums (module docstring)."""
+    fits = tuple(_fit(v, corr) for v in site_wins)
+    side = _choose(fits, per_site, corr, rc)
+    theta = _pick([f.theta for f in fits], side)
+    P = _pick([f.P for f in fits], side)
+    n, n_ais = _pick([f.n for f in fits], side), _pick([f.n_ais for f in fits], side)
+    applied = (n >= rc.min_tracks) & (_mahalanobis(theta, P) >= chi2_ppf(1.0 - rc.apply_q, 3))
+    # both sides whole: within a window of the rows' first or last epoch one side is cut
+    # short and a jump there unseen (a fault from the first epoch on would be corrected
+    # before its onset too)
+    k = np.arange(epochs.size)
+    applied &= ((k >= w) & (k < epochs.size - w))[:, None]
+    return Estimate(epochs, theta, P, side, n, n_ais, applied)
+
+
+def correct_reports(synced: pl.DataFrame, est: Estimate, site_xy: np.ndarray,
+                    sites: list[str]) -> pl.DataFrame:
+    """The synchronised reports (``synchronise``'s rows) corrected by the registration
+    ``est`` applied at their site and epoch: p <- p - H theta, P <- P + H P_theta H^T, H
+    (:func:`~pipeline.maritime.integrity.registration_jacobian`) of the report as
+    reported, seen from its site (``site_xy`` (C, 2) in the order of ``sites``); the
+    reports as reported kept in ``reported_<column>`` (:func:`as_reported`). Rows of
+    an epoch and site where nothing is applied stay as they are, to the last digit."""
+    k = np.searchsorted(est.epochs, synced["time_ns"].to_numpy())
+    c = synced["site_id"].replace_strict(sites, list(range(len(sites))),
+                                         return_dtype=pl.Int64).to_numpy()
+    xy = synced.select("x_enu_m", "y_enu_m").to_numpy()
+    vx, vy = velocity_enu(synced["speed_mps"].to_numpy(), synced["course_rad"].to_numpy())
+    H = registration_jacobian(xy, site_xy[c], vx, vy)
+    kept = synced.with_columns(pl.col(col).alias(f"reported_{col}") for col in REPORTED_COLUMNS)
+    # where nothing is applied, x - 0 and 1 P + 0: the bits as reported
+    return _correct(kept, H, est.theta_used[k, c], est.cov_used[k, c], np.ones(k.size))
+
+
+def as_reported(associations: pl.DataFrame) -> pl.DataFrame:
+    """Rows of reports corrected by :func:`correct_reports` with their positions and
+    covariances as reported again (the ``reported_*`` columns dropped)."""
+    return associations.with_columns(
+        pl.col(f"reported_{col}").alias(col) for col in REPORTED_COLUMNS
+    ).drop(f"reported_{col}" for col in REPORTED_COLUMNS)
 
 
 def _correct(df: pl.DataFrame, H: np.ndarray, theta: np.ndarray, P_theta: np.ndarray,
@@ -315,12 +409,12 @@ def _correct(df: pl.DataFrame, H: np.ndarray, theta: np.ndarray, P_theta: np.nda
     )
 
 
-def _table(ev: RegistrationEvidence, present: np.ndarray, theta: np.ndarray, P: np.ndarray,
-           applied: np.ndarray, side: np.ndarray, n: np.ndarray, n_ais: np.ndarray,
-           scale: np.ndarray, scale_ok: np.ndarray, scale_n: np.ndarray,
-           readmit: np.ndarray, sites: list[str], sector_names: list[str]) -> pl.DataFrame:
+def _table(ev: RegistrationEvidence, present: np.ndarray, est: Estimate, scale: np.ndarray,
+           scale_ok: np.ndarray, scale_n: np.ndarray, readmit: np.ndarray, sites: list[str],
+           sector_names: list[str]) -> pl.DataFrame:
     """``sensor_registration`` rows: one per epoch and (site, sector) with reports."""
     G1 = ev.G + 1
+    theta, P, applied, side, n, n_ais = est.theta, est.P, est.applied, est.side, est.n, est.n_ais
     kk, gg = np.nonzero(present)
     cc = gg // G1
     names = [*sector_names, None]

@@ -6,8 +6,11 @@ two-step synchronisation (multi-radar paper eq. 7-13), track-to-track associatio
 transponder (airfield paper eq. 21-23; a channel in fault is left out of the fusion and
 the identification), online registration and estimated accuracy of each radar from the
 integrity's residuals (issue 38: a biased radar corrected and fused again, a degraded
-one down-weighted; ``pipeline.maritime.registration``), fusion (multi-radar paper eq.
-14), geodetic
+one down-weighted; ``pipeline.maritime.registration``; where a registration is applied,
+association, integrity and registration run a second time on the synchronised reports
+corrected by it, so that the corrected radar's tracks join the other radars' system
+tracks; ``maritime_channel_health`` and the AIS exclusions stay the first pass's, the
+channels as reported), fusion (multi-radar paper eq. 14), geodetic
 position, sectors, cross-track deviation (eq. 1-6), AIS identification, accuracy
 against truth (or AIS), SIAP per sector and cross-track error per leg.
 
@@ -36,9 +39,15 @@ from pipeline.maritime.cross_track import cross_track_by_leg
 from pipeline.maritime.evaluate import radar_detection
 from pipeline.maritime.fuse import fuse
 from pipeline.maritime.identity import identify
-from pipeline.maritime.integrity import check_channels
+from pipeline.maritime.integrity import IntegrityResult, check_channels, site_positions_enu
 from pipeline.maritime.reference import reconstruct, truth_reference
-from pipeline.maritime.registration import register
+from pipeline.maritime.registration import (
+    Estimate,
+    Registration,
+    as_reported,
+    correct_reports,
+    register,
+)
 from pipeline.maritime.score import pair_with_truth, score_tracks
 from pipeline.maritime.siap import siap_by_sector
 from pipeline.maritime.stitch import (
@@ -116,20 +125,19 @@ def stage(tables: Inputs, window: Window, cfg: Config) -> Outputs:
     aligned, unknown = align_reports(tables["radar_tracks"], cfg)
     epochs = epoch_grid(track_start_ns, track_end_ns, mc.sync.epoch_period_s)
     synced = synchronise(aligned, epochs_ns=epochs, sync=mc.sync)
-    associated = associate_tracks(synced, cfg=mc.association)
-    associated = assign_sectors(associated, cfg.sectors, cfg.region)
-    integrity = check_channels(
-        associated, aligned, ais, epochs_ns=epochs, start_ns=track_start_ns, cfg=cfg, mc=mc
-    )
-    associated, fusable = integrity.associations, integrity.associations
-    registration = pl.DataFrame()
-    if mc.registration.enabled:
-        reg = register(associated, integrity.evidence, mc.registration,
-                       radar_q=mc.integrity.radar_q, outlier_q=mc.integrity.outlier_q,
-                       epoch_period_s=mc.sync.epoch_period_s,
-                       sites=[s.site_id for s in cfg.radar_sites],
-                       sector_names=[s.name for s in cfg.sectors])
-        associated, fusable, registration = reg.associations, reg.corrected, reg.table
+    # the channels' health is tested on the reports as reported (the first pass)
+    associated, fusable, integrity, reg = _tracked(synced, aligned, ais, epochs,
+                                                   track_start_ns, cfg)
+    if reg is not None and reg.estimate.applied.any():
+        # the second pass: the reports corrected where a registration is applied, so the
+        # corrected radar's tracks associate with the other radars' (no duplicate born);
+        # its integrity test decides which radar rows are fused
+        sites = [s.site_id for s in cfg.radar_sites]
+        synced = correct_reports(synced, reg.estimate, site_positions_enu(cfg), sites)
+        associated, fusable, _, reg = _tracked(synced, aligned, ais, epochs, track_start_ns,
+                                               cfg, reg.estimate)
+        associated = as_reported(associated)
+    registration = reg.table if reg is not None else pl.DataFrame()
     fused = fuse(fusable.filter(pl.col("used")))
     fused = add_geodetic(fused, cfg.region)
     fused = assign_sectors(fused, cfg.sectors, cfg.region)
@@ -185,6 +193,29 @@ def stage(tables: Inputs, window: Window, cfg: Config) -> Outputs:
         LEAD_ASSOCIATIONS: lead.select("time_ns", "site_id", "local_track_id",
                                        "system_track_id"),
     }
+
+
+def _tracked(synced: pl.DataFrame, aligned: pl.DataFrame, ais: pl.DataFrame, epochs,
+             start_ns: int, cfg: Config, corrected_by: Estimate | None = None
+             ) -> tuple[pl.DataFrame, pl.DataFrame, IntegrityResult, Registration | None]:
+    """Association, integrity and registration of the synchronised reports: (associations
+    with ``used`` as fused, the rows to fuse as corrected, the integrity's result, the
+    registration or None when ``[registration]`` is off). ``corrected_by``: the estimate
+    ``synced`` was corrected by (:func:`~pipeline.maritime.registration.register`)."""
+    mc = maritime_config(cfg)
+    associated = associate_tracks(synced, cfg=mc.association)
+    associated = assign_sectors(associated, cfg.sectors, cfg.region)
+    integrity = check_channels(
+        associated, aligned, ais, epochs_ns=epochs, start_ns=start_ns, cfg=cfg, mc=mc
+    )
+    if not mc.registration.enabled:
+        return integrity.associations, integrity.associations, integrity, None
+    reg = register(integrity.associations, integrity.evidence, mc.registration,
+                   radar_q=mc.integrity.radar_q, outlier_q=mc.integrity.outlier_q,
+                   epoch_period_s=mc.sync.epoch_period_s,
+                   sites=[s.site_id for s in cfg.radar_sites],
+                   sector_names=[s.name for s in cfg.sectors], corrected_by=corrected_by)
+    return reg.associations, reg.corrected, integrity, reg
 
 
 def _detection(aligned: pl.DataFrame, associations: pl.DataFrame, errors: pl.DataFrame,

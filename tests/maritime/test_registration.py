@@ -107,6 +107,29 @@ def test_range_bias_estimate_within_its_interval(range_bias):
     assert before["registration_applied"].mean() < 0.1
 
 
+def _duplicates(out, t0_s: float, t1_s: float) -> int:
+    """(epoch, ship) pairs followed by more than one fused system track."""
+    e = out["track_errors"].filter(
+        (pl.col("source") == "fused") & (pl.col("reference") == "truth")
+        & pl.col("time_ns").is_between(DEFAULT_START_NS + round(t0_s * NS),
+                                       DEFAULT_START_NS + round(t1_s * NS), closed="left"))
+    per = e.group_by("time_ns", "reference_id").agg(pl.col("system_track_id").n_unique())
+    return int((per["system_track_id"] > 1).sum())
+
+
+def test_range_bias_corrected_before_the_association_births_no_duplicate(range_bias, clean):
+    # the corrected radar's tracks associate with the other radar's: a ship followed by
+    # one fused track during the bias, as in the clean scene (a second track per ship
+    # in 112 of ~830 (epoch, ship) pairs when the association ran on the raw reports)
+    t0, t1 = FAULT[0] + 40.0, FAULT[0] + FAULT[1]
+    assert _duplicates(range_bias[True], t0, t1) <= _duplicates(clean[True], t0, t1) + 2
+    # the channel's health still says R2 is in fault (tested on the reports as reported)
+    h = range_bias[True]["maritime_channel_health"].filter(
+        (pl.col("channel") == "R2") & pl.col("time_ns").is_between(
+            DEFAULT_START_NS + round(t0 * NS), DEFAULT_START_NS + round(t1 * NS)))
+    assert h["excluded"].mean() > 0.5
+
+
 def test_clean_scene_not_worse(clean):
     off, on = _fused(clean[False], 0.0, DURATION_S), _fused(clean[True], 0.0, DURATION_S)
     assert _rms(on) <= _rms(off) * 1.01, (_rms(on), _rms(off))

@@ -51,9 +51,12 @@ def test_units_cut_inside_faults_give_the_one_pass_rows(scenario):
     cut = batch_by_units(scenario, CUTS_S)
     assert one["maritime_channel_health"]["eta"].sum() > 0  # faults were detected
     assert one["system_tracks"]["mmsi"].is_not_null().mean() > 0.5
-    # registration corrected the faulted radars and fused them again (issue 38)
-    reg = one["sensor_registration"]
-    assert reg["registration_applied"].any() and reg["readmitted"].any()
+    # registration corrected the faulted radars and fused them (issue 38): corrected
+    # before the association (the second pass), they pass the integrity test
+    applied = (one["sensor_registration"].filter("registration_applied")
+               .select("time_ns", "site_id").unique())
+    assert applied.height and one["associations"].join(
+        applied, on=["time_ns", "site_id"])["used"].mean() > 0.5
     for name in PER_EPOCH:
         a, b = (t.sort(t.columns) for t in (cut[name], one[name]))
         try:
