@@ -49,6 +49,30 @@ FAMILY_SECTIONS: tuple[ConfigSection, ...] = (
 as its ``Family``'s; a test checks)."""
 
 
+@dataclass(frozen=True)
+class FamilyDeclaration:
+    """What reading a warehouse's provenance needs of a family, without importing its
+    stage (``surveil report`` and the audit name the config digests behind the rows):
+    the core config fields its stage reads and the tables it writes (the same as its
+    ``Family``'s; a test checks)."""
+
+    name: str
+    config_fields: tuple[str, ...]
+    outputs: tuple[str, ...]
+
+
+FAMILY_DECLARATIONS: tuple[FamilyDeclaration, ...] = (
+    FamilyDeclaration("maritime", ("region", "radar_sites", "ais", "fairway_legs", "sectors"),
+                      ("associations", "system_tracks", "identifications", "track_errors",
+                       "reference_tracks", "siap_by_sector", "cross_track_by_leg",
+                       "radar_detection", "maritime_channel_health", "sensor_registration")),
+    FamilyDeclaration("airfield", (), ("airfield_tracks", "channel_health",
+                                       "airfield_reference")),
+    FamilyDeclaration("gaps", ("region", "ais", "sectors"), ("gap_forecasts",)),
+    FamilyDeclaration("nav", ("region", "sectors"), ("nav_solution", "nav_outages")),
+)
+
+
 def _families() -> tuple[Family, ...]:
     if "FAMILIES" not in globals():
         globals()["FAMILIES"] = tuple(importlib.import_module(m).FAMILY for m in _STAGES)

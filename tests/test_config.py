@@ -481,6 +481,28 @@ def test_loading_a_config_imports_no_stage():
     assert out.stdout.strip() == "[]", out.stdout
 
 
+def test_family_declarations_are_the_families_own():
+    """Provenance reads FAMILY_DECLARATIONS (no stage imported): the same names, core
+    config fields and output tables as FAMILIES, in the same order."""
+    from pipeline.families import FAMILY_DECLARATIONS
+
+    assert [(d.name, d.config_fields, d.outputs) for d in FAMILY_DECLARATIONS] == [
+        (f.name, f.config_fields, f.outputs) for f in FAMILIES]
+
+
+def test_a_report_imports_no_stage(e2e):
+    """`surveil report` (with its provenance lines) imports no family's stage: ~0.8 s of
+    every report command before (the stages pull in scipy and the batch's kernels)."""
+    code = ("import sys; from jobs.cli import main; sys.argv = ['surveil', '--warehouse', "
+            f"{str(e2e.warehouse)!r}, 'report', 'accuracy_by_sector', '--format', 'csv']\n"
+            "try:\n    main()\nexcept SystemExit:\n    pass\n"
+            "print(sorted(m for m in sys.modules if m.endswith('.stage')), file=sys.stderr)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True, cwd=REPO)
+    assert "config digest" in out.stderr and "fused" in out.stdout
+    assert out.stderr.strip().splitlines()[-1] == "[]", out.stderr
+
+
 def test_the_documented_template_checks(monkeypatch, capsys):
     """config/site-template.toml (every section optional, commented) is a valid site."""
     code, out, err = surveil(monkeypatch, capsys, "config", "check",

@@ -36,20 +36,28 @@ pending). Each guarantee is kept in one module:
 The walk of one unit: docs/architecture.md, "One batch unit, from plan to commit".
 """
 
-from pipeline.batch.driver import resume_continuations, run_batch, run_site
-from pipeline.batch.summary import BatchSummary, SitesSummary
-from pipeline.batch.worker import BatchUnit, UnitManifest, read_inputs, run_unit
-from pipeline.warehouse.sites import sites_in
+import importlib
+from typing import Any
 
-__all__ = [
-    "BatchSummary",
-    "BatchUnit",
-    "SitesSummary",
-    "UnitManifest",
-    "read_inputs",
-    "resume_continuations",
-    "run_batch",
-    "run_site",
-    "run_unit",
-    "sites_in",
-]
+_EXPORTS = {
+    "BatchSummary": "pipeline.batch.summary",
+    "BatchUnit": "pipeline.batch.worker",
+    "SitesSummary": "pipeline.batch.summary",
+    "UnitManifest": "pipeline.batch.worker",
+    "read_inputs": "pipeline.batch.worker",
+    "resume_continuations": "pipeline.batch.driver",
+    "run_batch": "pipeline.batch.driver",
+    "run_site": "pipeline.batch.driver",
+    "run_unit": "pipeline.batch.worker",
+    "sites_in": "pipeline.warehouse.sites",
+}
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str) -> Any:
+    """The kernel's entry points, imported on first use (PEP 562): a command that reads
+    one module of the package (``surveil report``: :mod:`~pipeline.batch.provenance`)
+    does not import the batch's driver and every family's stage with it."""
+    if name in _EXPORTS:
+        return getattr(importlib.import_module(_EXPORTS[name]), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -30,7 +30,7 @@ import numpy as np
 import polars as pl
 
 from pipeline.config import Config
-from pipeline.families import FAMILIES
+from pipeline.families import FAMILY_DECLARATIONS, FamilyDeclaration
 from pipeline.family import Family
 from pipeline.units import iso
 from pipeline.warehouse.delta import read_table
@@ -58,7 +58,7 @@ def _canonical(value: Any) -> Any:
     return value
 
 
-def family_digest(cfg: Config, fam: Family) -> str:
+def family_digest(cfg: Config, fam: Family | FamilyDeclaration) -> str:
     """Digest (16 hex characters of SHA-256) of what ``fam`` reads of ``cfg``: the core
     fields it declares (``fam.config_fields``) and its own parsed sections."""
     doc = {"family": fam.name,
@@ -68,9 +68,11 @@ def family_digest(cfg: Config, fam: Family) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:DIGEST_CHARS]
 
 
-def current_digests(cfg: Config, families: Iterable[Family] = ()) -> dict[str, str]:
-    """{family: digest} of ``cfg`` for ``families`` (default: every registered one)."""
-    return {f.name: family_digest(cfg, f) for f in (tuple(families) or FAMILIES)}
+def current_digests(cfg: Config, families: Iterable[Family | FamilyDeclaration] = ()
+                    ) -> dict[str, str]:
+    """{family: digest} of ``cfg`` for ``families`` (default: every registered one, by
+    its declaration: no stage imported)."""
+    return {f.name: family_digest(cfg, f) for f in (tuple(families) or FAMILY_DECLARATIONS)}
 
 
 def _units(warehouse: Path, site: str | None = None) -> pl.DataFrame:
@@ -109,7 +111,7 @@ def window_digests(warehouse: Path, start_ns: int, end_ns: int, site: str | None
 def families_of(tables: Iterable[str]) -> list[str]:
     """The families owning any of ``tables`` (derived tables; raw ones own none)."""
     names = set(tables)
-    return [f.name for f in FAMILIES if names & set(f.outputs)]
+    return [f.name for f in FAMILY_DECLARATIONS if names & set(f.outputs)]
 
 
 def provenance_lines(digests: pl.DataFrame, cfg: Config) -> tuple[list[str], list[str]]:
