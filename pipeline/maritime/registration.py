@@ -387,6 +387,24 @@ def correct_reports(synced: pl.DataFrame, est: Estimate, site_xy: np.ndarray,
     return _correct(kept, H, est.theta_used[k, c], est.cov_used[k, c], np.ones(k.size))
 
 
+SECOND_PASS_SIGMA = 1.0
+"""A correction moves a report when it shifts it by more than this many of its own
+position sigmas (Mahalanobis distance): less cannot take a report out of its track's
+association gate (chi2_2(0.999), ~3.7 sigma), so no duplicate can be born of it."""
+
+
+def moves_a_report(synced: pl.DataFrame, corrected: pl.DataFrame) -> bool:
+    """Whether :func:`correct_reports` shifted any report by more than
+    :data:`SECOND_PASS_SIGMA` of its own position covariance (the stage then runs the
+    association again on the corrected reports; else the first pass's association
+    stands and only the fusion takes the corrected reports)."""
+    dx = (corrected["x_enu_m"] - synced["x_enu_m"]).to_numpy()
+    dy = (corrected["y_enu_m"] - synced["y_enu_m"]).to_numpy()
+    a, b, c = (synced[k].to_numpy() for k in ("P_xx", "P_xy", "P_yy"))
+    d2 = (c * dx * dx - 2.0 * b * dx * dy + a * dy * dy) / (a * c - b * b)
+    return bool(np.any(d2 > SECOND_PASS_SIGMA**2))
+
+
 def as_reported(associations: pl.DataFrame) -> pl.DataFrame:
     """Rows of reports corrected by :func:`correct_reports` with their positions and
     covariances as reported again (the ``reported_*`` columns dropped)."""

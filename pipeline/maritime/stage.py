@@ -46,6 +46,7 @@ from pipeline.maritime.registration import (
     Registration,
     as_reported,
     correct_reports,
+    moves_a_report,
     register,
 )
 from pipeline.maritime.score import pair_with_truth, score_tracks
@@ -129,14 +130,15 @@ def stage(tables: Inputs, window: Window, cfg: Config) -> Outputs:
     associated, fusable, integrity, reg = _tracked(synced, aligned, ais, epochs,
                                                    track_start_ns, cfg)
     if reg is not None and reg.estimate.applied.any():
-        # the second pass: the reports corrected where a registration is applied, so the
-        # corrected radar's tracks associate with the other radars' (no duplicate born);
-        # its integrity test decides which radar rows are fused
         sites = [s.site_id for s in cfg.radar_sites]
-        synced = correct_reports(synced, reg.estimate, site_positions_enu(cfg), sites)
-        associated, fusable, _, reg = _tracked(synced, aligned, ais, epochs, track_start_ns,
-                                               cfg, reg.estimate)
-        associated = as_reported(associated)
+        corrected = correct_reports(synced, reg.estimate, site_positions_enu(cfg), sites)
+        if moves_a_report(synced, corrected):
+            # the second pass: the reports corrected where a registration moves them, so
+            # the corrected radar's tracks associate with the other radars' (no
+            # duplicate born); its integrity test decides which radar rows are fused
+            associated, fusable, _, reg = _tracked(corrected, aligned, ais, epochs,
+                                                   track_start_ns, cfg, reg.estimate)
+            associated = as_reported(associated)
     registration = reg.table if reg is not None else pl.DataFrame()
     fused = fuse(fusable.filter(pl.col("used")))
     fused = add_geodetic(fused, cfg.region)

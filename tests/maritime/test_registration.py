@@ -174,3 +174,19 @@ def test_degraded_radar_down_weighted_by_its_estimated_accuracy(world):
     # the healthy radar keeps its sigmas
     r2 = out[True]["sensor_registration"].filter((pl.col("site_id") == "R2") & during)
     assert r2["scale_applied"].mean() < 0.2
+
+
+def test_a_correction_within_a_sigma_moves_no_report():
+    """The second pass (association again) runs only where a correction shifts a report
+    by more than one sigma of its own position: a 3 m correction of a 15 m report cannot
+    take it out of its track's gate."""
+    import polars as pl
+
+    from pipeline.maritime.registration import moves_a_report
+
+    synced = pl.DataFrame({"x_enu_m": [0.0, 100.0], "y_enu_m": [0.0, 0.0],
+                           "P_xx": [225.0, 225.0], "P_yy": [900.0, 900.0], "P_xy": [0.0, 0.0]})
+    small = synced.with_columns(pl.col("x_enu_m") - 3.0, pl.col("y_enu_m") + 20.0)
+    large = synced.with_columns(pl.col("x_enu_m") - pl.Series([0.0, 16.0]))
+    assert not moves_a_report(synced, small)
+    assert moves_a_report(synced, large)
