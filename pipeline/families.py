@@ -19,13 +19,18 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from pipeline import config as _config
+from pipeline.airfield.config import DECLARATION as AIRFIELD_DECLARATION
 from pipeline.airfield.config import parse_airfield
 from pipeline.config import Config
 from pipeline.configspec import Document
 from pipeline.convert.config import IMPORT_SECTION
+from pipeline.family import FamilyDeclaration
+from pipeline.gaps.config import DECLARATION as GAPS_DECLARATION
 from pipeline.gaps.config import parse_gaps
+from pipeline.maritime.config import DECLARATION as MARITIME_DECLARATION
 from pipeline.maritime.config import SECTIONS as MARITIME_SECTIONS
 from pipeline.maritime.config import parse_maritime
+from pipeline.nav.config import DECLARATION as NAV_DECLARATION
 from pipeline.nav.config import parse_ownship
 from pipeline.reports import REPORTS_SECTION
 from pipeline.requirements import REQUIREMENTS_SECTION, ConfigSection
@@ -49,28 +54,10 @@ FAMILY_SECTIONS: tuple[ConfigSection, ...] = (
 as its ``Family``'s; a test checks)."""
 
 
-@dataclass(frozen=True)
-class FamilyDeclaration:
-    """What reading a warehouse's provenance needs of a family, without importing its
-    stage (``surveil report`` and the audit name the config digests behind the rows):
-    the core config fields its stage reads and the tables it writes (the same as its
-    ``Family``'s; a test checks)."""
-
-    name: str
-    config_fields: tuple[str, ...]
-    outputs: tuple[str, ...]
-
-
 FAMILY_DECLARATIONS: tuple[FamilyDeclaration, ...] = (
-    FamilyDeclaration("maritime", ("region", "radar_sites", "ais", "fairway_legs", "sectors"),
-                      ("associations", "system_tracks", "identifications", "track_errors",
-                       "reference_tracks", "siap_by_sector", "cross_track_by_leg",
-                       "radar_detection", "maritime_channel_health", "sensor_registration")),
-    FamilyDeclaration("airfield", (), ("airfield_tracks", "channel_health",
-                                       "airfield_reference")),
-    FamilyDeclaration("gaps", ("region", "ais", "sectors"), ("gap_forecasts",)),
-    FamilyDeclaration("nav", ("region", "sectors"), ("nav_solution", "nav_outages")),
-)
+    MARITIME_DECLARATION, AIRFIELD_DECLARATION, GAPS_DECLARATION, NAV_DECLARATION)
+"""Each family's declaration (its config module's ``DECLARATION``), in ``FAMILIES``'
+order: what provenance reads without importing a stage."""
 
 
 def _families() -> tuple[Family, ...]:

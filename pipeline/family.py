@@ -109,6 +109,18 @@ def relabel(frame: pl.DataFrame, mapping: Relabel) -> pl.DataFrame:
 
 
 @dataclass(frozen=True)
+class FamilyDeclaration:
+    """What reading a warehouse's provenance needs of a family, without importing its
+    stage (``surveil report`` and the audit name the config digests behind the rows):
+    the core config fields its stage reads and the tables it writes. Declared in the
+    family's config module; its ``Family`` takes both from there."""
+
+    name: str
+    config_fields: tuple[str, ...]
+    outputs: tuple[str, ...]
+
+
+@dataclass(frozen=True)
 class Family:
     """A sensor family as the batch sees it (see the module docstring)."""
 

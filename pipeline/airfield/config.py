@@ -27,6 +27,7 @@ from pipeline.configspec import (
     setting,
     text,
 )
+from pipeline.family import FamilyDeclaration
 from pipeline.filters.ar_errors import VarModel, is_stable
 
 SENSOR_KINDS = ("smr", "mlat", "vasn")
@@ -248,3 +249,8 @@ def airfield_config(cfg: Config) -> AirfieldConfig:
     if acfg is None:
         raise ConfigError(f"config {cfg.source or ''} has no [airfield] section")
     return acfg
+
+
+# what the family's stage reads of the core config (nothing), and the tables it writes
+DECLARATION = FamilyDeclaration("airfield", (), ("airfield_tracks", "channel_health",
+                                                 "airfield_reference"))

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import polars as pl
 
 from pipeline.airfield.calibrate import calibrate, stored_models
-from pipeline.airfield.config import SENSOR_KINDS, AirfieldConfig, parse_airfield
+from pipeline.airfield.config import DECLARATION, SENSOR_KINDS, AirfieldConfig, parse_airfield
 from pipeline.airfield.frames import config_sensor_id, sensor_rows, to_common_frame
 from pipeline.airfield.fusion import fuse_airfield_run
 from pipeline.airfield.reference import empty_reference, smooth
@@ -30,7 +30,7 @@ log = logging.getLogger(__name__)
 
 LEAD_IN_S = 120
 UNIT_S = 3600
-OUTPUTS = ("airfield_tracks", "channel_health", "airfield_reference")
+OUTPUTS = DECLARATION.outputs  # the tables the stage writes (its config module)
 
 
 def target_reports(obs: pl.DataFrame) -> pl.DataFrame:
@@ -144,7 +144,7 @@ FAMILY = Family(
     outputs=OUTPUTS,
     stage=stage,
     unit_s=UNIT_S,
-    config_fields=(),  # what its stage reads of the core config
+    config_fields=DECLARATION.config_fields,
 )
 
 

@@ -30,8 +30,8 @@ import numpy as np
 import polars as pl
 
 from pipeline.config import Config
-from pipeline.families import FAMILY_DECLARATIONS, FamilyDeclaration
-from pipeline.family import Family
+from pipeline.families import FAMILY_DECLARATIONS
+from pipeline.family import Family, FamilyDeclaration
 from pipeline.units import iso
 from pipeline.warehouse.delta import read_table
 

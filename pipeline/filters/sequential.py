@@ -85,11 +85,15 @@ def held_decision(s: np.ndarray, segment_start: np.ndarray, lo: float, hi: float
     if s.size == 0:
         return np.empty(0, dtype=bool)
     start = np.asarray(segment_start, dtype=bool)
-    up = s >= hi - BOUNDARY_TOLERANCE
-    down = s <= lo + BOUNDARY_TOLERANCE
+    up, down = _touches(s, lo, hi)
     rows = np.arange(s.size)
     last = np.maximum.accumulate(np.where(up | down | start, rows, 0))
     return up[last]
+
+
+def _touches(s: np.ndarray, lo: float, hi: float) -> tuple[np.ndarray, np.ndarray]:
+    """(rows at ``hi``, rows at ``lo``) of the held sum, within the boundary tolerance."""
+    return s >= hi - BOUNDARY_TOLERANCE, s <= lo + BOUNDARY_TOLERANCE
 
 
 def fixed_lag_decision(s: np.ndarray, segment_start: np.ndarray, lo: float, hi: float,
@@ -107,8 +111,8 @@ def fixed_lag_decision(s: np.ndarray, segment_start: np.ndarray, lo: float, hi: 
         return causal
     s = np.asarray(s, dtype=float)
     t = np.asarray(time_ns, dtype=np.int64)
-    up = s >= hi - BOUNDARY_TOLERANCE
-    touch = up | (s <= lo + BOUNDARY_TOLERANCE)
+    up, down = _touches(s, lo, hi)
+    touch = up | down
     rows = np.arange(s.size)
     segment = np.cumsum(np.asarray(segment_start, dtype=bool))
     nxt = np.minimum.accumulate(np.where(touch, rows, s.size)[::-1])[::-1]

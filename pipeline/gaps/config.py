@@ -9,6 +9,7 @@ from dataclasses import dataclass, replace
 
 from pipeline.config import Config
 from pipeline.configspec import Document, count, polygon, positive, probability, setting
+from pipeline.family import FamilyDeclaration
 from pipeline.filters import particle as pf
 
 
@@ -106,3 +107,7 @@ def parse_gaps(doc: Document, core: Config | None = None) -> GapsConfig | None:
                       for i, p in enumerate(getattr(g, k)))
              for k in ("admissible", "islands", "zones")}
     return replace(g, **named)
+
+
+# what the family's stage reads of the core config, and the tables it writes
+DECLARATION = FamilyDeclaration("gaps", ("region", "ais", "sectors"), ("gap_forecasts",))

@@ -24,11 +24,11 @@ import numpy as np
 
 from pipeline.config import Config
 from pipeline.family import Family, Inputs, Outputs, TableInput, Window
-from pipeline.gaps.config import gaps_config, parse_gaps
+from pipeline.gaps.config import DECLARATION, gaps_config, parse_gaps
 from pipeline.gaps.forecast import forecast_gaps
 from pipeline.units import NS
 
-OUTPUTS = ("gap_forecasts",)
+OUTPUTS = DECLARATION.outputs  # the tables the stage writes (its config module)
 
 AIS_COLUMNS = ("time_ns", "mmsi", "ais_class", "lat_deg", "lon_deg", "sog_mps", "cog_rad")
 TRACK_COLUMNS = (
@@ -83,5 +83,5 @@ FAMILY = Family(
     # hourly units: each reads its own lookback and horizon (inputs), so a day is not
     # one worker holding a day of fused tracks (~2.6 GB for a 1,000-ship region day)
     unit_s=3600,
-    config_fields=("region", "ais", "sectors"),  # what its stage reads of the core config
+    config_fields=DECLARATION.config_fields,
 )

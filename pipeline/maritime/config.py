@@ -27,6 +27,7 @@ from pipeline.configspec import (
     probability,
     setting,
 )
+from pipeline.family import FamilyDeclaration
 
 SHIP_SPEED_WHY = "a ship sails at most ~25 m/s (50 kn): 50 m/s is no ship's speed"
 TIMEOUT_WHY = ("a track coasts for a few scans to minutes; a timeout beyond an hour keeps "
@@ -405,3 +406,14 @@ def parse_maritime(doc: Document, core: Config | None) -> MaritimeConfig | None:
                                                                       "start")):
                 doc.problem(("channel_faults", i), "ais_spoof needs mmsi and start = [lat, lon]")
     return m
+
+
+# what the family's stage reads of the core config, and the tables it writes (its
+# ``Family`` takes both from here; provenance reads them without importing the stage):
+# the fused picture, the audit tables (SIAP against truth, cross-track error per leg,
+# detection), channel integrity (issue 22), online registration (issue 38)
+DECLARATION = FamilyDeclaration(
+    "maritime", ("region", "radar_sites", "ais", "fairway_legs", "sectors"),
+    ("associations", "system_tracks", "identifications", "track_errors", "reference_tracks",
+     "siap_by_sector", "cross_track_by_leg", "radar_detection", "maritime_channel_health",
+     "sensor_registration"))

@@ -34,7 +34,7 @@ from pipeline.family import Family, Inputs, Outputs, TableInput, Window
 from pipeline.geometry import add_geodetic, assign_sectors, cross_track
 from pipeline.maritime.align import align_reports
 from pipeline.maritime.associate import associate_tracks
-from pipeline.maritime.config import SECTIONS, maritime_config, parse_maritime
+from pipeline.maritime.config import DECLARATION, SECTIONS, maritime_config, parse_maritime
 from pipeline.maritime.cross_track import cross_track_by_leg
 from pipeline.maritime.evaluate import radar_detection
 from pipeline.maritime.fuse import fuse
@@ -65,15 +65,7 @@ UNIT_REPORTS = 300_000
 """Radar reports per work unit at most (about): ~2.5 KB of worker memory per report
 read (docs/scale.md), so a unit stays well under 2 GB at any traffic density."""
 
-DERIVED_TABLES = ("associations", "system_tracks", "identifications", "track_errors",
-                  "reference_tracks")
-# maritime audit tables (docs/maritime.md): SIAP against truth, cross-track error per leg
-AUDIT_TABLES = ("siap_by_sector", "cross_track_by_leg", "radar_detection")
-# channel integrity (issue 22): every radar per sector and every AIS transponder
-INTEGRITY_TABLES = ("maritime_channel_health",)
-# online registration and estimated accuracy of each radar (issue 38)
-REGISTRATION_TABLES = ("sensor_registration",)
-OUTPUTS = DERIVED_TABLES + AUDIT_TABLES + INTEGRITY_TABLES + REGISTRATION_TABLES
+OUTPUTS = DECLARATION.outputs  # the tables the stage writes (pipeline.maritime.config)
 
 
 def continuity_margins_s(cfg: Config) -> tuple[float, float]:
@@ -266,6 +258,7 @@ FAMILY = Family(
     inputs=inputs,
     outputs=OUTPUTS,
     stage=stage,
+    config_fields=DECLARATION.config_fields,
     unit_s=3600,
     unit_rows=UNIT_REPORTS,
     unit_table="radar_tracks",

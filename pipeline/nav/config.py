@@ -20,6 +20,7 @@ from pipeline.configspec import (
     setting,
     text,
 )
+from pipeline.family import FamilyDeclaration
 from pipeline.filters.current_log import CurrentLogSettings
 from pipeline.filters.gyro_gnss_log import FilterSettings, GyroModel, NavFilterModel, RollModel
 
@@ -204,3 +205,7 @@ def parse_ownship(doc: Document, core: Config | None = None) -> OwnshipConfig | 
         roll=roll,
     )
     return OwnshipConfig(nav, NavFilterModel(gyro, roll, settings), current, scenario)
+
+
+# what the family's stage reads of the core config, and the tables it writes
+DECLARATION = FamilyDeclaration("nav", ("region", "sectors"), ("nav_solution", "nav_outages"))

@@ -12,10 +12,10 @@ from __future__ import annotations
 
 from pipeline.config import Config
 from pipeline.family import Family, Inputs, Outputs, TableInput, Window
-from pipeline.nav.config import ownship_config, parse_ownship
+from pipeline.nav.config import DECLARATION, ownship_config, parse_ownship
 from pipeline.nav.solution import nav_window
 
-OUTPUTS = ("nav_solution", "nav_outages")
+OUTPUTS = DECLARATION.outputs  # the tables the stage writes (its config module)
 
 GNSS_COLUMNS = ("time_ns", "platform_id", "lat_deg", "lon_deg", "fix_quality", "fix_valid",
                 "sog_mps", "cog_rad")
@@ -54,5 +54,5 @@ FAMILY = Family(
     outputs=OUTPUTS,
     stage=stage,
     unit_s=None,
-    config_fields=("region", "sectors"),  # what its stage reads of the core config
+    config_fields=DECLARATION.config_fields,
 )
