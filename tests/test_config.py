@@ -491,12 +491,14 @@ def test_family_declarations_are_the_families_own():
 
 
 def test_a_report_imports_no_stage(e2e):
-    """`surveil report` (with its provenance lines) imports no family's stage: ~0.8 s of
-    every report command before (the stages pull in scipy and the batch's kernels)."""
+    """`surveil report` (with its provenance lines) imports no family's stage, nor scipy:
+    ~0.8 s of every report command before (the stages pull in scipy and the batch's
+    kernels), and ~0.3 s more for scipy.linalg through the airfield config's VAR model."""
     code = ("import sys; from jobs.cli import main; sys.argv = ['surveil', '--warehouse', "
             f"{str(e2e.warehouse)!r}, 'report', 'accuracy_by_sector', '--format', 'csv']\n"
             "try:\n    main()\nexcept SystemExit:\n    pass\n"
-            "print(sorted(m for m in sys.modules if m.endswith('.stage')), file=sys.stderr)")
+            "print(sorted(m for m in sys.modules if m.endswith('.stage') or m == 'scipy'),"
+            " file=sys.stderr)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True, cwd=REPO)
     assert "config digest" in out.stderr and "fused" in out.stdout

@@ -42,7 +42,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import linalg
 
 Z_95 = 1.959963984540054
 
@@ -102,6 +101,10 @@ def stationary_covariance(model: VarModel) -> np.ndarray:
     equation P = A P Aᵀ + G Gᵀ); its top-left (d, d) block is Var Y."""
     if not is_stable(model):
         raise ValueError("VAR model is not stable: no stationary covariance")
+    # scipy imported here, not at module level: the airfield config imports this module,
+    # and a report command (which never solves a Lyapunov equation) should not pay ~0.3 s
+    from scipy import linalg
+
     A, G = companion(model)
     P = linalg.solve_discrete_lyapunov(A, G @ G.T)
     return 0.5 * (P + P.T)
