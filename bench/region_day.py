@@ -89,8 +89,10 @@ class TreeMemory(threading.Thread):
         return total, driver, largest
 
 
-def run(step: str, args: list[str]) -> dict:
-    """Run ``surveil <args>``; wall, CPU of the command and its workers, peak memory."""
+def run(step: str, args: list[str], fatal: bool = True) -> dict:
+    """Run ``surveil <args>``; wall, CPU of the command and its workers, peak memory.
+    A failing step ends the bench, except where ``fatal`` is False (a report): then its
+    error is kept under "failed" and the day's other figures are still printed."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     proc = subprocess.Popen([str(SURVEIL), *args], stdout=subprocess.PIPE,
@@ -102,9 +104,12 @@ def run(step: str, args: list[str]) -> dict:
     mem.stop.set()
     mem.join()
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
-    if proc.returncode != 0:
+    if proc.returncode != 0 and fatal:
         raise SystemExit(f"{step} failed ({proc.returncode}):\n{out[-3000:]}\n{err[-3000:]}")
-    return {"step": step, "wall_s": wall,
+    failed = err.strip().splitlines()[-1][:300] if proc.returncode != 0 and err.strip() else ""
+    print(f"  {step}: {wall:.1f} s wall{' FAILED: ' + failed if proc.returncode else ''}",
+          file=sys.stderr, flush=True)
+    return {"step": step, "wall_s": wall, "failed": failed or None,
             "cpu_s": (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime),
             "peak_rss_mb": mem.peak / 2**20, "peak_driver_mb": mem.peak_driver / 2**20,
             "peak_worker_mb": mem.peak_one / 2**20,
@@ -169,8 +174,8 @@ def main() -> None:
              .splitlines() if ln.strip()]
     probes["reports"] = probe()
     t0 = time.perf_counter()
-    reports = [run(f"report {n}", [*base, "report", n, *window, "--format", "csv"])
-               for n in names]
+    reports = [run(f"report {n}", [*base, "report", n, *window, "--format", "csv"],
+                   fatal=False) for n in names]
     day.append({"step": f"reports ({len(names)})", "wall_s": time.perf_counter() - t0,
                 "cpu_s": sum(r["cpu_s"] for r in reports),
                 "peak_rss_mb": max(r["peak_rss_mb"] for r in reports),
@@ -208,14 +213,18 @@ def main() -> None:
           f"(goal <= 15 min); peak RSS {peak / 1024:.2f} GB (goal <= 4), largest worker "
           f"{max(s['peak_worker_mb'] for s in day) / 1024:.2f} GB (goal <= 2 per worker), "
           f"driver {max(s['peak_driver_mb'] for s in day) / 1024:.2f} GB")
+    for r in reports:
+        if r["failed"]:
+            print(f"{r['step']} failed after {r['wall_s']:.0f} s: {r['failed']}")
     print(f"1-hour reprocess: {reprocess['wall_s']:.0f} s = 1/{total / reprocess['wall_s']:.0f}"
           f" of the day (goal <= 1/20)")
     if a.json:
-        for s in [*steps, *day, reprocess]:
+        for s in [*steps, *day, *reports, reprocess]:
             s.pop("stdout", None)
         Path(a.json).write_text(json.dumps({
             "params": params, "records": records, "ingested": ingested, "derived": batched,
-            "steps": [*steps, *day], "reprocess_1h": reprocess, "day_wall_s": total,
+            "steps": [*steps, *day], "reports": reports, "reprocess_1h": reprocess,
+            "day_wall_s": total,
             "day_peak_rss_mb": peak, "reprocess_fraction_of_day": reprocess["wall_s"] / total,
         }, indent=2))
 
