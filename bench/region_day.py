@@ -106,7 +106,8 @@ def run(step: str, args: list[str], fatal: bool = True) -> dict:
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     if proc.returncode != 0 and fatal:
         raise SystemExit(f"{step} failed ({proc.returncode}):\n{out[-3000:]}\n{err[-3000:]}")
-    failed = err.strip().splitlines()[-1][:300] if proc.returncode != 0 and err.strip() else ""
+    failed = ((err.strip().splitlines() or [f"exit {proc.returncode}"])[-1][:300]
+              if proc.returncode != 0 else "")
     print(f"  {step}: {wall:.1f} s wall{' FAILED: ' + failed if proc.returncode else ''}",
           file=sys.stderr, flush=True)
     return {"step": step, "wall_s": wall, "failed": failed or None,
