@@ -394,9 +394,24 @@ def run_report(
 
 ALL_TIME = (0, 2**63 - 1)
 ROWS_PER_BATCH = 65_536  # rows a streamed report holds at a time
-REPORT_MEMORY = os.environ.get("SURVEIL_REPORT_MEMORY", "2GB")
-"""DuckDB's memory limit for a report: a larger aggregate (``map_tracks`` over a regional
-day: tens of millions of groups) spills to the system's temporary folder."""
+
+
+def _half_the_memory() -> str:
+    """Half the machine's physical memory, at least 2 GiB (2 GiB where it cannot be
+    read). Exact percentiles hold each group's values in memory, which DuckDB cannot
+    spill: a day of a 1,000-ship region's ``track_errors`` (94 M rows) needs ~1.8 GiB
+    for ``error_decomposition``'s two, a week ~13 GiB."""
+    try:
+        total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):
+        total = 0
+    return f"{max(2 * 1024**3, total // 2) // 1024**2}MiB"
+
+
+REPORT_MEMORY = os.environ.get("SURVEIL_REPORT_MEMORY") or _half_the_memory()
+"""DuckDB's memory limit for a report (``SURVEIL_REPORT_MEMORY``, else half the
+machine's memory): a larger aggregate (``map_tracks`` over a regional day: tens of
+millions of groups) spills to the system's temporary folder beyond it."""
 _SPILLS = itertools.count()  # one spill folder per connection (DuckDB names its files alike)
 
 

@@ -11,36 +11,32 @@
 --         $sector (VARCHAR, NULL = every sector), $site (VARCHAR, NULL = every site),
 --         $min_speed_mps (DOUBLE, default 2)
 -- source table: track_errors (written by `surveil batch`)
-WITH pts AS (
-    SELECT site, source, reference, along_track_error_m AS a, reference_speed_mps AS v
-    FROM track_errors
-    WHERE time_ns >= $start_ns
-      AND time_ns < $end_ns
-      AND along_track_error_m IS NOT NULL
-      AND reference_speed_mps >= $min_speed_mps
-      AND (CAST($sector AS VARCHAR) IS NULL OR sector = CAST($sector AS VARCHAR))
-      AND (CAST($site AS VARCHAR) IS NULL OR site = CAST($site AS VARCHAR))
-),
-fit AS (
-    SELECT site, source, reference, count(*) AS n, sum(v * v) AS svv,
-           -sum(a * v) / nullif(sum(v * v), 0) AS latency_s
-    FROM pts
+WITH fit AS (   -- one pass: the slope and, from the same sums, the residual variance
+    SELECT site, source, reference, count(*) AS n, sum(v * v) AS svv, sum(a * v) AS sav,
+           sum(a * a) AS saa
+    FROM (SELECT site, source, reference, along_track_error_m AS a, reference_speed_mps AS v
+          FROM track_errors
+          WHERE time_ns >= $start_ns
+            AND time_ns < $end_ns
+            AND along_track_error_m IS NOT NULL
+            AND reference_speed_mps >= $min_speed_mps
+            AND (CAST($sector AS VARCHAR) IS NULL OR sector = CAST($sector AS VARCHAR))
+            AND (CAST($site AS VARCHAR) IS NULL OR site = CAST($site AS VARCHAR)))
     GROUP BY site, source, reference
 ),
-resid AS (   -- residual variance of a = -latency v + noise
-    SELECT p.site, p.source, p.reference,
-           sum(power(p.a + f.latency_s * p.v, 2)) / nullif(count(*) - 1, 0) AS s2
-    FROM pts AS p JOIN fit AS f USING (site, source, reference)
-    GROUP BY p.site, p.source, p.reference
+est AS (   -- a = -latency v + noise: latency = -sav / svv, residual sum saa - sav^2 / svv
+    SELECT *, -sav / nullif(svv, 0) AS latency_s,
+           greatest(saa - sav * sav / nullif(svv, 0), 0) / nullif(n - 1, 0) AS s2
+    FROM fit
 )
 SELECT
-    f.site::VARCHAR                                          AS site,          -- site (deployment)
-    f.source::VARCHAR                                        AS source,        -- radar site id or 'fused'
-    f.reference::VARCHAR                                     AS reference,     -- truth | reconstructed
-    f.n::BIGINT                                              AS samples,       -- moving points
-    round(f.latency_s, 3)::DOUBLE                            AS latency_s,     -- > 0: positions late
-    round(sqrt(r.s2 / f.svv), 3)::DOUBLE                     AS latency_se_s,  -- standard error
-    round(f.latency_s - 1.96 * sqrt(r.s2 / f.svv), 3)::DOUBLE AS latency_ci_low_s,
-    round(f.latency_s + 1.96 * sqrt(r.s2 / f.svv), 3)::DOUBLE AS latency_ci_high_s
-FROM fit AS f JOIN resid AS r USING (site, source, reference)
+    site::VARCHAR                                          AS site,          -- site (deployment)
+    source::VARCHAR                                        AS source,        -- radar site id or 'fused'
+    reference::VARCHAR                                     AS reference,     -- truth | reconstructed
+    n::BIGINT                                              AS samples,       -- moving points
+    round(latency_s, 3)::DOUBLE                            AS latency_s,     -- > 0: positions late
+    round(sqrt(s2 / svv), 3)::DOUBLE                       AS latency_se_s,  -- standard error
+    round(latency_s - 1.96 * sqrt(s2 / svv), 3)::DOUBLE    AS latency_ci_low_s,
+    round(latency_s + 1.96 * sqrt(s2 / svv), 3)::DOUBLE    AS latency_ci_high_s
+FROM est
 ORDER BY site, reference, (source = 'fused') DESC, source;

@@ -39,3 +39,16 @@ def test_report_on_empty_window_is_empty(e2e, name):
 def test_unknown_report(bad):
     with pytest.raises(UnknownReportError):
         load_report(bad)
+
+
+def test_report_memory_defaults_to_half_the_machine(monkeypatch):
+    """Exact percentiles hold their values: a day-long report needs more than a fixed
+    2 GB, so the default follows the machine (and never goes below 2 GiB)."""
+    import os
+
+    from pipeline.reports import _half_the_memory
+
+    total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    assert _half_the_memory() == f"{max(2 * 1024**3, total // 2) // 1024**2}MiB"
+    monkeypatch.setattr(os, "sysconf", lambda name: (_ for _ in ()).throw(ValueError(name)))
+    assert _half_the_memory() == "2048MiB"
