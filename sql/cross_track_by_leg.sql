@@ -10,7 +10,8 @@
 --         $sector (VARCHAR, NULL = every sector), $site (VARCHAR, NULL = every site)
 -- source table: cross_track_by_leg (written by `surveil batch`)
 WITH pts AS (
-    SELECT *
+    SELECT site, time_ns, system_track_id, leg_id, source, n_sources, cross_track_error_m,
+           rms_error_60s_m, sigma_cross_track_m, aspect_deg, range_m
     FROM cross_track_by_leg
     WHERE time_ns >= $start_ns
       AND time_ns < $end_ns
