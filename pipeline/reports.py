@@ -432,6 +432,7 @@ def open_warehouse(warehouse: Path | Location, threads: int = 2,
                                  "autoinstall_known_extensions": False,
                                  "autoload_known_extensions": False})
     try:
+        con.execute("SET enable_progress_bar = false")  # never into a CSV on stdout
         register_tables(con, warehouse, tables, refuse_damaged=refuse_damaged)
         lock_down(con, write_dir)
     except BaseException:

@@ -41,10 +41,10 @@ h AS (
     WHERE (CAST($sector AS VARCHAR) IS NULL OR sector = CAST($sector AS VARCHAR))
       AND (CAST($site AS VARCHAR) IS NULL OR site = CAST($site AS VARCHAR))
 ),
-gaps AS (   -- time to the previous decision of the same unit
-    SELECT h.*,
-           time_ns - lag(time_ns) OVER (PARTITION BY site, family, sector, channel, unit ORDER BY time_ns) AS dt
+gaps AS (   -- time to the previous decision of the same unit, and whether it excluded
+    SELECT h.*, time_ns - lag(time_ns) OVER w AS dt, lag(excluded) OVER w AS excluded_before
     FROM h
+    WINDOW w AS (PARTITION BY site, family, sector, channel, unit ORDER BY time_ns)
 ),
 step AS (   -- each channel's decision step, ns (median spacing of one unit's decisions)
     SELECT site, family, channel, coalesce(median(dt) FILTER (WHERE dt > 0), 1000000000)::BIGINT AS step_ns
@@ -53,11 +53,9 @@ step AS (   -- each channel's decision step, ns (median spacing of one unit's de
 ),
 marked AS (   -- gaps and islands: an episode starts at an excluded decision after a non-excluded one or a gap
     SELECT g.*, s.step_ns,
-           CASE WHEN excluded AND (
-                    coalesce(NOT lag(excluded) OVER w, TRUE) OR dt > 3 * s.step_ns)
+           CASE WHEN excluded AND (coalesce(NOT excluded_before, TRUE) OR dt > 3 * s.step_ns)
                 THEN 1 ELSE 0 END AS starts
     FROM gaps AS g JOIN step AS s USING (site, family, channel)
-    WINDOW w AS (PARTITION BY g.site, g.family, g.sector, g.channel, g.unit ORDER BY g.time_ns)
 ),
 target_episodes AS (
     SELECT site, family, sector, channel, unit, ep,
