@@ -396,19 +396,30 @@ ALL_TIME = (0, 2**63 - 1)
 ROWS_PER_BATCH = 65_536  # rows a streamed report holds at a time
 
 
-def _half_the_memory() -> str:
-    """Half the machine's physical memory, at least 2 GiB (2 GiB where it cannot be
-    read). Exact percentiles hold each group's values in memory, which DuckDB cannot
-    spill: a day of a 1,000-ship region's ``track_errors`` (94 M rows) needs ~1.8 GiB
-    for ``error_decomposition``'s two, a week ~13 GiB."""
+def machine_memory_bytes() -> int:
+    """The machine's physical memory, or the container's cgroup (v2) limit when lower;
+    0 where neither can be read."""
     try:
         total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
     except (ValueError, OSError, AttributeError):
         total = 0
-    return f"{max(2 * 1024**3, total // 2) // 1024**2}MiB"
+    try:
+        limit = int(Path("/sys/fs/cgroup/memory.max").read_text())  # "max": no limit
+    except (OSError, ValueError):
+        limit = 0
+    return min(total, limit) if total and limit else total or limit
 
 
-REPORT_MEMORY = os.environ.get("SURVEIL_REPORT_MEMORY") or _half_the_memory()
+def half_the_memory(total_bytes: int) -> str:
+    """DuckDB's memory limit for reports: half of ``total_bytes``, at least 2 GiB. Exact
+    percentiles hold each group's values in memory, which DuckDB cannot spill: over a
+    day of a 1,000-ship region (77 M ``track_errors`` rows) ``error_decomposition``'s
+    two need more than 2 GB, over a week ~7-10 GiB (docs/scale.md)."""
+    return f"{max(2 * 1024**3, total_bytes // 2) // 1024**2}MiB"
+
+
+REPORT_MEMORY = (os.environ.get("SURVEIL_REPORT_MEMORY")
+                 or half_the_memory(machine_memory_bytes()))
 """DuckDB's memory limit for a report (``SURVEIL_REPORT_MEMORY``, else half the
 machine's memory): a larger aggregate (``map_tracks`` over a regional day: tens of
 millions of groups) spills to the system's temporary folder beyond it."""

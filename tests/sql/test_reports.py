@@ -41,14 +41,16 @@ def test_unknown_report(bad):
         load_report(bad)
 
 
-def test_report_memory_defaults_to_half_the_machine(monkeypatch):
+def test_report_memory_defaults_to_half_the_machine():
     """Exact percentiles hold their values: a day-long report needs more than a fixed
     2 GB, so the default follows the machine (and never goes below 2 GiB)."""
     import os
 
-    from pipeline.reports import _half_the_memory
+    from pipeline.reports import REPORT_MEMORY, half_the_memory, machine_memory_bytes
 
-    total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
-    assert _half_the_memory() == f"{max(2 * 1024**3, total // 2) // 1024**2}MiB"
-    monkeypatch.setattr(os, "sysconf", lambda name: (_ for _ in ()).throw(ValueError(name)))
-    assert _half_the_memory() == "2048MiB"
+    gib = 1024**3
+    assert half_the_memory(24 * gib) == "12288MiB"
+    assert half_the_memory(3 * gib) == half_the_memory(0) == "2048MiB"
+    assert machine_memory_bytes() > 0  # Linux: sysconf or the cgroup
+    if "SURVEIL_REPORT_MEMORY" not in os.environ:
+        assert half_the_memory(machine_memory_bytes()) == REPORT_MEMORY
