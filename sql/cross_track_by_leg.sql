@@ -9,16 +9,7 @@
 -- params: $start_ns (BIGINT, inclusive), $end_ns (BIGINT, exclusive),
 --         $sector (VARCHAR, NULL = every sector), $site (VARCHAR, NULL = every site)
 -- source table: cross_track_by_leg (written by `surveil batch`)
-WITH pts AS (
-    SELECT site, time_ns, system_track_id, leg_id, source, n_sources, cross_track_error_m,
-           rms_error_60s_m, sigma_cross_track_m, aspect_deg, range_m
-    FROM cross_track_by_leg
-    WHERE time_ns >= $start_ns
-      AND time_ns < $end_ns
-      AND (CAST($sector AS VARCHAR) IS NULL OR sector = CAST($sector AS VARCHAR))
-      AND (CAST($site AS VARCHAR) IS NULL OR site = CAST($site AS VARCHAR))
-),
-best AS (   -- per epoch and track: fused sliding RMS vs the best radar's
+WITH best AS (   -- per epoch and track: fused sliding RMS vs the best radar's
     SELECT
         site,
         leg_id,
@@ -26,7 +17,14 @@ best AS (   -- per epoch and track: fused sliding RMS vs the best radar's
         min(CASE WHEN source <> 'fused' THEN rms_error_60s_m END)  AS best_radar_rms,
         max(CASE WHEN source = 'fused' THEN n_sources END)         AS n_fused,
         count(*) FILTER (WHERE source <> 'fused')                  AS n_radars
-    FROM pts
+    FROM (
+    SELECT site, time_ns, system_track_id, leg_id, source, n_sources, rms_error_60s_m
+    FROM cross_track_by_leg
+    WHERE time_ns >= $start_ns
+      AND time_ns < $end_ns
+      AND (CAST($sector AS VARCHAR) IS NULL OR sector = CAST($sector AS VARCHAR))
+      AND (CAST($site AS VARCHAR) IS NULL OR site = CAST($site AS VARCHAR))
+)
     GROUP BY site, time_ns, system_track_id, leg_id
 ),
 share AS (
@@ -51,7 +49,15 @@ SELECT
     round(max(p.range_m))::DOUBLE                                 AS max_range_m,
     CASE WHEN p.source = 'fused' THEN round(any_value(s.not_worse), 4) END::DOUBLE
                                                                   AS fused_not_worse_share
-FROM pts AS p
+FROM (
+    SELECT site, time_ns, system_track_id, leg_id, source, n_sources, cross_track_error_m,
+           rms_error_60s_m, sigma_cross_track_m, aspect_deg, range_m
+    FROM cross_track_by_leg
+    WHERE time_ns >= $start_ns
+      AND time_ns < $end_ns
+      AND (CAST($sector AS VARCHAR) IS NULL OR sector = CAST($sector AS VARCHAR))
+      AND (CAST($site AS VARCHAR) IS NULL OR site = CAST($site AS VARCHAR))
+) AS p
 LEFT JOIN share AS s USING (site, leg_id)
 GROUP BY p.site, p.leg_id, p.source
 ORDER BY p.site, p.leg_id, (p.source = 'fused') DESC, p.source;
