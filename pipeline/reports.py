@@ -45,6 +45,7 @@ from pipeline.errors import UsageError
 from pipeline.requirements import ConfigSection, RequirementsConfig, requirements_config
 from pipeline.resources import resource_path
 from pipeline.tables import table_specs
+from pipeline.threads import machine_memory_bytes
 from pipeline.warehouse.location import Location
 from pipeline.warehouse.views import lock_down, register_tables
 
@@ -394,20 +395,6 @@ def run_report(
 
 ALL_TIME = (0, 2**63 - 1)
 ROWS_PER_BATCH = 65_536  # rows a streamed report holds at a time
-
-
-def machine_memory_bytes() -> int:
-    """The machine's physical memory, or the container's cgroup (v2) limit when lower;
-    0 where neither can be read."""
-    try:
-        total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
-    except (ValueError, OSError, AttributeError):
-        total = 0
-    try:
-        limit = int(Path("/sys/fs/cgroup/memory.max").read_text())  # "max": no limit
-    except (OSError, ValueError):
-        limit = 0
-    return min(total, limit) if total and limit else total or limit
 
 
 def half_the_memory(total_bytes: int) -> str:

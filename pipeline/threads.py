@@ -1,6 +1,8 @@
-"""Helper threads of a job: niceness per thread (Linux), and pools built with it.
+"""What a job takes of the machine: its helper threads (niceness per thread on Linux, and
+pools built with it) and the memory it may size itself to.
 
-A kernel with no dependencies, used by the decoders, the stager and the ingest job.
+A kernel with no dependencies, used by the decoders, the stager, the ingest job, the
+batch's window planning and the reports.
 """
 
 from __future__ import annotations
@@ -10,6 +12,7 @@ import os
 import sys
 import threading
 from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
 
 # Niceness added to a job's helper threads (initializers of their pools). On two cores the
 # chunk fetch thread (read + zstd, one chunk after another) is the critical path of an
@@ -43,3 +46,17 @@ def helper_pool(workers: int, name: str, nice: int) -> ThreadPoolExecutor:
     """A thread pool whose threads run ``nice`` steps nicer than the thread creating them
     (:func:`lower_thread_priority` as their initializer)."""
     return ThreadPoolExecutor(workers, name, initializer=lower_thread_priority, initargs=(nice,))
+
+
+def machine_memory_bytes() -> int:
+    """The machine's physical memory, or the container's cgroup (v2) limit when lower;
+    0 where neither can be read."""
+    try:
+        total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):
+        total = 0
+    try:
+        limit = int(Path("/sys/fs/cgroup/memory.max").read_text())  # "max": no limit
+    except (OSError, ValueError):
+        limit = 0
+    return min(total, limit) if total and limit else total or limit

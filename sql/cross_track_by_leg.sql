@@ -17,14 +17,15 @@ WITH best AS (   -- per epoch and track: fused sliding RMS vs the best radar's
         min(CASE WHEN source <> 'fused' THEN rms_error_60s_m END)  AS best_radar_rms,
         max(CASE WHEN source = 'fused' THEN n_sources END)         AS n_fused,
         count(*) FILTER (WHERE source <> 'fused')                  AS n_radars
-    FROM (
-    SELECT site, time_ns, system_track_id, leg_id, source, n_sources, rms_error_60s_m
-    FROM cross_track_by_leg
-    WHERE time_ns >= $start_ns
-      AND time_ns < $end_ns
-      AND (CAST($sector AS VARCHAR) IS NULL OR sector = CAST($sector AS VARCHAR))
-      AND (CAST($site AS VARCHAR) IS NULL OR site = CAST($site AS VARCHAR))
-)
+    FROM (   -- each aggregate reads the table itself: a CTE read twice is materialised
+             -- by DuckDB, a day's 49 M rows held in memory (sql/README.md)
+        SELECT site, time_ns, system_track_id, leg_id, source, n_sources, rms_error_60s_m
+        FROM cross_track_by_leg
+        WHERE time_ns >= $start_ns
+          AND time_ns < $end_ns
+          AND (CAST($sector AS VARCHAR) IS NULL OR sector = CAST($sector AS VARCHAR))
+          AND (CAST($site AS VARCHAR) IS NULL OR site = CAST($site AS VARCHAR))
+    )
     GROUP BY site, time_ns, system_track_id, leg_id
 ),
 share AS (

@@ -24,13 +24,13 @@ refuses them.
 from __future__ import annotations
 
 import json
-import os
 from dataclasses import dataclass
 from pathlib import Path
 
 from pipeline.config import Config
 from pipeline.errors import UsageError
 from pipeline.families import FAMILIES
+from pipeline.threads import machine_memory_bytes
 from pipeline.units import iso
 from pipeline.warehouse.delta import read_table
 
@@ -49,13 +49,6 @@ class BoundedWindow:
     start_ns: int
     end_ns: int
     note: str = ""
-
-
-def _memory_total_mb() -> int:
-    try:
-        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") // 2**20
-    except (ValueError, OSError, AttributeError):
-        return 8192
 
 
 def bounded_window(cfg: Config, warehouse: Path, start_ns: int, end_ns: int,
@@ -89,7 +82,7 @@ def bounded_window(cfg: Config, warehouse: Path, start_ns: int, end_ns: int,
         )
     name, peak = largest_unit_rows(cfg, files)
     need_mb = peak * BYTES_PER_ROW_IN_UNIT * ex.max_workers / 2**20
-    budget = ex.memory_budget_mb or int(0.8 * _memory_total_mb())
+    budget = ex.memory_budget_mb or int(0.8 * (machine_memory_bytes() // 2**20 or 8192))
     if need_mb > budget:
         raise UsageError(
             f"the largest work unit of this window ({name}) reads ~{peak:,.0f} raw rows: "

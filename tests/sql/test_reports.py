@@ -46,7 +46,8 @@ def test_report_memory_defaults_to_half_the_machine():
     2 GB, so the default follows the machine (and never goes below 2 GiB)."""
     import os
 
-    from pipeline.reports import REPORT_MEMORY, half_the_memory, machine_memory_bytes
+    from pipeline.reports import REPORT_MEMORY, half_the_memory
+    from pipeline.threads import machine_memory_bytes
 
     gib = 1024**3
     assert half_the_memory(24 * gib) == "12288MiB"
