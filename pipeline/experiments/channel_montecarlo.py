@@ -218,11 +218,13 @@ def _p95(points: pl.DataFrame) -> float:
     return float(np.quantile(v, 0.95)) if v.size else float("nan")
 
 
-def _accuracy(on: dict, off: dict, clean: dict, sites: list[str], t0: int, t1: int
-              ) -> dict[str, float]:
+def _accuracy(on: dict, off: dict, clean: dict, sites: list[str], faulted: str, t0: int,
+              t1: int) -> dict[str, float]:
     """RMS errors during a fault on the same points: the (time, vessel) pairs fused in
     every run (exclusion on, off, fault-free); each fault-free radar alone on those of
-    them it sees, and the best of them."""
+    them it sees, the best of them, and the best of the radars the fault left healthy
+    (the others than ``faulted``: what the fusion still has; whether the faulted radar
+    was the fault-free best, ``faulted_was_best``)."""
     key = ["time_ns", "vessel"]
     f_on = _points(on["track_errors"], "fused", t0, t1)
     f_off = _points(off["track_errors"], "fused", t0, t1)
@@ -230,11 +232,16 @@ def _accuracy(on: dict, off: dict, clean: dict, sites: list[str], t0: int, t1: i
     common = f_on.select(key).join(f_off.select(key), on=key).join(f_clean.select(key), on=key)
     alone = {s: _points(clean["track_errors"], s, t0, t1).join(common, on=key) for s in sites}
     radar = {s: _rms(v) for s, v in alone.items()}
+    p95 = {s: _p95(v) for s, v in alone.items()}
+    healthy = [v for s, v in p95.items() if s != faulted]
+    best = float(np.nanmin(list(p95.values())))
     return {
         "points": common.height,
         "fused_rms_on_m": _rms(f_on.join(common, on=key)),
         "fused_p95_on_m": _p95(f_on.join(common, on=key)),
-        "clean_best_radar_p95_m": float(np.nanmin([_p95(v) for v in alone.values()])),
+        "clean_best_radar_p95_m": best,
+        "healthy_best_radar_p95_m": float(np.nanmin(healthy)) if healthy else float("nan"),
+        "faulted_was_best": faulted in p95 and p95[faulted] == best,
         "fused_rms_off_m": _rms(f_off.join(common, on=key)),
         "clean_fused_rms_m": _rms(f_clean.join(common, on=key)),
         "fused_nees_on": float(f_on.join(common, on=key)["nees"].mean() or np.nan),
@@ -308,7 +315,7 @@ def _fault_rows(cfg: Config, truth: pl.DataFrame, on: dict, off: dict, clean: di
             "delay": delay,
             "detected_within_3": delay is not None and delay <= DETECT_WITHIN,
             "flagged_share_during": float(during["eta"].mean()) if during.height else None,
-            **_accuracy(on, off, clean, sites, t0, t1),
+            **_accuracy(on, off, clean, sites, f["channel"], t0, t1),
             **_registration(on, clean, f),
         })
     return pl.DataFrame(rows)
@@ -459,6 +466,10 @@ def summarise(res: dict[str, pl.DataFrame]) -> pl.DataFrame:
         pl.col("clean_best_radar_p95_m").median().alias("clean_best_radar_p95_m"),
         (pl.col("fused_p95_on_m") <= pl.col("clean_best_radar_p95_m")).mean().alias(
             "share_on_p95_le_best_radar"),
+        pl.col("healthy_best_radar_p95_m").median().alias("healthy_best_radar_p95_m"),
+        (pl.col("fused_p95_on_m") <= pl.col("healthy_best_radar_p95_m")).mean().alias(
+            "share_on_p95_le_healthy_radar"),
+        pl.col("faulted_was_best").mean().alias("share_faulted_was_best"),
         *_identification_shares(f),
         *_registration_shares(f),
     ).with_columns(pl.lit(None, pl.Float64).alias("false_alarm_share"),
