@@ -17,13 +17,13 @@ WITH e AS (
       AND (CAST($site AS VARCHAR) IS NULL OR site = CAST($site AS VARCHAR))
 ),
 cls AS (
-    SELECT site, mmsi, mode(ais_class) AS ais_class
+    SELECT site, mmsi, mode(ais_class ORDER BY ais_class) AS ais_class
     FROM ais_reports
     WHERE time_ns >= $start_ns - 3600000000000 AND time_ns < $end_ns
     GROUP BY site, mmsi
 ),
 typ AS (
-    SELECT site, mmsi, mode(ship_type) AS ship_type
+    SELECT site, mmsi, mode(ship_type ORDER BY ship_type) AS ship_type
     FROM ais_static
     WHERE ship_type IS NOT NULL
     GROUP BY site, mmsi

@@ -173,7 +173,7 @@ other AS (
 senders AS (   -- what each MMSI sent: position reports, base station, AtoN, SAR reports
     SELECT site, mmsi, bool_or(kind = 'position') AS positions, bool_or(kind = 'base_station') AS base,
            bool_or(kind = 'aton') AS aton, bool_or(kind = 'sar_aircraft') AS sar,
-           mode(cls) FILTER (WHERE cls IN ('A', 'B')) AS vessel_class
+           mode(cls ORDER BY cls) FILTER (WHERE cls IN ('A', 'B')) AS vessel_class
     FROM (SELECT site, mmsi, 'position' AS kind, ais_class AS cls FROM pos0
           UNION ALL SELECT site, mmsi, coalesce(ais_class, 'other'), NULL FROM other
           UNION ALL SELECT site, mmsi, 'static', NULL FROM stat) AS s

@@ -30,7 +30,7 @@ k AS (
     FROM s
 ),
 per_track AS (
-    SELECT site, system_track_id, mode(sector) AS sector,
+    SELECT site, system_track_id, mode(sector ORDER BY sector) AS sector,
            max(speed_mps) AS vmax,
            max(abs(accel)) FILTER (WHERE t0 IS NOT NULL AND time_ns > t0) AS amax,
            max(turn) FILTER (WHERE t0 IS NOT NULL AND time_ns > t0) AS tmax

@@ -22,9 +22,9 @@ scored AS (
     WHERE source = 'fused' AND time_ns >= $start_ns AND time_ns < $end_ns
       AND (CAST($site AS VARCHAR) IS NULL OR site = CAST($site AS VARCHAR))
 ),
-kind AS (SELECT site, mode(reference) AS reference FROM scored GROUP BY site),
+kind AS (SELECT site, mode(reference ORDER BY reference) AS reference FROM scored GROUP BY site),
 per_track AS (
-    SELECT s.site, s.system_track_id, mode(s.sector) AS sector, count(*) AS epochs,
+    SELECT s.site, s.system_track_id, mode(s.sector ORDER BY s.sector) AS sector, count(*) AS epochs,
            count(e.time_ns) AS scored_epochs
     FROM st AS s
     LEFT JOIN scored AS e USING (site, time_ns, system_track_id)

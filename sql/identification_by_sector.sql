@@ -33,7 +33,7 @@ WITH fused AS (
       AND (CAST($site AS VARCHAR) IS NULL OR s.site = CAST($site AS VARCHAR))
 ),
 majority AS (
-    SELECT site, system_track_id, mode(mmsi) AS majority_mmsi
+    SELECT site, system_track_id, mode(mmsi ORDER BY mmsi) AS majority_mmsi
     FROM fused
     WHERE mmsi IS NOT NULL
     GROUP BY site, system_track_id

@@ -19,7 +19,7 @@ WITH e AS (
       AND (CAST($site AS VARCHAR) IS NULL OR site = CAST($site AS VARCHAR))
 ),
 fused AS (
-    SELECT site, reference, reference_id, mode(sector) AS sector, count(*) AS fused_points,
+    SELECT site, reference, reference_id, mode(sector ORDER BY sector) AS sector, count(*) AS fused_points,
            sqrt(avg(error_m * error_m)) AS rms, quantile_cont(error_m, 0.95) AS p95,
            max(error_m) AS worst, count(DISTINCT system_track_id) AS system_tracks
     FROM e WHERE source = 'fused'

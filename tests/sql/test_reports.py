@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import re
+
+import duckdb
 import pytest
 
 from jobs.demo import DEMO_REPORTS
@@ -15,6 +18,19 @@ def test_report_header(name):
     assert r.header.get("name") == name
     assert "grain" in r.header and "params" in r.header
     assert "ORDER BY" in r.text.upper()
+    # the same rows on every run: mode() breaks ties by thread timing unless ordered
+    for m in re.finditer(r"\bmode\(([^()]*)\)", r.text, re.IGNORECASE):
+        assert "ORDER BY" in m.group(1).upper(), f"{name}: {m.group(0)} (write mode(x ORDER BY x))"
+
+
+def test_ordered_mode_breaks_ties_by_the_smallest_value():
+    """What the reports rely on (sql/README.md): DuckDB's mode(x ORDER BY x) over many
+    threads and row groups returns the smallest of the tied values."""
+    con = duckdb.connect(config={"threads": 4})
+    got = con.execute(
+        "SELECT g, mode(x ORDER BY x) FROM (SELECT i % 1000 AS g, (i * 7919) % 3 AS x "
+        "FROM range(3000000) t(i)) GROUP BY g ORDER BY g").fetchall()
+    assert {x for _, x in got} == {0}  # each group holds 0, 1, 2 equally often
 
 
 @pytest.mark.parametrize("name", list_reports())
