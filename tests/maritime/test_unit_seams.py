@@ -113,3 +113,40 @@ def test_units_of_a_family_without_a_join_are_finalised_as_each_finishes():
     for k in (2, 0, 1):
         tasks = joiner.ready(UnitManifest("airfield", starts[k], {}))
         assert [(t.manifest.start_ns, t.mapping) for t in tasks] == [(starts[k], None)]
+
+
+def _seam_rows(part: str, rows: list[tuple[int, str | None, int | None, int]]) -> pl.DataFrame:
+    return pl.DataFrame(rows, schema={"time_ns": pl.Int64, "site_id": pl.Utf8,
+                                      "local_track_id": pl.Int64,
+                                      "system_track_id": pl.Int64},
+                        orient="row").with_columns(part=pl.lit(part))
+
+
+def test_a_lead_in_track_continuing_nothing_never_takes_an_id_of_the_unit_before():
+    """Unit k+1's lead-in starts cold: its track B born in the lead-in may get the id
+    unit k gave another ship born in the same ms (the same rank among other births),
+    while its track A continues that very id. Seen on the region day: two ships 44 km
+    apart under one system_track_id at one epoch. B gets an id of its own, born at its
+    first row in the window; A continues P."""
+    birth_ms = 1_768_436_980_000
+    p = birth_ms * 1_000_000 + 1  # unit k's id P; in unit k+1 B's native id is P too
+    a = birth_ms * 1_000_000 + 0
+    t0, t1, first_b = (birth_ms + 20_000) * 1_000_000, (birth_ms + 24_000) * 1_000_000, \
+        (birth_ms + 60_000) * 1_000_000
+    unit_k = _seam_rows("tail", [(t0, "R1", 7, p), (t1, "R1", 7, p)])
+    unit_k1 = pl.concat([
+        _seam_rows("head", [(t0, "R1", 7, a), (t1, "R1", 7, a), (t1, "R3", 2, p)]),
+        _seam_rows("born", [(first_b, None, None, a), (first_b, None, None, p)]),
+    ])
+    maps = join_units([unit_k, unit_k1])
+    assert maps[0] is None
+    relabelled = maps[1]["system_track_id"]
+    assert relabelled[a] == p
+    own = relabelled[p]
+    assert own not in (a, p) and own // 1_000_000 == first_b // 1_000_000
+    assert relabel(unit_k1, maps[1])["system_track_id"].n_unique() == 2
+
+
+def test_cut_units_never_give_two_tracks_one_id_at_one_epoch(scenario):
+    cut = batch_by_units(scenario, CUTS_S)["system_tracks"]
+    assert cut.height and cut.select("system_track_id", "time_ns").is_duplicated().sum() == 0
