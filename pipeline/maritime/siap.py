@@ -507,11 +507,7 @@ def siap_sums(
             pl.col("n_tracks").fill_null(0))
     parts = [
         _truth_sums(tt, epoch_period_s),
-        a.group_by("sector").agg(
-            pl.len().alias("associated_track_epochs"),
-            pl.col("dist_m").sum().alias("sum_position_error_m"),
-            pl.col("vel_err").sum().alias("sum_velocity_error_mps"),
-        ),
+        _error_sums(a),
         _track_sums(tracks, assoc),
         _continuity_sums(tt, a.filter(pl.col("primary")) if primary is None else primary,
                          epoch_period_s, swap_window_s, window),
@@ -520,6 +516,23 @@ def siap_sums(
     for p in parts[1:]:
         out = out.join(p, on="sector", how="full", coalesce=True, nulls_equal=True)
     return out.with_columns([pl.col(c).fill_null(0) for c in SUM_COLUMNS if c in out.columns])
+
+
+def _error_sums(a: pl.DataFrame) -> pl.DataFrame:
+    """Per sector the associated track-epochs and their position and velocity error
+    sums, each added in row order (a polars group_by adds a float column in an order
+    that follows its threads: the last digits of a sum changed from run to run)."""
+    sectors = a.select("sector").unique(maintain_order=True)
+    code = a.select("sector").join(sectors.with_row_index("_g"), on="sector", how="left",
+                                   nulls_equal=True, maintain_order="left")["_g"].to_numpy()
+    n = sectors.height
+    def total(col: str) -> np.ndarray:
+        return np.bincount(code, weights=a[col].fill_null(0.0).to_numpy(), minlength=n)
+    return sectors.with_columns(
+        pl.Series("associated_track_epochs", np.bincount(code, minlength=n), pl.UInt32),
+        pl.Series("sum_position_error_m", total("dist_m")),
+        pl.Series("sum_velocity_error_mps", total("vel_err")),
+    )
 
 
 def _per_truth_columns(a: pl.DataFrame, j: np.ndarray, n: int) -> list[pl.Series]:

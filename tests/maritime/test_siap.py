@@ -203,3 +203,28 @@ def test_siap_on_the_end_to_end_warehouse(e2e):
         pl.col("source") == "fused")
     pa = tot["sum_position_error_m"] / tot["associated_track_epochs"]
     assert pa == pytest.approx(err["error_m"].mean(), rel=0.15)
+
+
+def test_error_sums_add_in_row_order_per_sector_outside_sectors_too():
+    """The per-sector error sums are the row-order sums, to the last digit (a polars
+    group_by's float sum followed its threads: siap_by_sector differed in the last digits
+    between two runs of one 1,000-ship slice)."""
+    from pipeline.maritime.siap import _error_sums
+
+    rng = np.random.default_rng(3)
+    n = 200_000
+    sector = [("a", "b", "c", None)[k] for k in rng.integers(0, 4, n)]
+    a = pl.DataFrame({"sector": pl.Series(sector, dtype=pl.String),
+                      "dist_m": rng.exponential(50.0, n), "vel_err": rng.exponential(1.0, n)})
+    a = a.with_columns(pl.when(pl.int_range(n) % 97 == 0).then(None)
+                       .otherwise(pl.col("vel_err")).alias("vel_err"))
+    got = {r["sector"]: r for r in _error_sums(a).iter_rows(named=True)}
+    assert set(got) == {"a", "b", "c", None}
+    for s, rows in a.group_by("sector"):
+        expect_pos = expect_vel = 0.0
+        for d, v in zip(rows["dist_m"].to_list(), rows["vel_err"].to_list(), strict=True):
+            expect_pos += d
+            expect_vel += v or 0.0
+        assert got[s[0]]["associated_track_epochs"] == rows.height
+        assert got[s[0]]["sum_position_error_m"] == expect_pos
+        assert got[s[0]]["sum_velocity_error_mps"] == expect_vel
