@@ -267,3 +267,15 @@ def test_dense_ais_candidates_give_the_same_decisions(cfg, data, monkeypatch):
                 np.testing.assert_array_equal(getattr(a, f), getattr(b, f), err_msg=f)
         else:
             np.testing.assert_array_equal(a, b)
+
+
+def test_track_slots_are_the_dense_rank_of_the_track_within_its_epoch():
+    from pipeline.maritime.integrity import _track_slots
+
+    rng = np.random.default_rng(5)
+    df = pl.DataFrame({"time_ns": rng.integers(0, 40, 5000) * NS,
+                       "track": rng.integers(0, 300, 5000) * 1_000_003}).sort("time_ns", "track")
+    expect = (pl.col("track").rank("dense").over("time_ns") - 1).cast(pl.Int64)
+    got = _track_slots(df["time_ns"].to_numpy(), df["track"].to_numpy())
+    assert np.array_equal(got, df.select(expect).to_series().to_numpy())
+    assert _track_slots(np.zeros(0, np.int64), np.zeros(0, np.int64)).size == 0
