@@ -3,7 +3,8 @@
 --   accuracy_by_sector split by the AIS class of the reference vessel (A / B; 'no AIS'
 --   for a vessel without AIS, known from truth only) and by its ship type group from its
 --   static data (ITU-R M.1371 ship and cargo type, tens digit: 3x special craft, 5x
---   pilot/tug/port, 6x passenger, 7x cargo, 8x tanker, ...; '(no static data)' when it
+--   pilot/tug/port, 6x passenger, 7x cargo, 8x tanker, ...; from its static messages
+--   within a day of the window, which AIS repeats every 6 min; '(no static data)' when it
 --   sent none). Against simulated truth, else the reconstructed reference.
 -- grain: one row per (site, source, reference, AIS class, ship type group)
 -- params: $start_ns (BIGINT, inclusive), $end_ns (BIGINT, exclusive),
@@ -26,6 +27,7 @@ typ AS (
     SELECT site, mmsi, mode(ship_type ORDER BY ship_type) AS ship_type
     FROM ais_static
     WHERE ship_type IS NOT NULL
+      AND time_ns >= $start_ns - 86400000000000 AND time_ns < $end_ns + 86400000000000
     GROUP BY site, mmsi
 ),
 j AS (
