@@ -61,6 +61,9 @@ def _run(e2e, wh, min_units: int = 1) -> dict:
     a = pl.from_arrow(read_table(wh, "associations", start_ns=e2e.start_ns, end_ns=e2e.end_ns))
     err = pl.from_arrow(read_table(wh, "track_errors", start_ns=e2e.start_ns,
                                    end_ns=e2e.end_ns)).filter(pl.col("source") == "fused")
+    tracks = pl.from_arrow(read_table(wh, "system_tracks", start_ns=e2e.start_ns,
+                                      end_ns=e2e.end_ns, columns=["system_track_id", "time_ns"]))
+    assert tracks.height and not tracks.is_duplicated().any()  # one ship per id and epoch
     return {"a": a, "rms": float(np.sqrt((err["error_m"] ** 2).mean()))}
 
 
