@@ -134,7 +134,11 @@ def test_identification_by_sector(world):
     st = table(world, "system_tracks").with_columns(pl.col("sector").fill_null(OUTSIDE))
     e = table(world, "track_errors").filter(pl.col("source") == "fused").select(
         "site", "time_ns", "system_track_id", "reference", "reference_mmsi")
-    f = st.join(e, on=["site", "time_ns", "system_track_id"])
+    key = ["site", "time_ns", "system_track_id"]
+    nearest = st.join(e, on=key)
+    f = _followed(world, nearest)
+    moved = f.join(nearest.select(*key, pl.col("reference_mmsi").alias("near")), on=key)
+    assert moved["reference_mmsi"].ne_missing(moved["near"]).sum() > 0  # not the nearest
     major = (f.drop_nulls("mmsi").group_by("site", "system_track_id")
              .agg(pl.col("mmsi").mode().first().alias("majority")))
     f = f.join(major, on=["site", "system_track_id"], how="left")
@@ -155,6 +159,39 @@ def test_identification_by_sector(world):
     assert want["correct_share"].max() > 0.5 and want["samples"].sum() > 1000
     same(report(world, "identification_by_sector"), want,
          ["site", "sector", "vessel_class", "reference"], atol=5.1e-5)
+
+
+def _most(frame: pl.DataFrame, key: list[str], of: str) -> pl.DataFrame:
+    """Per ``key`` the most frequent ``of`` (ties: the smallest)."""
+    return (frame.group_by(*key, of).len().sort("len", of, descending=[True, False])
+            .unique(key, keep="first").select(*key, of))
+
+
+def _followed(world, f: pl.DataFrame) -> pl.DataFrame:
+    """The fused points with ``reference_mmsi`` that of the vessel each follows where the
+    nearest vessel's MMSI is not the one it carries: the vessel most of its used members'
+    local tracks were scored against (their radar rows of ``track_errors``)."""
+    key = ["site", "time_ns", "system_track_id"]
+    e = table(world, "track_errors").filter(pl.col("reference") == "truth")
+    a = table(world, "associations").select(*key, "site_id", "local_track_id", "used")
+    radar = a.join(e.filter(pl.col("source") != "fused")
+                   .select(*key, pl.col("source").alias("site_id"), "reference_id"),
+                   on=[*key, "site_id"])
+    owner = _most(radar, ["site", "site_id", "local_track_id"], "reference_id")
+    suspect = f.filter((pl.col("reference") == "truth")
+                       & pl.col("mmsi").ne_missing(pl.col("reference_mmsi")))
+    followed = _most(a.filter("used").join(suspect.select(key), on=key, how="semi")
+                     .join(owner, on=["site", "site_id", "local_track_id"]),
+                     key, "reference_id")
+    mmsi = (e.filter(pl.col("source") == "fused")
+            .select("site", "reference_id", pl.col("reference_mmsi").alias("followed_mmsi"))
+            .unique())
+    return (f.join(followed, on=key, how="left").join(mmsi, on=["site", "reference_id"],
+                                                      how="left")
+            .with_columns(pl.when(pl.col("reference_id").is_null())
+                          .then(pl.col("reference_mmsi")).otherwise(pl.col("followed_mmsi"))
+                          .alias("reference_mmsi"))
+            .drop("reference_id", "followed_mmsi"))
 
 
 @covers("siap_by_sector")
