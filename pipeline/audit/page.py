@@ -192,6 +192,7 @@ table.verdicts td.num { text-align: right; font-variant-numeric: tabular-nums;
          font-size: 12px; white-space: nowrap; }
 .pass { background: #d9f2dd; color: #1d6b2a; } .fail { background: #f8d7d3; color: #9b2316; }
 .nes { background: #eee; color: #555; }
+.why { color: #666; font-size: 11px; max-width: 280px; margin-top: 2px; }
 .summary span { margin-right: 14px; } nav a { margin-right: 10px; font-size: 13px; }
 .chart { margin: 6px 0 14px; break-inside: avoid; }
 @page { size: A4; margin: 12mm; }
@@ -230,6 +231,14 @@ def _badge(status: str, outcome: str | None = None) -> str:
     return f'<span class="badge {cls}">{html.escape(status)}</span>'
 
 
+def _verdict_cell(v: Verdict) -> str:
+    """The verdict's badge, its reason (after "status: ") below it in small text: a
+    sentence in a badge that does not wrap squeezed the table's other columns."""
+    label, _, why = v.status.partition(": ")
+    why_html = f'<div class="why">{html.escape(why)}</div>' if why else ""
+    return _badge(label, v.outcome) + why_html
+
+
 def _fmt(v: float | None, unit: str) -> str:
     if v is None:
         return "–"
@@ -247,7 +256,7 @@ def verdict_table(verdicts: list[Verdict] | tuple[Verdict, ...]) -> str:
     for v in sorted(verdicts, key=lambda v: order[v.outcome]):
         body.append(
             "<tr>"
-            f"<td>{_badge(v.status, v.outcome)}</td><td>{html.escape(v.requirement)}</td>"
+            f"<td>{_verdict_cell(v)}</td><td>{html.escape(v.requirement)}</td>"
             f"<td>{html.escape(v.scope)}</td>"
             f'<td class="num">{_fmt(v.value, v.unit)}</td>'
             f'<td class="num">{html.escape(v.comparison)} {_fmt(v.limit, v.unit)}</td>'
