@@ -134,7 +134,8 @@ def identification_bars(rows: list[dict[str, Any]], req: RequirementsConfig
                 f"target: ≥ {req.maritime_identification_share:g} correct (ships with AIS)")
     fig = _layout(fig, f"Identification: share of fused track time by MMSI verdict (axis from "
                        f"{bottom:.0%})", barmode="stack", yaxis_title="share of track time")
-    fig.update_yaxes(range=[bottom, 1.0], tickformat=".0%")
+    # ticks of a few-percent axis are tenths of a percent: ".0%" printed 100%, 100%, 99%
+    fig.update_yaxes(range=[bottom, 1.0], tickformat=".1%" if bottom > 0.95 else ".0%")
     return fig
 
 
