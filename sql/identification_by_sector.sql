@@ -2,9 +2,10 @@
 -- description: share of fused-track time with the correct MMSI, a wrong MMSI or no MMSI,
 --   per sector. With truth, "correct" means the MMSI of the simulated vessel the fused
 --   point follows; ships without AIS count as correct when they carry no MMSI. The vessel
---   a point follows: where the nearest vessel (track_errors) is not the one whose MMSI it
---   carries, the vessel most of its fused radar members' local tracks were scored against
---   over the window (a radar tracker's track follows one ship; ties: the smaller id), so
+--   a point follows: where it carries an MMSI that is not the nearest vessel's
+--   (track_errors), the vessel most of its fused radar members' local tracks were
+--   scored against over the window (the vessels of the fused points they were in) (a radar tracker's track follows one ship; ties: the
+--   smaller id), so
 --   a ship sailing closer to another than the track's error does not flip the verdict
 --   from epoch to epoch (docs/maritime.md, "Two judges"); elsewhere the nearest. Without
 --   truth, against the reconstructed reference (issue 37: the AIS vessel the fused point
@@ -17,14 +18,16 @@
 -- params: $start_ns (BIGINT, inclusive), $end_ns (BIGINT, exclusive),
 --         $sector (VARCHAR, NULL = every sector), $site (VARCHAR, NULL = every site)
 -- source tables: system_tracks, track_errors, associations (written by `surveil batch`)
-WITH fused AS (
+WITH scored AS (  -- the window's scored fused points, every sector (owners span them)
     SELECT
         s.site,
         s.time_ns,
         s.system_track_id,
+        s.sector AS raw_sector,
         coalesce(s.sector, '(outside sectors)') AS sector,
         s.mmsi,
         e.reference,
+        e.reference_id,
         e.reference_mmsi
     FROM system_tracks AS s
     JOIN track_errors AS e
@@ -34,13 +37,16 @@ WITH fused AS (
      AND e.source = 'fused'
     WHERE s.time_ns >= $start_ns
       AND s.time_ns < $end_ns
-      AND (CAST($sector AS VARCHAR) IS NULL OR s.sector = CAST($sector AS VARCHAR))
       AND (CAST($site AS VARCHAR) IS NULL OR s.site = CAST($site AS VARCHAR))
 ),
-suspect AS (  -- points the nearest vessel judges not correct: the followed one decides
+fused AS (
+    SELECT * FROM scored
+    WHERE CAST($sector AS VARCHAR) IS NULL OR raw_sector = CAST($sector AS VARCHAR)
+),
+suspect AS (  -- points the nearest vessel judges wrong: the followed one decides
     SELECT site, time_ns, system_track_id
     FROM fused
-    WHERE reference = 'truth' AND mmsi IS DISTINCT FROM reference_mmsi
+    WHERE reference = 'truth' AND mmsi IS NOT NULL AND mmsi IS DISTINCT FROM reference_mmsi
 ),
 members AS (  -- their fused radar members
     SELECT a.site, a.time_ns, a.system_track_id, a.site_id, a.local_track_id
@@ -48,20 +54,15 @@ members AS (  -- their fused radar members
     SEMI JOIN suspect AS s USING (site, time_ns, system_track_id)
     WHERE a.time_ns >= $start_ns AND a.time_ns < $end_ns AND a.used
 ),
-owner AS (  -- the vessel each of their local tracks was scored against most often
+owner AS (  -- the vessel each of their local tracks was scored against most often (a
+            -- radar point is scored against its fused point's vessel)
     SELECT a.site, a.site_id, a.local_track_id,
-           mode(e.reference_id ORDER BY e.reference_id) AS vessel_id
+           mode(sc.reference_id ORDER BY sc.reference_id) AS vessel_id
     FROM associations AS a
     SEMI JOIN (SELECT DISTINCT site, site_id, local_track_id FROM members) AS m
         USING (site, site_id, local_track_id)
-    JOIN track_errors AS e
-      ON e.site = a.site
-     AND e.time_ns = a.time_ns
-     AND e.system_track_id = a.system_track_id
-     AND e.source = a.site_id
-    WHERE a.time_ns >= $start_ns AND a.time_ns < $end_ns
-      AND e.time_ns >= $start_ns AND e.time_ns < $end_ns
-      AND e.reference = 'truth'
+    JOIN scored AS sc USING (site, time_ns, system_track_id)
+    WHERE a.time_ns >= $start_ns AND a.time_ns < $end_ns AND sc.reference = 'truth'
     GROUP BY a.site, a.site_id, a.local_track_id
 ),
 followed AS (
@@ -72,12 +73,11 @@ followed AS (
     GROUP BY m.site, m.time_ns, m.system_track_id
 ),
 vessel AS (  -- the MMSI of each followed vessel (null: no AIS aboard)
-    SELECT DISTINCT e.site, e.reference_id AS vessel_id, e.reference_mmsi AS mmsi
-    FROM track_errors AS e
+    SELECT DISTINCT sc.site, sc.reference_id AS vessel_id, sc.reference_mmsi AS mmsi
+    FROM scored AS sc
     SEMI JOIN (SELECT DISTINCT site, vessel_id FROM followed) AS f
-        ON f.site = e.site AND f.vessel_id = e.reference_id
-    WHERE e.time_ns >= $start_ns AND e.time_ns < $end_ns
-      AND e.reference = 'truth' AND e.source = 'fused'
+        ON f.site = sc.site AND f.vessel_id = sc.reference_id
+    WHERE sc.reference = 'truth'
 ),
 judged_fused AS (
     SELECT f.site, f.time_ns, f.system_track_id, f.sector, f.mmsi, f.reference,

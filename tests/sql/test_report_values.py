@@ -168,17 +168,16 @@ def _most(frame: pl.DataFrame, key: list[str], of: str) -> pl.DataFrame:
 
 
 def _followed(world, f: pl.DataFrame) -> pl.DataFrame:
-    """The fused points with ``reference_mmsi`` that of the vessel each follows where the
-    nearest vessel's MMSI is not the one it carries: the vessel most of its used members'
-    local tracks were scored against (their radar rows of ``track_errors``)."""
+    """The fused points with ``reference_mmsi`` that of the vessel each follows where it
+    carries an MMSI that is not the nearest vessel's: the vessel most of its used members'
+    local tracks were scored against (the vessels of the fused points they were in)."""
     key = ["site", "time_ns", "system_track_id"]
     e = table(world, "track_errors").filter(pl.col("reference") == "truth")
     a = table(world, "associations").select(*key, "site_id", "local_track_id", "used")
-    radar = a.join(e.filter(pl.col("source") != "fused")
-                   .select(*key, pl.col("source").alias("site_id"), "reference_id"),
-                   on=[*key, "site_id"])
-    owner = _most(radar, ["site", "site_id", "local_track_id"], "reference_id")
-    suspect = f.filter((pl.col("reference") == "truth")
+    scored = a.join(e.filter(pl.col("source") == "fused").select(*key, "reference_id"),
+                    on=key)
+    owner = _most(scored, ["site", "site_id", "local_track_id"], "reference_id")
+    suspect = f.filter((pl.col("reference") == "truth") & pl.col("mmsi").is_not_null()
                        & pl.col("mmsi").ne_missing(pl.col("reference_mmsi")))
     followed = _most(a.filter("used").join(suspect.select(key), on=key, how="semi")
                      .join(owner, on=["site", "site_id", "local_track_id"]),
