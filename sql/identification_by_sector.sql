@@ -72,12 +72,13 @@ followed AS (
     JOIN owner AS o USING (site, site_id, local_track_id)
     GROUP BY m.site, m.time_ns, m.system_track_id
 ),
-vessel AS (  -- the MMSI of each followed vessel (null: no AIS aboard)
-    SELECT DISTINCT sc.site, sc.reference_id AS vessel_id, sc.reference_mmsi AS mmsi
+vessel AS (  -- the MMSI of each followed vessel (null: no AIS aboard), one row each
+    SELECT sc.site, sc.reference_id AS vessel_id, min(sc.reference_mmsi) AS mmsi
     FROM scored AS sc
     SEMI JOIN (SELECT DISTINCT site, vessel_id FROM followed) AS f
         ON f.site = sc.site AND f.vessel_id = sc.reference_id
     WHERE sc.reference = 'truth'
+    GROUP BY sc.site, sc.reference_id
 ),
 judged_fused AS (
     SELECT f.site, f.time_ns, f.system_track_id, f.sector, f.mmsi, f.reference,
