@@ -43,7 +43,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
-from deltalake import DeltaTable
+from deltalake import DeltaTable, Field
 from deltalake import Schema as DeltaSchema
 from deltalake.transaction import AddAction, RemoveAction, create_table_with_add_actions
 
@@ -536,6 +536,8 @@ def commit_staged(warehouse: Path, name: str, staged: list[StagedFile], *, sourc
         return "rewrite"
     if not staged and not removes:
         return "noop"
+    if staged:
+        add_new_columns(dt, name)
     adds = _add_actions(uri, staged)
     version = dt.version() + 1
     try:
@@ -550,6 +552,20 @@ def commit_staged(warehouse: Path, name: str, staged: list[StagedFile], *, sourc
         raise
     checkpoint_if_due(dt, version)
     return "swap"
+
+
+def add_new_columns(dt: DeltaTable, name: str) -> list[str]:
+    """Add to ``dt`` the nullable columns the canonical schema of ``name`` gained since the
+    table was created (one metadata commit, before the data commit that brings them: the
+    table's older rows read them as null). The staged files hold every canonical column,
+    but a commit of add actions keeps the table's schema, so without this the new column
+    stayed unread forever (the views read it as null). A new non-nullable column is not
+    added (``surveil doctor`` reports the schema). Returns the names added."""
+    have = set(pa.schema(dt.schema().to_arrow()).names)
+    new = [f for f in spec(name).schema if f.name not in have and f.nullable]
+    if new:
+        dt.alter.add_columns([Field.from_arrow(f) for f in new])
+    return [f.name for f in new]
 
 
 def _drop_added(table: Location, adds: list[AddAction]) -> None:
@@ -659,6 +675,8 @@ def _swap(warehouse: Path, name: str, dt: DeltaTable, staged: list[StagedFile],
             kept = stager.close()
         if not staged and not removes and not kept:
             return "noop"
+        if staged:
+            add_new_columns(dt, name)
         adds = _add_actions(uri, [*staged, *kept])
         version = dt.version() + 1
         try:

@@ -187,3 +187,34 @@ def test_a_checkpoint_every_ten_versions_same_rows(tmp_path):
     np.testing.assert_array_equal(v, [float(last[k]) for k in np.repeat(np.arange(10), 10)])
     old = DeltaTable(str(table_path(wh, "truth")), version=5).to_pyarrow_table()
     assert sorted(old["speed_mps"].to_pylist()) == sorted(at5["speed_mps"].to_pylist())
+
+
+def test_a_nullable_column_added_to_the_schema_joins_the_table(tmp_path):
+    """A table written before its canonical schema gained a nullable column (``mmsi`` of
+    ``truth`` stands for one: ``sensor_registration.range_gain`` was added so) takes the
+    column at the next window commit: the new rows carry it, the older read null. A
+    commit of add actions keeps the table's schema, so before ``add_new_columns`` the
+    staged column was never read."""
+    from deltalake import write_deltalake
+
+    from pipeline.tables import conform
+    from pipeline.warehouse.staged import add_new_columns
+
+    wh = tmp_path / "wh"
+    t = T0_NS + np.arange(0, 100) * S
+    old = conform("truth", truth_rows(t[:50], speed=1.0)).drop(["mmsi"])
+    write_deltalake(str(table_path(wh, "truth")), old, partition_by=["date"])
+    assert "mmsi" not in DeltaTable(str(table_path(wh, "truth"))).schema().to_arrow().names
+    new = truth_rows(t[50:], speed=2.0)
+    new = new.set_column(new.schema.get_field_index("mmsi"), "mmsi",
+                         pa.array(np.full(50, 273_000_001), pa.int64()))
+    st = TableStager(tmp_path / "a", threaded=False)
+    st.add("truth", new)
+    assert commit_window(wh, "truth", st.close(), start_ns=int(t[50]),
+                         end_ns=int(t[-1]) + S) == "swap"
+    got = read_table(wh, "truth")
+    assert "mmsi" in got.column_names and got.num_rows == 100
+    mmsi = got.sort_by("time_ns")["mmsi"]
+    assert mmsi[:50].null_count == 50 and mmsi[50:].null_count == 0
+    # nothing more to add
+    assert add_new_columns(DeltaTable(str(table_path(wh, "truth"))), "truth") == []
