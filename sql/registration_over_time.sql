@@ -1,11 +1,12 @@
 -- name: registration_over_time
--- description: each radar's online registration and estimated accuracy per minute (issue
---   38; pipeline/maritime/registration.py): the range bias, azimuth bias and clock offset
---   the batch estimated (reported - true) with their 95 % intervals (estimate -/+ 1.96
---   sigma, means over the minute's epochs), the share of epochs the estimate was applied
---   to the reports before fusion, the largest variance scale of the radar's sectors
---   (1 = the configured sigmas) and the share of epochs it was fused although the
---   integrity excluded it. The audit's registration time series.
+-- description: each radar's online registration and estimated accuracy per minute
+--   (issue 38; pipeline/maritime/registration.py): the range bias, azimuth bias, clock
+--   offset and range gain (m per km) the batch estimated (reported - true) with their
+--   95 % intervals (estimate -/+ 1.96 sigma, means over the minute's epochs), the share
+--   of epochs the estimate was applied to the reports before fusion, the largest
+--   variance scale of the radar's sectors (1 = the configured sigmas) and the share of
+--   epochs it was fused although the integrity excluded it. The audit's registration
+--   time series.
 -- grain: one row per (site, radar site, minute)
 -- params: $start_ns (BIGINT, inclusive), $end_ns (BIGINT, exclusive),
 --         $sector (VARCHAR, NULL = every sector), $site (VARCHAR, NULL = every site)
@@ -27,6 +28,9 @@ SELECT
     round(avg(time_offset_s), 3)::DOUBLE                                  AS time_offset_s,
     round(avg(time_offset_s - 1.959964 * sigma_time_offset_s), 3)::DOUBLE AS time_ci_low_s,
     round(avg(time_offset_s + 1.959964 * sigma_time_offset_s), 3)::DOUBLE AS time_ci_high_s,
+    round(avg(1000 * range_gain), 3)::DOUBLE                              AS range_gain_m_per_km,
+    round(avg(1000 * (range_gain - 1.959964 * sigma_range_gain)), 3)::DOUBLE AS range_gain_ci_low_m_per_km,
+    round(avg(1000 * (range_gain + 1.959964 * sigma_range_gain)), 3)::DOUBLE AS range_gain_ci_high_m_per_km,
     round(max(variance_scale), 3)::DOUBLE                                 AS variance_scale_max,
     round(avg(readmitted::INTEGER), 4)::DOUBLE                            AS readmitted_share
 FROM sensor_registration

@@ -1,14 +1,14 @@
 -- name: sensor_registration
 -- description: online registration and estimated accuracy of each radar (issue 38;
 --   pipeline/maritime/registration.py) per site and sector over the window: the range
---   bias, azimuth bias and clock offset the batch estimated from the channel integrity's
---   leave-one-out residuals (AIS-identified ships, radar-radar overlap), their mean and
---   the mean of their 95 % intervals (estimate -/+ 1.96 sigma) over the epochs, the share
---   of epochs the estimate was applied to the reports before fusion, the variance scale
---   on the reports' covariance (mean and largest; 1 = the configured sigmas) and the share
---   of epochs it was estimated, the share of the estimate's tracks tested against AIS,
---   and the share of epochs the radar was fused although the integrity excluded it
---   (its corrected and rescaled residuals passed).
+--   bias, azimuth bias, clock offset and range gain (m per km) the batch estimated from
+--   the channel integrity's leave-one-out residuals (AIS-identified ships, radar-radar
+--   overlap), their mean and the mean of their 95 % intervals (estimate -/+ 1.96 sigma)
+--   over the epochs, the share of epochs the estimate was applied to the reports before
+--   fusion, the variance scale on the reports' covariance (mean and largest; 1 = the
+--   configured sigmas) and the share of epochs it was estimated, the share of the
+--   estimate's tracks tested against AIS, and the share of epochs the radar was fused
+--   although the integrity excluded it (its corrected and rescaled residuals passed).
 -- grain: one row per (site, radar site, sector)
 -- params: $start_ns (BIGINT, inclusive), $end_ns (BIGINT, exclusive),
 --         $sector (VARCHAR, NULL = every sector), $site (VARCHAR, NULL = every site)
@@ -30,6 +30,9 @@ SELECT
     round(avg(time_offset_s), 3)::DOUBLE                       AS time_offset_s,
     round(avg(time_offset_s - 1.959964 * sigma_time_offset_s), 3)::DOUBLE AS time_ci_low_s,
     round(avg(time_offset_s + 1.959964 * sigma_time_offset_s), 3)::DOUBLE AS time_ci_high_s,
+    round(avg(1000 * range_gain), 3)::DOUBLE                              AS range_gain_m_per_km,
+    round(avg(1000 * (range_gain - 1.959964 * sigma_range_gain)), 3)::DOUBLE AS range_gain_ci_low_m_per_km,
+    round(avg(1000 * (range_gain + 1.959964 * sigma_range_gain)), 3)::DOUBLE AS range_gain_ci_high_m_per_km,
     round(avg(variance_scale), 3)::DOUBLE                      AS variance_scale_mean,
     round(max(variance_scale), 3)::DOUBLE                      AS variance_scale_max,
     round(avg(scale_applied::INTEGER), 4)::DOUBLE              AS scale_applied_share,

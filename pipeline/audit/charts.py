@@ -226,13 +226,15 @@ _REGISTRATION_PANELS = (
     ("range bias, m", "range_bias_m", "range_ci_low_m", "range_ci_high_m"),
     ("azimuth bias, deg", "azimuth_bias_deg", "azimuth_ci_low_deg", "azimuth_ci_high_deg"),
     ("clock offset, s", "time_offset_s", "time_ci_low_s", "time_ci_high_s"),
+    ("range gain, m per km", "range_gain_m_per_km", "range_gain_ci_low_m_per_km",
+     "range_gain_ci_high_m_per_km"),
     ("variance scale (largest sector)", "variance_scale_max", None, None),
 )
 
 
 def registration_over_time(rows: list[dict[str, Any]], start_ns: int, end_ns: int
                            ) -> go.Figure | None:
-    """Each radar's online registration per minute (range, azimuth, clock; the 95 %
+    """Each radar's online registration per minute (range, azimuth, clock, gain; the 95 %
     interval as a band, markers where the estimate was applied) and its variance scale."""
     if not rows:
         return None

@@ -128,7 +128,8 @@ def sections(data: AuditData) -> list[Section]:
         "Range, azimuth and time bias of each site estimated from AIS, with 95% intervals.",
         ("radar_bias_by_site",), charts.radar_bias(rows("radar_bias_by_site")))
     add("registration", "Online registration and estimated accuracy",
-        "Each radar's range bias, azimuth bias and clock offset as the batch estimated them "
+        "Each radar's range bias, azimuth bias, clock offset and range gain as the batch "
+        "estimated them "
         "from AIS ships and radar overlap (95% interval as a band; large markers: the minutes "
         "the estimate was removed from the reports before fusion) and the variance scale on "
         "its reports' covariance (1: the configured sigmas).",

@@ -94,6 +94,7 @@ def mc_faults(cfg: Config) -> tuple[ChannelFault, ...]:
         ChannelFault("radar_blank", 0, 0, site_id=r2, azimuth_from_rad=math.radians(240.0),
                      azimuth_to_rad=math.radians(285.0)),
         ChannelFault("radar_noise", 0, 0, site_id=r1, factor=4.0),
+        ChannelFault("radar_range_gain", 0, 0, site_id=r2, range_gain=0.006),
     ]
     return tuple(replace(f, start_s=FIRST_S + i * (FAULT_S + GAP_S), duration_s=FAULT_S)
                  for i, f in enumerate(kinds))
@@ -256,6 +257,7 @@ REGISTRATION_OF = {
     "radar_range_bias": ("range_bias_m", "sigma_range_bias_m"),
     "radar_azimuth_bias": ("azimuth_bias_rad", "sigma_azimuth_bias_rad"),
     "radar_time_offset": ("time_offset_s", "sigma_time_offset_s"),
+    "radar_range_gain": ("range_gain", "sigma_range_gain"),
 }
 Z95 = 1.959963984540054
 

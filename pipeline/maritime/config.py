@@ -111,7 +111,7 @@ def _name_or_empty(v: str) -> str | None:
 
 RADAR_FAULT_KINDS = (
     "radar_outage", "radar_blank", "radar_range_bias", "radar_azimuth_bias",
-    "radar_time_offset", "radar_noise",
+    "radar_time_offset", "radar_noise", "radar_range_gain",
 )
 AIS_FAULT_KINDS = ("ais_offset", "ais_stuck", "ais_mmsi_swap", "ais_spoof")
 FAULT_KINDS = RADAR_FAULT_KINDS + AIS_FAULT_KINDS
@@ -126,7 +126,8 @@ class ChannelFault:
     tracker coasts, then drops its tracks there), ``radar_range_bias`` (``bias_m`` added
     to ranges), ``radar_azimuth_bias`` (``bias_deg`` added to azimuths and courses),
     ``radar_time_offset`` (``offset_s`` added to report times), ``radar_noise`` (range,
-    azimuth, course and speed noise x ``factor``; the reported sigmas unchanged). AIS
+    azimuth, course and speed noise x ``factor``; the reported sigmas unchanged),
+    ``radar_range_gain`` (ranges x (1 + ``gain``): a range scale error). AIS
     faults name a vessel (``vessel_id``, 1-based; 0 or absent: the simulator picks, with
     the run's seed, a Class A vessel in the scene for the whole fault, in ``sector`` when
     given):
@@ -144,6 +145,7 @@ class ChannelFault:
     azimuth_bias_rad: float = setting(0.0, key="bias_deg", unit="deg", ge=-180.0, le=180.0)
     time_offset_s: float = setting(0.0, key="offset_s", ge=-3600.0, le=3600.0)
     factor: float = setting(1.0, ge=1.0, le=1000.0)
+    range_gain: float = setting(0.0, key="gain", ge=-0.5, le=0.5)
     azimuth_from_rad: float = setting(0.0, unit="deg", ge=0.0, le=360.0)
     azimuth_to_rad: float = setting(0.0, unit="deg", ge=0.0, le=360.0)
     vessel_id: int = setting(0, ge=0)  # 0: chosen by the simulator
@@ -168,12 +170,13 @@ class ChannelFault:
     @property
     def value(self) -> float:
         """The size of a radar fault (range bias m, azimuth bias rad, time offset s,
-        noise factor; 0 for the others)."""
+        noise factor, range gain; 0 for the others)."""
         return {
             "radar_range_bias": self.range_bias_m,
             "radar_azimuth_bias": self.azimuth_bias_rad,
             "radar_time_offset": self.time_offset_s,
             "radar_noise": self.factor,
+            "radar_range_gain": self.range_gain,
         }.get(self.kind, 0.0)
 
 

@@ -29,6 +29,9 @@ estimate a channel is tested against is the picture WITHOUT that channel:
     of ``pipeline.maritime.bias``). theta_hat = A^-1 b with A = sum H^T S^-1 H,
     b = sum H^T S^-1 r, and T = b^T A^-1 b ~ chi2(3) (n >= 2), upper tail q/2. theta_hat
     is the evidence a fault episode reports (estimated range, azimuth and time bias).
+    The sums A and b are kept with a fourth parameter, the range gain (H's column
+    rho u_r), for the online registration (:mod:`pipeline.maritime.registration`); the
+    test takes their first three rows and columns.
 
   A single bad AIS (an AIS fault) makes one track disagree with every radar: tracks with
   xi_i above chi2_2(1 - outlier_q) are outliers, and outliers fewer than half of the
@@ -110,9 +113,16 @@ from pipeline.maritime.sync import extrapolation_covariance
 from pipeline.spatial import MAX_CELLS, pairs_within
 from pipeline.units import NS
 
-#: wide prior on (range bias m, azimuth bias rad, time offset s): conditions A when the
-#: tracks' geometry leaves a parameter unobservable (e.g. every ship stationary)
-THETA_PRIOR = np.array([1.0e3, 0.2, 100.0])
+#: wide prior on (range bias m, azimuth bias rad, time offset s, range gain): conditions A
+#: when the tracks' geometry leaves a parameter unobservable (e.g. every ship stationary,
+#: or every ship at one range: bias and gain)
+THETA_PRIOR = np.array([1.0e3, 0.2, 100.0, 0.05])
+TESTED = 3
+"""The integrity's registration test takes the first three parameters (range bias,
+azimuth bias, time offset: airfield paper eq. 21-23 on the model of
+:mod:`pipeline.maritime.bias`); the online registration
+(:mod:`pipeline.maritime.registration`) estimates the range gain too."""
+DIM = THETA_PRIOR.size
 
 HEALTH_COLUMNS = (
     "time_ns", "channel", "sensor_kind", "sector", "check", "targets", "nis", "dof", "d1",
@@ -147,15 +157,15 @@ class IntegrityResult:
 class RegistrationEvidence:
     """Per epoch k and radar group (site * (G + 1) + sector; G: outside every sector) the
     sums of the leave-one-out residuals of the group's tracks tested (outliers of a
-    minority left out): ``A`` = sum H^T S^-1 H (K, n_groups, 3, 3, no prior), ``b`` =
-    sum H^T S^-1 r (K, n_groups, 3), ``nis`` = sum r^T S^-1 r, ``n`` tracks, ``trace`` =
+    minority left out): ``A`` = sum H^T S^-1 H (K, n_groups, 4, 4, no prior), ``b`` =
+    sum H^T S^-1 r (K, n_groups, 4), ``nis`` = sum r^T S^-1 r, ``n`` tracks, ``trace`` =
     sum tr(S^-1 P) (P: the radar's own covariance: how much of S is the radar's),
     ``n_ais`` of the tracks tested against their AIS report (the rest: against two or
     more other radars);
     ``blocked``: the group's scan check failed there (no scan published: an outage no
     correction readmits); ``excluded`` after the epoch's check. Per row
-    of ``associations``: its epoch ``row_k``, group ``row_group``, ``H`` (n, 2, 3),
-    d(position)/d(range bias, azimuth bias, time offset), its leave-one-out residual
+    of ``associations``: its epoch ``row_k``, group ``row_group``, ``H`` (n, 2, 4),
+    d(position)/d(range bias, azimuth bias, time offset, range gain), its leave-one-out residual
     ``row_r`` (n, 2) and its covariance ``row_innov_cov`` (n, 3) (NaN: no other radar,
     no AIS report on the track), ``row_tested`` (in the test: its AIS report or two
     other radars), its own covariance ``row_cov`` (n, 3). ``G``, ``C``: sectors, sites."""
@@ -195,7 +205,7 @@ class _Radar:
     xy: np.ndarray  # (n, 2) synchronised position, regional ENU, m
     P: np.ndarray  # (n, 3) its covariance xx, yy, xy, m^2
     info: np.ndarray  # (n, 5) information terms (eq. 14, matrix form)
-    H: np.ndarray  # (n, 2, 3) d(position)/d(range bias, azimuth bias, time offset)
+    H: np.ndarray  # (n, 2, 4) d(position)/d(range bias, azimuth bias, time offset, gain)
     v: np.ndarray  # (n, 2) velocity east, north, m/s
     sv: np.ndarray  # (n,) sigma speed, m/s
     sc: np.ndarray  # (n,) sigma course, rad
@@ -357,15 +367,16 @@ def site_positions_enu(cfg: Config) -> np.ndarray:
 
 def registration_jacobian(xy: np.ndarray, site_xy: np.ndarray, vx: np.ndarray, vy: np.ndarray
                           ) -> np.ndarray:
-    """(n, 2, 3) H = d(position)/d(range bias, azimuth bias, time offset) of reports at
-    ``xy`` (n, 2) seen from ``site_xy`` (n, 2) moving at (``vx``, ``vy``) m/s:
-    [u_r, rho u_az, -v]."""
+    """(n, 2, 4) H = d(position)/d(range bias, azimuth bias, time offset, range gain) of
+    reports at ``xy`` (n, 2) seen from ``site_xy`` (n, 2) moving at (``vx``, ``vy``) m/s:
+    [u_r, rho u_az, -v, rho u_r] (measured range = (1 + gain) true range + bias)."""
     d = xy - site_xy
     rho = np.maximum(np.hypot(d[:, 0], d[:, 1]), 1.0)
-    H = np.empty((xy.shape[0], 2, 3))
+    H = np.empty((xy.shape[0], 2, DIM))
     H[:, 0, 0], H[:, 1, 0] = d[:, 0] / rho, d[:, 1] / rho  # range bias: line of sight
     H[:, 0, 1], H[:, 1, 1] = d[:, 1], -d[:, 0]  # azimuth bias (clockwise): rho u_az
     H[:, 0, 2], H[:, 1, 2] = -vx, -vy  # time offset: the report is dt late
+    H[:, 0, 3], H[:, 1, 3] = d[:, 0], d[:, 1]  # range gain: rho u_r
     return H
 
 
@@ -866,8 +877,8 @@ class _RadarOut:
     expected: np.ndarray
     missed: np.ndarray
     outliers: np.ndarray
-    A: np.ndarray  # (K, n_groups, 9) sum H^T S^-1 H
-    b: np.ndarray  # (K, n_groups, 3) sum H^T S^-1 r
+    A: np.ndarray  # (K, n_groups, 16) sum H^T S^-1 H
+    b: np.ndarray  # (K, n_groups, 4) sum H^T S^-1 r
     trace: np.ndarray  # (K, n_groups) sum tr(S^-1 P)
     n_ais: np.ndarray  # (K, n_groups) tracks tested against their AIS report
 
@@ -947,7 +958,7 @@ def check_channels(
                                                             np.int64, float, float)),
                    np.full((K, n_groups, 3), np.nan),
                    *(np.zeros((K, n_groups), np.int64) for _ in range(3)),
-                   np.zeros((K, n_groups, 9)), np.zeros((K, n_groups, 3)),
+                   np.zeros((K, n_groups, DIM * DIM)), np.zeros((K, n_groups, DIM)),
                    np.zeros((K, n_groups)), np.zeros((K, n_groups)))
     n_rep = ais.rep_m.size
     ao = _AisOut(np.zeros(n_rep, bool), np.zeros(n_rep, np.int8), np.full(n_rep, np.nan),
@@ -1050,7 +1061,7 @@ def check_channels(
                                 schema={"mmsi": pl.Int64, "time_ns": pl.Int64})
     k_row = np.repeat(np.arange(K), np.diff(rad.bounds))
     evidence = RegistrationEvidence(
-        epochs=epochs, A=ro.A.reshape(K, n_groups, 3, 3), b=ro.b, nis=ro.nis, n=ro.n,
+        epochs=epochs, A=ro.A.reshape(K, n_groups, DIM, DIM), b=ro.b, nis=ro.nis, n=ro.n,
         trace=ro.trace, n_ais=ro.n_ais, blocked=ro.checked & ro.eta & (ro.check == 3),
         excluded=ro.excluded, row_k=k_row, row_group=rad.group, H=rad.H, row_r=row_r,
         row_innov_cov=row_innov_cov, row_tested=row_tested, row_cov=rad.P, G=G, C=C)
@@ -1091,7 +1102,7 @@ def _radar_groups(
     gk = g[kept]
     Sk, Hk, rk = S[kept], H[kept], r[kept]
     det = Sk[:, 0] * Sk[:, 1] - Sk[:, 2] ** 2
-    # H^T S^-1 (n, 3, 2) with S^-1 = [[S_yy, -S_xy], [-S_xy, S_xx]] / det
+    # H^T S^-1 (n, 4, 2) with S^-1 = [[S_yy, -S_xy], [-S_xy, S_xx]] / det
     HtSi = np.stack([Hk[:, 0, :] * Sk[:, 1, None] - Hk[:, 1, :] * Sk[:, 2, None],
                      Hk[:, 1, :] * Sk[:, 0, None] - Hk[:, 0, :] * Sk[:, 2, None]],
                     axis=2) / det[:, None, None]
@@ -1101,20 +1112,24 @@ def _radar_groups(
     HtSir = HtSi[:, :, 0] * rk[:, 0, None] + HtSi[:, :, 1] * rk[:, 1, None]
     Pk = P[kept]
     trace = (Sk[:, 1] * Pk[:, 0] - 2 * Sk[:, 2] * Pk[:, 2] + Sk[:, 0] * Pk[:, 1]) / det
-    terms = np.concatenate([np.ones((gk.size, 1)), xi[kept, None], HtSiH.reshape(-1, 9),
+    terms = np.concatenate([np.ones((gk.size, 1)), xi[kept, None], HtSiH.reshape(-1, DIM * DIM),
                             HtSir, trace[:, None], with_ais[kept, None]], axis=1)
     tot = _sums(gk, terms, n_groups)
     nk = tot[:, 0].astype(np.int64)
-    A = tot[:, 2:11].reshape(-1, 3, 3) + np.diag(THETA_PRIOR**-2.0)
-    bvec = tot[:, 11:14]
+    a_end = 2 + DIM * DIM
+    A_all, b_all = tot[:, 2:a_end], tot[:, a_end:a_end + DIM]
+    # the test's model: the first TESTED parameters (the range gain is the registration's)
+    A = (A_all.reshape(-1, DIM, DIM)[:, :TESTED, :TESTED]
+         + np.diag(THETA_PRIOR[:TESTED] ** -2.0))
+    bvec = b_all[:, :TESTED]
     theta = np.linalg.solve(A, bvec[..., None])[..., 0]
     stat = np.einsum("ni,ni->n", bvec, theta)
     few = nk < 2
     stat[few] = np.nan
     theta[few] = np.nan
     return {"n": nk, "nis": tot[:, 1], "outliers": np.where(drop, counts[:, 1], 0).astype(
-        np.int64), "T": stat, "theta": theta, "A": tot[:, 2:11], "b": bvec,
-        "trace": tot[:, 14], "n_ais": tot[:, 15]}
+        np.int64), "T": stat, "theta": theta, "A": A_all, "b": b_all,
+        "trace": tot[:, a_end + DIM], "n_ais": tot[:, a_end + DIM + 1]}
 
 
 def _ais_odd(xi: np.ndarray, tot: np.ndarray, own: np.ndarray, info: np.ndarray,

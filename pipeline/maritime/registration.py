@@ -1,16 +1,17 @@
 """Online registration and estimated accuracy of each radar, applied before fusion
 (issue 38 items 1-2): the fused picture should not be worse than the best radar when
-one radar has a range, azimuth or clock bias or degraded noise.
+one radar has a range, azimuth or clock bias, a range gain error or degraded noise.
 
 The evidence is the channel integrity's (:mod:`pipeline.maritime.integrity`): per epoch
 k and radar group (site c, sector g) the leave-one-out residuals r_i = p_i - p_ref of
 the tracks tested against the picture without the radar (their AIS report where the
 track carries one, two or more other radars otherwise), S_i = P_i + P_ref, and the
 registration model of the integrity's test (airfield paper eq. 21-23 on the residual of
-multi-radar paper eq. 14),
+multi-radar paper eq. 14) with the range gain g (measured range = (1 + g) true range +
+b_r, the range scale error of a radar's range clock or its trigger delay's drift),
 
-.. math:: r_i = H_i \\theta + e_i, \\quad H_i = [u_r, \\rho u_{az}, -v], \\quad
-          \\theta = (b_r, b_{az}, \\Delta t)
+.. math:: r_i = H_i \\theta + e_i, \\quad H_i = [u_r, \\rho u_{az}, -v, \\rho u_r], \\quad
+          \\theta = (b_r, b_{az}, \\Delta t, g)
 
 summed per epoch and group: A_k = sum H^T S^-1 H, b_k = sum H^T S^-1 r, the NIS sum
 N_k = sum r^T S^-1 r, the tracks n_k and T_k = sum tr(S^-1 P_i).
@@ -21,7 +22,7 @@ integrity's wide prior P_0,
 
 .. math:: \\hat\\theta_W = (A_W + P_0^{-1})^{-1} b_W, \\qquad
           P_{\\theta,W} = f_W (A_W + P_0^{-1})^{-1}, \\qquad
-          f_W = c \\max(1, \\tilde N_W / (2 n_W - 3))
+          f_W = c \\max(1, \\tilde N_W / (2 n_W - 4))
 
 with A_W, b_W, N_W the sums over W, the corrected NIS sum
 N~_W = N_W - 2 theta^T b_W + theta^T A_W theta, and c = ``decorrelation_s`` / epoch
@@ -29,10 +30,10 @@ period (at most the window's epochs): a radar tracker's errors are correlated ov
 many scans, so an epoch carries 1/c of an independent sample. Three windows per epoch:
 the ``window_s`` before it (past), after it (future), both. Both, unless the past and
 future estimates disagree (d = (theta_p - theta_f)^T (P_p + P_f)^-1 (theta_p - theta_f)
-above chi2_3(1 - ``jump_q``): a registration jump), then the side whose corrected NIS
+above chi2_4(1 - ``jump_q``): a registration jump), then the side whose corrected NIS
 per dof is the smaller (the side that does not straddle the jump). The estimate is
 applied once the window holds ``min_tracks`` track-epochs and it differs from zero,
-theta^T P_theta^-1 theta >= chi2_3(1 - ``apply_q``) (else nothing is corrected: a
+theta^T P_theta^-1 theta >= chi2_4(1 - ``apply_q``) (else nothing is corrected: a
 clean radar's reports stay as reported), and both its windows lie within the rows (not
 within ``window_s`` of their first or last epoch, where one side is cut short and a
 jump there unseen: a fault from the first epoch on would be corrected before its onset
@@ -94,14 +95,21 @@ from numpy.lib.stride_tricks import sliding_window_view
 from pipeline.filters.quantiles import chi2_ppf, normal_ppf
 from pipeline.frames import velocity_enu
 from pipeline.maritime.config import RegistrationConfig
-from pipeline.maritime.integrity import THETA_PRIOR, RegistrationEvidence, registration_jacobian
+from pipeline.maritime.integrity import (
+    DIM,
+    THETA_PRIOR,
+    RegistrationEvidence,
+    registration_jacobian,
+)
 
 MIN_SCALE = 0.25
 """The smallest variance scale: a radar at most twice as accurate as its sigmas say."""
 
 PAST, FUTURE, BOTH = 0, 1, 2
 _SIDES = ("past", "future", "both")
-_A, _B, _NIS, _N, _TRACE, _NAIS = slice(0, 9), slice(9, 12), 12, 13, 14, 15
+_A, _B = slice(0, DIM * DIM), slice(DIM * DIM, DIM * DIM + DIM)
+_NIS, _N, _TRACE, _NAIS = (DIM * DIM + DIM + i for i in range(4))
+_WIDTH = _NAIS + 1
 
 
 REPORTED_COLUMNS = ("x_enu_m", "y_enu_m", "P_xx", "P_yy", "P_xy")
@@ -110,9 +118,10 @@ REPORTED_COLUMNS = ("x_enu_m", "y_enu_m", "P_xx", "P_yy", "P_xy")
 
 @dataclass(frozen=True, eq=False)
 class Estimate:
-    """Each site's registration per epoch: ``theta`` (K, C, 3), its covariance ``P`` (K,
-    C, 3, 3), the ``side`` of its window, the track-epochs ``n`` and ``n_ais`` in it, and
-    whether it is ``applied`` (K, C); ``epochs`` (K,)."""
+    """Each site's registration per epoch: ``theta`` (K, C, 4: range bias m, azimuth bias
+    rad, time offset s, range gain), its covariance ``P`` (K, C, 4, 4), the ``side`` of
+    its window, the track-epochs ``n`` and ``n_ais`` in it, and whether it is
+    ``applied`` (K, C); ``epochs`` (K,)."""
 
     epochs: np.ndarray
     theta: np.ndarray
@@ -148,8 +157,8 @@ class Registration:
 
 @dataclass(frozen=True, eq=False)
 class _Fit:
-    """A window's estimate per (epoch, site): theta (K, C, 3), its covariance P (K, C, 3,
-    3), corrected NIS sum, tracks and tracks against AIS."""
+    """A window's estimate per (epoch, site): theta (K, C, 4), its covariance P (K, C, 4,
+    4), corrected NIS sum, tracks and tracks against AIS."""
 
     theta: np.ndarray
     P: np.ndarray
@@ -159,9 +168,9 @@ class _Fit:
 
 
 def _evidence(ev: RegistrationEvidence) -> np.ndarray:
-    """(K, n_groups, 16) the sums A (9), b (3), NIS, tracks, trace, tracks with AIS."""
+    """(K, n_groups, 24) the sums A (16), b (4), NIS, tracks, trace, tracks with AIS."""
     K, ng = ev.n.shape
-    return np.concatenate([ev.A.reshape(K, ng, 9), ev.b, ev.nis[..., None],
+    return np.concatenate([ev.A.reshape(K, ng, DIM * DIM), ev.b, ev.nis[..., None],
                            ev.n[..., None].astype(float), ev.trace[..., None],
                            ev.n_ais[..., None]], axis=2)
 
@@ -177,21 +186,21 @@ def _windows(x: np.ndarray, w: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]
 
 
 def _corrected_nis(v: np.ndarray, theta: np.ndarray) -> np.ndarray:
-    """N - 2 theta^T b + theta^T A theta of sums ``v`` (..., 16), >= 0."""
-    A = v[..., _A].reshape(*v.shape[:-1], 3, 3)
+    """N - 2 theta^T b + theta^T A theta of sums ``v`` (..., 24), >= 0."""
+    A = v[..., _A].reshape(*v.shape[:-1], DIM, DIM)
     quad = np.einsum("...i,...ij,...j->...", theta, A, theta)
     return np.maximum(v[..., _NIS] - 2 * np.einsum("...i,...i->...", theta, v[..., _B]) + quad,
                       0.0)
 
 
 def _fit(v: np.ndarray, corr: float) -> _Fit:
-    """The weighted least-squares estimate of sums ``v`` (K, C, 16) (module docstring)."""
-    A = v[..., _A].reshape(*v.shape[:-1], 3, 3) + np.diag(THETA_PRIOR**-2.0)
+    """The weighted least-squares estimate of sums ``v`` (K, C, 24) (module docstring)."""
+    A = v[..., _A].reshape(*v.shape[:-1], DIM, DIM) + np.diag(THETA_PRIOR**-2.0)
     cov = np.linalg.inv(A)
     theta = np.einsum("...ij,...j->...i", cov, v[..., _B])
     nis = _corrected_nis(v, theta)
     n = v[..., _N]
-    f = corr * np.maximum(1.0, nis / np.maximum(2 * n - 3, 1.0))
+    f = corr * np.maximum(1.0, nis / np.maximum(2 * n - DIM, 1.0))
     return _Fit(theta, cov * f[..., None, None], nis, n, v[..., _NAIS])
 
 
@@ -208,7 +217,7 @@ def _choose(fits: tuple[_Fit, _Fit, _Fit], cur: np.ndarray, corr: float,
     past, future, _ = fits
     d = corr * _mahalanobis(past.theta - future.theta, past.P + future.P)
     enough = (past.n >= rc.min_tracks) & (future.n >= rc.min_tracks)
-    jump = enough & (d > chi2_ppf(1.0 - rc.jump_q, 3))
+    jump = enough & (d > chi2_ppf(1.0 - rc.jump_q, DIM))
     side = np.where(_corrected_nis(cur, past.theta) <= _corrected_nis(cur, future.theta),
                     PAST, FUTURE)
     return np.where(jump, side, BOTH)
@@ -244,8 +253,8 @@ def _pick(x: list[np.ndarray], side: np.ndarray) -> np.ndarray:
 
 def _scale(v: np.ndarray, theta: np.ndarray, corr: float, rc: RegistrationConfig
            ) -> tuple[np.ndarray, np.ndarray]:
-    """(scale, applied) of sums ``v`` (..., 16) with the correction ``theta`` (...,
-    3): covariance matching of the corrected residuals (module docstring)."""
+    """(scale, applied) of sums ``v`` (..., 24) with the correction ``theta`` (...,
+    4): covariance matching of the corrected residuals (module docstring)."""
     nis = _corrected_nis(v, theta)
     dof = 2 * v[..., _N]
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -319,7 +328,7 @@ def register(
     w = max(1, round(rc.window_s / epoch_period_s))
     corr = float(np.clip(rc.decorrelation_s / epoch_period_s, 1.0, 2 * w + 1))
     cur = _evidence(ev)
-    per_site = cur.reshape(K, C, G1, 16).sum(axis=2)
+    per_site = cur.reshape(K, C, G1, _WIDTH).sum(axis=2)
     site_wins = _windows(per_site, w)
     if corrected_by is None:
         est = _estimate(site_wins, per_site, corr, w, rc, ev.epochs)
@@ -359,7 +368,7 @@ def _estimate(site_wins: tuple[np.ndarray, ...], per_site: np.ndarray, corr: flo
     theta = _pick([f.theta for f in fits], side)
     P = _pick([f.P for f in fits], side)
     n, n_ais = _pick([f.n for f in fits], side), _pick([f.n_ais for f in fits], side)
-    applied = (n >= rc.min_tracks) & (_mahalanobis(theta, P) >= chi2_ppf(1.0 - rc.apply_q, 3))
+    applied = (n >= rc.min_tracks) & (_mahalanobis(theta, P) >= chi2_ppf(1.0 - rc.apply_q, DIM))
     # both sides whole: within a window of the rows' first or last epoch one side is cut
     # short and a jump there unseen (a fault from the first epoch on would be corrected
     # before its onset too)
@@ -445,9 +454,11 @@ def _table(ev: RegistrationEvidence, present: np.ndarray, est: Estimate, scale: 
         "range_bias_m": th[:, 0],
         "azimuth_bias_rad": th[:, 1],
         "time_offset_s": th[:, 2],
+        "range_gain": th[:, 3],
         "sigma_range_bias_m": sigma[:, 0],
         "sigma_azimuth_bias_rad": sigma[:, 1],
         "sigma_time_offset_s": sigma[:, 2],
+        "sigma_range_gain": sigma[:, 3],
         "window": pl.Series([_SIDES[i] for i in side[kk, cc].tolist()], dtype=pl.String),
         "tracks": n[kk, cc].astype(np.int32),
         "tracks_ais": n_ais[kk, cc].astype(np.int32),

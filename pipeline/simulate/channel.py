@@ -588,7 +588,7 @@ def _site_reports(
         valid = (ts >= v.t_seen_from_s) & (ts <= v.t_exit_s) & (r <= site.max_range_m)
         n = k.size
         z = np.random.default_rng([seed, _RADAR, site_index, *v.key]).standard_normal((n, 6))
-        can_detect, f_dr, f_daz, f_dt, f_noise = radar_effects(faults, ts, az)
+        can_detect, f_dr, f_daz, f_dt, f_noise = radar_effects(faults, ts, az, r)
         detected = (ndtr(z[:, 0]) < DETECTION_PROBABILITY) & can_detect
         lost = ndtr(z[:, 1]) < TRACK_LOSS_PROBABILITY
         status, track_no = _track_life(valid, detected, lost)

@@ -15,6 +15,7 @@ Radar (per site, by the sweep time of each report, s since the scenario start):
 - ``radar_range_bias`` / ``radar_azimuth_bias``: the value is added to ranges / to
   azimuths and courses (a range-gate or encoder fault);
 - ``radar_time_offset``: the value is added to report times (a clock jump);
+- ``radar_range_gain``: ranges are multiplied by (1 + the value) (a range scale error);
 - ``radar_noise``: range, azimuth, course and speed noise scaled by the factor; the
   reported sigmas stay as configured (the tracker does not know).
 
@@ -48,6 +49,7 @@ _UNITS = {
     "radar_azimuth_bias": "rad",
     "radar_time_offset": "s",
     "radar_noise": "factor",
+    "radar_range_gain": "ratio",
     "ais_offset": "m",
 }
 
@@ -63,11 +65,11 @@ def in_azimuths(az_rad: np.ndarray, lo_rad: float, hi_rad: float) -> np.ndarray:
 
 
 def radar_effects(
-    faults: Sequence[ChannelFault], t_s: np.ndarray, az_rad: np.ndarray
+    faults: Sequence[ChannelFault], t_s: np.ndarray, az_rad: np.ndarray, range_m: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Effects of one site's faults on reports swept at ``t_s`` (s) and azimuth
-    ``az_rad``: (detection possible (bool), range added (m), azimuth added (rad), time
-    added (s), noise factor)."""
+    """Effects of one site's faults on reports swept at ``t_s`` (s), azimuth ``az_rad``
+    and true range ``range_m``: (detection possible (bool), range added (m), azimuth
+    added (rad), time added (s), noise factor)."""
     n = np.shape(t_s)[0]
     detect = np.ones(n, bool)
     dr, daz, dt, noise = np.zeros(n), np.zeros(n), np.zeros(n), np.ones(n)
@@ -79,6 +81,8 @@ def radar_effects(
             detect &= ~(on & in_azimuths(az_rad, f.azimuth_from_rad, f.azimuth_to_rad))
         elif f.kind == "radar_range_bias":
             dr += np.where(on, f.value, 0.0)
+        elif f.kind == "radar_range_gain":
+            dr += np.where(on, f.value * np.asarray(range_m), 0.0)
         elif f.kind == "radar_azimuth_bias":
             daz += np.where(on, f.value, 0.0)
         elif f.kind == "radar_time_offset":

@@ -124,17 +124,20 @@ def test_registration_test_recovers_the_bias_and_is_chi2_3():
         rho = rng.uniform(3e3, 15e3, n)
         d = np.column_stack([rho * np.sin(az), rho * np.cos(az)])
         v = rng.normal(0, 4, (n, 2))
-        H = np.empty((n, 2, 3))
+        H = np.empty((n, 2, 4))
         H[:, 0, 0], H[:, 1, 0] = d[:, 0] / rho, d[:, 1] / rho
         H[:, 0, 1], H[:, 1, 1] = d[:, 1], -d[:, 0]
         H[:, 0, 2], H[:, 1, 2] = -v[:, 0], -v[:, 1]
+        H[:, 0, 3], H[:, 1, 3] = d[:, 0], d[:, 1]  # range gain: the registration's only
+        np.testing.assert_allclose(H, integ.registration_jacobian(d, np.zeros((n, 2)),
+                                                                  v[:, 0], v[:, 1]), rtol=1e-12)
         S = np.column_stack([rng.uniform(200, 900, n), rng.uniform(200, 900, n),
                              rng.uniform(-100, 100, n)])
         L = np.linalg.cholesky(np.stack([[S[:, 0], S[:, 2]], [S[:, 2], S[:, 1]]], -1)
                                .transpose(1, 0, 2))
         noise = np.einsum("nij,nj->ni", L, rng.standard_normal((n, 2)))
         biased_run = trial % 2 == 1
-        r = noise + (np.einsum("nij,j->ni", H, theta) if biased_run else 0.0)
+        r = noise + (np.einsum("nij,j->ni", H[:, :, :3], theta) if biased_run else 0.0)
         xi = integ._d2(r, S)
         P = S * 0.6  # the radar's own share of S
         g = integ._radar_groups(xi, r, S, P, np.ones(n, bool), np.ones(n, bool), H,
@@ -149,9 +152,10 @@ def test_registration_test_recovers_the_bias_and_is_chi2_3():
             A = np.einsum("nji,njk,nkl->il", H, W, H)
             b = np.einsum("nji,njk,nk->i", H, W, r)
             np.testing.assert_allclose(g["theta"][0], np.linalg.solve(
-                A + np.diag(integ.THETA_PRIOR ** -2.0), b), rtol=1e-9)
-            # the registration's evidence (issue 38): A without the prior, b, tr(S^-1 P)
-            np.testing.assert_allclose(g["A"][0].reshape(3, 3), A, rtol=1e-9)
+                A[:3, :3] + np.diag(integ.THETA_PRIOR[:3] ** -2.0), b[:3]), rtol=1e-9)
+            # the registration's evidence (issue 38): A without the prior, b, tr(S^-1 P),
+            # with the range gain's row and column
+            np.testing.assert_allclose(g["A"][0].reshape(4, 4), A, rtol=1e-9)
             np.testing.assert_allclose(g["b"][0], b, rtol=1e-9)
             assert g["trace"][0] == pytest.approx(0.6 * 2 * n, rel=1e-9)
             assert g["n_ais"][0] == n

@@ -113,6 +113,24 @@ def test_biases_add_exactly_their_value_during_the_fault(cfg, clean, kind, colum
     assert sc.fault_truth.select("channel", "kind", "value").row(0) == ("R2", kind, value)
 
 
+def test_range_gain_scales_the_true_range_during_the_fault(cfg, clean):
+    f = ChannelFault("radar_range_gain", 120.0, 90.0, site_id="R2", range_gain=0.006)
+    sc = run(cfg, f)
+    j = sc.radar_reports.join(clean.radar_reports, on=["site_id", "track_id", "log_time_ns"],
+                              suffix="_clean")
+    assert j.height == clean.radar_reports.height
+    measured = (pl.col("status") != "coasting") & (pl.col("site_id") == "R2")
+    on = j.filter(measured & window(f))
+    assert on.height > 50
+    # faulty - clean = gain x the true range; the clean range is it within its 15 m noise
+    ratio = ((on["range_m"] - on["range_m_clean"]) / on["range_m_clean"]).to_numpy()
+    np.testing.assert_allclose(ratio, 0.006, rtol=0.03)
+    off = j.filter(measured & ~window(f))
+    assert (off["range_m"] - off["range_m_clean"]).abs().max() < 1e-9
+    assert sc.fault_truth.select("channel", "kind", "value", "unit").row(0) == (
+        "R2", "radar_range_gain", 0.006, "ratio")
+
+
 def test_noise_scales_the_errors(cfg, clean):
     f = ChannelFault("radar_noise", 120.0, 90.0, site_id="R1", factor=4.0)
     j = run(cfg, f).radar_reports.join(clean.radar_reports, on=["site_id", "track_id",

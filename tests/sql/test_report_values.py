@@ -855,6 +855,7 @@ def test_sensor_registration(world):
         *interval("range_bias_m", "sigma_range_bias_m"),
         *interval("azimuth_bias_rad", "sigma_azimuth_bias_rad", 180.0 / math.pi),
         *interval("time_offset_s", "sigma_time_offset_s"),
+        *interval("range_gain", "sigma_range_gain", 1000.0),
         pl.col("variance_scale").mean().alias("variance_scale_mean"),
         pl.col("variance_scale").max().alias("variance_scale_max"),
         pl.col("scale_applied").mean().alias("scale_applied_share"),
@@ -864,13 +865,18 @@ def test_sensor_registration(world):
               "range_bias_m_high": "range_ci_high_m", "azimuth_bias_rad_mean": "azimuth_bias_deg",
               "azimuth_bias_rad_low": "azimuth_ci_low_deg",
               "azimuth_bias_rad_high": "azimuth_ci_high_deg", "time_offset_s_mean": "time_offset_s",
-              "time_offset_s_low": "time_ci_low_s", "time_offset_s_high": "time_ci_high_s"})
+              "time_offset_s_low": "time_ci_low_s", "time_offset_s_high": "time_ci_high_s",
+              "range_gain_mean": "range_gain_m_per_km",
+              "range_gain_low": "range_gain_ci_low_m_per_km",
+              "range_gain_high": "range_gain_ci_high_m_per_km"})
     # the channel scene's two radars report in every sector
     assert {"R1", "R2"} <= set(want["site_id"])
     got = report(world, "sensor_registration")
     same(got, want, ["site", "site_id", "sector"], atol=0.0051, azimuth_bias_deg=5.1e-5,
          azimuth_ci_low_deg=5.1e-5, azimuth_ci_high_deg=5.1e-5, time_offset_s=5.1e-4,
-         time_ci_low_s=5.1e-4, time_ci_high_s=5.1e-4, variance_scale_mean=5.1e-4,
+         time_ci_low_s=5.1e-4, time_ci_high_s=5.1e-4, range_gain_m_per_km=5.1e-4,
+         range_gain_ci_low_m_per_km=5.1e-4, range_gain_ci_high_m_per_km=5.1e-4,
+         variance_scale_mean=5.1e-4,
          variance_scale_max=5.1e-4, registration_applied_share=5.1e-5,
          scale_applied_share=5.1e-5, ais_track_share=5.1e-5, readmitted_share=5.1e-5)
     # the scene's radar faults (a range bias of R2 among them) are estimated and applied
@@ -893,6 +899,9 @@ def test_registration_over_time(world):
         ((pl.col("azimuth_bias_rad") + z * pl.col("sigma_azimuth_bias_rad")) * deg).mean()
         .alias("azimuth_ci_high_deg"),
         pl.col("time_offset_s").mean(),
+        (1000 * pl.col("range_gain")).mean().alias("range_gain_m_per_km"),
+        (1000 * (pl.col("range_gain") + z * pl.col("sigma_range_gain"))).mean().alias(
+            "range_gain_ci_high_m_per_km"),
         pl.col("variance_scale").max().alias("variance_scale_max"),
         pl.col("readmitted").mean().alias("readmitted_share"),
     ).with_columns(pl.from_epoch(pl.col("minute") * 60, time_unit="s").alias("minute_utc")
@@ -900,6 +909,7 @@ def test_registration_over_time(world):
     got = report(world, "registration_over_time").select(want.columns)
     same(got, want, ["site", "site_id", "minute_utc"], atol=0.0051,
          azimuth_bias_deg=5.1e-5, azimuth_ci_high_deg=5.1e-5, time_offset_s=5.1e-4,
+         range_gain_m_per_km=5.1e-4, range_gain_ci_high_m_per_km=5.1e-4,
          variance_scale_max=5.1e-4, registration_applied_share=5.1e-5,
          readmitted_share=5.1e-5)
     # the minutes of the scene's R2 range bias: estimated near its injected 80 m, applied
