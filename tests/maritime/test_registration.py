@@ -152,7 +152,7 @@ def test_azimuth_bias_estimated(world):
 
 
 def test_range_gain_estimated_within_its_interval_and_corrected(world):
-    # ranges x 1.006 (6 m per km: 12-90 m over the scene): the four-parameter model
+    # ranges x 1.006 (6 m per km, 144 m at 24 km): the four-parameter model
     # estimates the gain, not a range bias at the mean range; the corrected radar is fused
     # again (a three-parameter fit, the gain's prior at 1e-9, left the fused RMS at 103 m
     # against 107 m excluding the radar; this gives 37 m)
