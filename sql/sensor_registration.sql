@@ -7,8 +7,9 @@
 --   over the epochs, the share of epochs the estimate was applied to the reports before
 --   fusion, the variance scale on the reports' covariance (mean and largest; 1 = the
 --   configured sigmas) and the share of epochs it was estimated, the share of the
---   estimate's tracks tested against AIS, and the share of epochs the radar was fused
---   although the integrity excluded it (its corrected and rescaled residuals passed).
+--   estimate's tracks tested against AIS and of radar-radar pairs without AIS, and the
+--   share of epochs the radar was fused although the integrity excluded it (its
+--   corrected and rescaled residuals passed).
 -- grain: one row per (site, radar site, sector)
 -- params: $start_ns (BIGINT, inclusive), $end_ns (BIGINT, exclusive),
 --         $sector (VARCHAR, NULL = every sector), $site (VARCHAR, NULL = every site)
@@ -37,6 +38,7 @@ SELECT
     round(max(variance_scale), 3)::DOUBLE                      AS variance_scale_max,
     round(avg(scale_applied::INTEGER), 4)::DOUBLE              AS scale_applied_share,
     round(sum(tracks_ais)::DOUBLE / nullif(sum(tracks), 0), 4)::DOUBLE AS ais_track_share,
+    round(sum(tracks_pair)::DOUBLE / nullif(sum(tracks), 0), 4)::DOUBLE AS pair_track_share,
     round(avg(readmitted::INTEGER), 4)::DOUBLE                 AS readmitted_share
 FROM sensor_registration
 WHERE time_ns >= $start_ns

@@ -168,7 +168,10 @@ class RegistrationEvidence:
     d(position)/d(range bias, azimuth bias, time offset, range gain), its leave-one-out residual
     ``row_r`` (n, 2) and its covariance ``row_innov_cov`` (n, 3) (NaN: no other radar,
     no AIS report on the track), ``row_tested`` (in the test: its AIS report or two
-    other radars), its own covariance ``row_cov`` (n, 3). ``G``, ``C``: sectors, sites."""
+    other radars), its own covariance ``row_cov`` (n, 3). ``G``, ``C``: sectors, sites.
+    ``pair_info`` (K, 4C, 4C: A of the pairs), ``pair_b`` (K, 4C), ``pair_nis`` (K,),
+    ``pair_n`` (K, C): the radar-radar evidence of tracks without a transponder seen by
+    two sites (:func:`_pair_evidence`), in every site's registration at once."""
 
     epochs: np.ndarray
     A: np.ndarray
@@ -188,6 +191,10 @@ class RegistrationEvidence:
     row_cov: np.ndarray
     G: int
     C: int
+    pair_info: np.ndarray
+    pair_b: np.ndarray
+    pair_nis: np.ndarray
+    pair_n: np.ndarray
 
 
 # --- the inputs as arrays (computed once, before the epoch loop) -----------------------
@@ -969,6 +976,7 @@ def check_channels(
     row_r = np.full((assoc.height, 2), np.nan)
     row_innov_cov = np.full((assoc.height, 3), np.nan)
     row_tested = np.zeros(assoc.height, bool)
+    row_ais = np.zeros(assoc.height, bool)  # the row's track carries a transponder in service
     # an epoch without radar rows, AIS references or reports, with no radar group out of
     # service and no scan down, decides nothing and changes no state: skipped (an hour of
     # sparse AIS without radar: its ~1,100 epochs cost 0.4 CPU-s, now the few with reports)
@@ -1012,6 +1020,7 @@ def check_channels(
         grp = _radar_groups(xi, r, S, rad.P[a:b], checkable, has_ais[inv], rad.H[a:b], g,
                             n_groups, thr)
         row_r[a:b], row_innov_cov[a:b], row_tested[a:b] = r, S, checkable
+        row_ais[a:b] = has_ais[inv]
         # -- coverage: ships trusted channels see in the site's range, the site misses; a
         # radar excluded or failing in any sector is no witness anywhere (a registration
         # fault splits its tracks off the others' where it is not tested)
@@ -1060,13 +1069,60 @@ def check_channels(
     ais_excluded = pl.DataFrame({"mmsi": ais.mmsi[ais.rep_m[excl]], "time_ns": ais.rep_t[excl]},
                                 schema={"mmsi": pl.Int64, "time_ns": pl.Int64})
     k_row = np.repeat(np.arange(K), np.diff(rad.bounds))
+    pair_info, pair_b, pair_nis, pair_n = _pair_evidence(rad, k_row, row_ais, K, C, thr)
     evidence = RegistrationEvidence(
         epochs=epochs, A=ro.A.reshape(K, n_groups, DIM, DIM), b=ro.b, nis=ro.nis, n=ro.n,
         trace=ro.trace, n_ais=ro.n_ais, blocked=ro.checked & ro.eta & (ro.check == 3),
         excluded=ro.excluded, row_k=k_row, row_group=rad.group, H=rad.H, row_r=row_r,
-        row_innov_cov=row_innov_cov, row_tested=row_tested, row_cov=rad.P, G=G, C=C)
+        row_innov_cov=row_innov_cov, row_tested=row_tested, row_cov=rad.P, G=G, C=C,
+        pair_info=pair_info, pair_b=pair_b, pair_nis=pair_nis, pair_n=pair_n)
     return IntegrityResult(health=health, associations=assoc.with_columns(
         pl.Series("used", used)), ais_excluded=ais_excluded, evidence=evidence)
+
+
+def _pair_evidence(rad: _Radar, k_row: np.ndarray, row_ais: np.ndarray, K: int, C: int,
+                   thr: _Tables) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The radar-radar evidence the leave-one-out test cannot use (``pair_*`` of
+    :class:`RegistrationEvidence`): tracks that carry no transponder and are reported by
+    exactly two sites c < d at the epoch. Their difference r = p_c - p_d, S = P_c + P_d,
+    is H_c theta_c - H_d theta_d + e whatever the two radars' registrations: one
+    equation in both, (K, 4C, 4C) sums A = sum J^T S^-1 J with J = [.. H_c .. -H_d ..],
+    b = sum J^T S^-1 r, the NIS sum and the pairs per site (K, C). Which of the two is
+    off is not a test here (xi_1 = xi_2): the joint estimate of every site's
+    registration (:mod:`pipeline.maritime.registration`) tells them apart by their
+    geometry and their AIS evidence. Outliers (xi above chi2_2(1 - outlier_q)) fewer than
+    half of a site pair's pairs at an epoch are left out, as in :func:`_radar_groups`."""
+    D = DIM * C
+    gslot = rad.slot_bounds[k_row] + rad.slot  # rows are in slot order
+    count = np.bincount(gslot, minlength=int(rad.slot_bounds[-1]))
+    first = np.r_[True, gslot[1:] != gslot[:-1]] if gslot.size else np.zeros(0, bool)
+    a = np.flatnonzero(first & (count[gslot] == 2) & ~row_ais)
+    a = a[rad.site[a] != rad.site[a + 1]]
+    b = a + 1
+    r, S = rad.xy[a] - rad.xy[b], rad.P[a] + rad.P[b]
+    xi = _d2(r, S)
+    key = (k_row[a] * C + rad.site[a]) * C + rad.site[b]
+    out = xi > thr.outlier
+    drop = 2 * np.bincount(key, weights=out, minlength=K * C * C) < np.bincount(
+        key, minlength=K * C * C)
+    keep = ~(out & drop[key])
+    a, b, r, S, xi = a[keep], b[keep], r[keep], S[keep], xi[keep]
+    k, ca, cb = k_row[a], rad.site[a], rad.site[b]
+    J = np.concatenate([rad.H[a], -rad.H[b]], axis=2)  # (m, 2, 2 DIM)
+    det = S[:, 0] * S[:, 1] - S[:, 2] ** 2
+    JtSi = np.stack([J[:, 0, :] * S[:, 1, None] - J[:, 1, :] * S[:, 2, None],
+                     J[:, 1, :] * S[:, 0, None] - J[:, 0, :] * S[:, 2, None]],
+                    axis=2) / det[:, None, None]
+    JtSiJ = JtSi[:, :, 0, None] * J[:, None, 0, :] + JtSi[:, :, 1, None] * J[:, None, 1, :]
+    JtSir = JtSi[:, :, 0] * r[:, 0, None] + JtSi[:, :, 1] * r[:, 1, None]
+    p = np.arange(2 * DIM)
+    gi = np.where(p < DIM, ca[:, None] * DIM + p, cb[:, None] * DIM + p - DIM)  # (m, 2 DIM)
+    cell = (k[:, None, None] * D + gi[:, :, None]) * D + gi[:, None, :]
+    A = np.bincount(cell.ravel(), weights=JtSiJ.ravel(), minlength=K * D * D)
+    bb = np.bincount((k[:, None] * D + gi).ravel(), weights=JtSir.ravel(), minlength=K * D)
+    n = (np.bincount(k * C + ca, minlength=K * C) + np.bincount(k * C + cb, minlength=K * C))
+    return (A.reshape(K, D, D), bb.reshape(K, D), np.bincount(k, weights=xi, minlength=K),
+            n.reshape(K, C).astype(float))
 
 
 def _release(st: _State, readmitted: np.ndarray, mmsi_near: np.ndarray, G: int) -> None:

@@ -16,6 +16,18 @@ b_r, the range scale error of a radar's range clock or its trigger delay's drift
 summed per epoch and group: A_k = sum H^T S^-1 H, b_k = sum H^T S^-1 r, the NIS sum
 N_k = sum r^T S^-1 r, the tracks n_k and T_k = sum tr(S^-1 P_i).
 
+**Radar-radar pairs** (:func:`~pipeline.maritime.integrity._pair_evidence`): a track
+without AIS that exactly two sites c, d report is no evidence for the leave-one-out test
+(xi_1 = xi_2), but its difference r = p_c - p_d = H_c theta_c - H_d theta_d + e is one
+equation in both registrations. Where a window holds such pairs every site's estimate
+is made at once (:func:`_joint_fit`): the sites' own sums on the block diagonal of a (4C,
+4C) system, the pairs' across, each site's estimate and covariance its block of the
+joint ones; the radars' geometry (two sites see a ship along different lines of sight)
+tells which of them is off, so registration works where no ship carries AIS. Not
+observable from pairs alone: a clock offset common to both radars (only their difference
+is), which the prior splits between them (the estimate then differs from zero by less
+than its interval and is not applied).
+
 **Registration** (per site, every sector's evidence: a range, azimuth or clock fault is
 the site's). Over a window W of epochs, the weighted least-squares estimate with the
 integrity's wide prior P_0,
@@ -27,7 +39,9 @@ integrity's wide prior P_0,
 with A_W, b_W, N_W the sums over W, the corrected NIS sum
 N~_W = N_W - 2 theta^T b_W + theta^T A_W theta, and c = ``decorrelation_s`` / epoch
 period (at most the window's epochs): a radar tracker's errors are correlated over
-many scans, so an epoch carries 1/c of an independent sample. Three windows per epoch:
+many scans, so an epoch carries 1/c of an independent sample (in a joint fit, a site
+without ``min_tracks`` of its own takes the joint f_W: N~ and n of every site and of the
+pairs, 4C parameters). Three windows per epoch:
 the ``window_s`` before it (past), after it (future), both. Both, unless the past and
 future estimates disagree (d = (theta_p - theta_f)^T (P_p + P_f)^-1 (theta_p - theta_f)
 above chi2_4(1 - ``jump_q``): a registration jump), then the side whose corrected NIS
@@ -120,8 +134,9 @@ REPORTED_COLUMNS = ("x_enu_m", "y_enu_m", "P_xx", "P_yy", "P_xy")
 class Estimate:
     """Each site's registration per epoch: ``theta`` (K, C, 4: range bias m, azimuth bias
     rad, time offset s, range gain), its covariance ``P`` (K, C, 4, 4), the ``side`` of
-    its window, the track-epochs ``n`` and ``n_ais`` in it, and whether it is
-    ``applied`` (K, C); ``epochs`` (K,)."""
+    its window, the track-epochs ``n`` in it, of them ``n_ais`` against AIS and
+    ``n_pair`` radar-radar pairs without AIS, and whether it is ``applied`` (K, C);
+    ``epochs`` (K,)."""
 
     epochs: np.ndarray
     theta: np.ndarray
@@ -129,6 +144,7 @@ class Estimate:
     side: np.ndarray
     n: np.ndarray
     n_ais: np.ndarray
+    n_pair: np.ndarray
     applied: np.ndarray
 
     @property
@@ -165,6 +181,7 @@ class _Fit:
     nis: np.ndarray
     n: np.ndarray
     n_ais: np.ndarray
+    n_pair: np.ndarray
 
 
 def _evidence(ev: RegistrationEvidence) -> np.ndarray:
@@ -201,7 +218,59 @@ def _fit(v: np.ndarray, corr: float) -> _Fit:
     nis = _corrected_nis(v, theta)
     n = v[..., _N]
     f = corr * np.maximum(1.0, nis / np.maximum(2 * n - DIM, 1.0))
-    return _Fit(theta, cov * f[..., None, None], nis, n, v[..., _NAIS])
+    return _Fit(theta, cov * f[..., None, None], nis, n, v[..., _NAIS], np.zeros_like(n))
+
+
+@dataclass(frozen=True, eq=False)
+class _Pairs:
+    """One window's sums of the radar-radar evidence (``RegistrationEvidence.pair_*``)."""
+
+    A: np.ndarray  # (K, 4C, 4C)
+    b: np.ndarray  # (K, 4C)
+    nis: np.ndarray  # (K,)
+    n: np.ndarray  # (K, C)
+
+
+def _joint_fit(v: np.ndarray, pairs: _Pairs, corr: float, min_tracks: int) -> _Fit:
+    """Every site's registration at once where the window holds radar-radar pairs
+    (module docstring): the sites' own sums on the block diagonal, the pairs' across,
+
+    .. math:: \\hat\\Theta = (\\mathrm{diag}(A_c) + A_{pairs} + P_0^{-1})^{-1}
+              (b + b_{pairs}), \\qquad f = c \\max(1, \\tilde N / (2 (n + m) - 4C))
+
+    (n the sites' track-epochs, m the pairs, N~ the corrected NIS of both; a site with
+    ``min_tracks`` track-epochs of its own takes f of its own residuals), each site's
+    estimate and covariance its block of the joint ones. Epochs without pairs in the
+    window: :func:`_fit`, to the last digit."""
+    own = _fit(v, corr)
+    idx = np.flatnonzero(pairs.n.sum(axis=-1) > 0)
+    if idx.size == 0:
+        return own
+    C = v.shape[1]
+    vi = v[idx]
+    A_site = vi[..., _A].reshape(-1, C, DIM, DIM)
+    A_data = pairs.A[idx].copy()
+    for c in range(C):
+        A_data[:, c * DIM:(c + 1) * DIM, c * DIM:(c + 1) * DIM] += A_site[:, c]
+    b = pairs.b[idx] + vi[..., _B].reshape(-1, C * DIM)
+    cov = np.linalg.inv(A_data + np.diag(np.tile(THETA_PRIOR**-2.0, C)))
+    theta = np.einsum("kij,kj->ki", cov, b)
+    nis = np.maximum(vi[..., _NIS].sum(axis=-1) + pairs.nis[idx] - 2 * np.einsum(
+        "ki,ki->k", theta, b) + np.einsum("ki,kij,kj->k", theta, A_data, theta), 0.0)
+    dof = 2 * (vi[..., _N].sum(axis=-1) + pairs.n[idx].sum(axis=-1) / 2) - C * DIM
+    f_joint = np.maximum(1.0, nis / np.maximum(dof, 1.0))
+    # a site with evidence of its own (min_tracks track-epochs against AIS or a majority)
+    # takes the inflation of its own residuals: the pairs' (association errors of
+    # untested tracks among them) would widen every site's interval
+    theta_c = theta.reshape(-1, C, DIM)
+    n_own = vi[..., _N]
+    f_own = np.maximum(1.0, _corrected_nis(vi, theta_c) / np.maximum(2 * n_own - DIM, 1.0))
+    f = corr * np.where(n_own >= min_tracks, f_own, f_joint[:, None])
+    blocks = np.moveaxis(np.diagonal(cov.reshape(-1, C, DIM, C, DIM), axis1=1, axis2=3), -1, 1)
+    out_theta, out_P = own.theta.copy(), own.P.copy()
+    out_theta[idx] = theta_c
+    out_P[idx] = blocks * f[..., None, None]
+    return _Fit(out_theta, out_P, own.nis, own.n + pairs.n, own.n_ais, pairs.n)
 
 
 def _mahalanobis(x: np.ndarray, P: np.ndarray) -> np.ndarray:
@@ -331,7 +400,9 @@ def register(
     per_site = cur.reshape(K, C, G1, _WIDTH).sum(axis=2)
     site_wins = _windows(per_site, w)
     if corrected_by is None:
-        est = _estimate(site_wins, per_site, corr, w, rc, ev.epochs)
+        pair_wins = [_Pairs(*x) for x in zip(*(_windows(a, w) for a in (
+            ev.pair_info, ev.pair_b, ev.pair_nis, ev.pair_n)), strict=True)]
+        est = _estimate(site_wins, pair_wins, per_site, corr, w, rc, ev.epochs)
         theta_used, P_used = est.theta_used, est.cov_used
     else:
         est = corrected_by
@@ -360,21 +431,23 @@ def register(
     return Registration(out, corrected, table, est)
 
 
-def _estimate(site_wins: tuple[np.ndarray, ...], per_site: np.ndarray, corr: float, w: int,
-              rc: RegistrationConfig, epochs: np.ndarray) -> Estimate:
+def _estimate(site_wins: tuple[np.ndarray, ...], pair_wins: list[_Pairs], per_site: np.ndarray,
+              corr: float, w: int, rc: RegistrationConfig, epochs: np.ndarray) -> Estimate:
     """Each site's registration on its windows' sums (module docstring)."""
-    fits = tuple(_fit(v, corr) for v in site_wins)
+    fits = tuple(_joint_fit(v, pw, corr, rc.min_tracks)
+                 for v, pw in zip(site_wins, pair_wins, strict=True))
     side = _choose(fits, per_site, corr, rc)
     theta = _pick([f.theta for f in fits], side)
     P = _pick([f.P for f in fits], side)
     n, n_ais = _pick([f.n for f in fits], side), _pick([f.n_ais for f in fits], side)
+    n_pair = _pick([f.n_pair for f in fits], side)
     applied = (n >= rc.min_tracks) & (_mahalanobis(theta, P) >= chi2_ppf(1.0 - rc.apply_q, DIM))
     # both sides whole: within a window of the rows' first or last epoch one side is cut
     # short and a jump there unseen (a fault from the first epoch on would be corrected
     # before its onset too)
     k = np.arange(epochs.size)
     applied &= ((k >= w) & (k < epochs.size - w))[:, None]
-    return Estimate(epochs, theta, P, side, n, n_ais, applied)
+    return Estimate(epochs, theta, P, side, n, n_ais, n_pair, applied)
 
 
 def correct_reports(synced: pl.DataFrame, est: Estimate, site_xy: np.ndarray,
@@ -442,6 +515,7 @@ def _table(ev: RegistrationEvidence, present: np.ndarray, est: Estimate, scale: 
     """``sensor_registration`` rows: one per epoch and (site, sector) with reports."""
     G1 = ev.G + 1
     theta, P, applied, side, n, n_ais = est.theta, est.P, est.applied, est.side, est.n, est.n_ais
+    n_pair = est.n_pair
     kk, gg = np.nonzero(present)
     cc = gg // G1
     names = [*sector_names, None]
@@ -462,6 +536,7 @@ def _table(ev: RegistrationEvidence, present: np.ndarray, est: Estimate, scale: 
         "window": pl.Series([_SIDES[i] for i in side[kk, cc].tolist()], dtype=pl.String),
         "tracks": n[kk, cc].astype(np.int32),
         "tracks_ais": n_ais[kk, cc].astype(np.int32),
+        "tracks_pair": n_pair[kk, cc].astype(np.int32),
         "registration_applied": applied[kk, cc],
         "variance_scale": scale[kk, gg],
         "scale_tracks": scale_n[kk, gg].astype(np.int32),

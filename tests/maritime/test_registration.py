@@ -177,6 +177,40 @@ def test_range_gain_estimated_within_its_interval_and_corrected(world):
     assert r1["registration_applied"].mean() < 0.1
 
 
+@pytest.fixture(scope="module")
+def no_ais(world):
+    """R2's 80 m range bias in a scene where no ship carries AIS: the two radars are
+    each other's only witness (the leave-one-out test cannot tell which is off)."""
+    cfg = with_faults(world, _fault("radar_range_bias", "R2", range_bias_m=80.0))
+    window = Window(DEFAULT_START_NS, DEFAULT_START_NS + round(DURATION_S * NS))
+    inputs, _ = maritime_inputs(cfg, SEED, window.start_ns, DURATION_S)
+    inputs["ais_reports"] = inputs["ais_reports"].head(0)
+    return {on: stage(inputs, window, _registration(cfg, on)) for on in (False, True)}
+
+
+def test_without_ais_the_radar_radar_pairs_find_the_biased_radar(no_ais):
+    # the joint estimate of both sites from the ships the two radars share: R2's bias
+    # (not R1's, by their geometry), corrected before the association; registration off
+    # (or before, with no AIS evidence at all: the same) fuses duplicates of the ships
+    t0, t1 = FAULT[0] + 40.0, FAULT[0] + FAULT[1]
+    off, on = _fused(no_ais[False], t0, t1), _fused(no_ais[True], t0, t1)
+    assert _rms(on) < 0.6 * _rms(off), (_rms(on), _rms(off))
+    assert np.quantile(on, 0.95) < 0.7 * np.quantile(off, 0.95)
+    assert _duplicates(no_ais[True], t0, t1) <= 2 < _duplicates(no_ais[False], t0, t1)
+    reg = no_ais[True]["sensor_registration"].unique(["time_ns", "site_id"])
+    during = pl.col("time_ns").is_between(DEFAULT_START_NS + round(t0 * NS),
+                                          DEFAULT_START_NS + round(t1 * NS))
+    r2 = reg.filter((pl.col("site_id") == "R2") & during)
+    assert r2["registration_applied"].mean() > 0.9
+    assert (r2["tracks_ais"] == 0).all() and (r2["tracks_pair"] > 100).all()
+    err = (r2["range_bias_m"] - 80.0).abs() / r2["sigma_range_bias_m"]
+    assert (err <= 1.96).mean() >= 0.9
+    r1 = reg.filter(pl.col("site_id") == "R1")
+    assert r1["registration_applied"].mean() < 0.05
+    before = reg.filter(pl.col("time_ns") < DEFAULT_START_NS + round((FAULT[0] - 45) * NS))
+    assert not before["registration_applied"].any()
+
+
 def test_degraded_radar_down_weighted_by_its_estimated_accuracy(world):
     # 1.3x its sigmas (1.69x in variance): the integrity keeps it; its variance scale is
     # estimated from the residuals and the fused sigma becomes honest again

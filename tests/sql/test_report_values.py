@@ -860,6 +860,7 @@ def test_sensor_registration(world):
         pl.col("variance_scale").max().alias("variance_scale_max"),
         pl.col("scale_applied").mean().alias("scale_applied_share"),
         (pl.col("tracks_ais").sum() / pl.col("tracks").sum()).alias("ais_track_share"),
+        (pl.col("tracks_pair").sum() / pl.col("tracks").sum()).alias("pair_track_share"),
         pl.col("readmitted").mean().alias("readmitted_share"),
     ).rename({"range_bias_m_mean": "range_bias_m", "range_bias_m_low": "range_ci_low_m",
               "range_bias_m_high": "range_ci_high_m", "azimuth_bias_rad_mean": "azimuth_bias_deg",
@@ -878,7 +879,8 @@ def test_sensor_registration(world):
          range_gain_ci_low_m_per_km=5.1e-4, range_gain_ci_high_m_per_km=5.1e-4,
          variance_scale_mean=5.1e-4,
          variance_scale_max=5.1e-4, registration_applied_share=5.1e-5,
-         scale_applied_share=5.1e-5, ais_track_share=5.1e-5, readmitted_share=5.1e-5)
+         scale_applied_share=5.1e-5, ais_track_share=5.1e-5, pair_track_share=5.1e-5,
+         readmitted_share=5.1e-5)
     # the scene's radar faults (a range bias of R2 among them) are estimated and applied
     assert got["registration_applied_share"].max() > 0
 
