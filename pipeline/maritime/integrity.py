@@ -1109,12 +1109,7 @@ def _pair_evidence(rad: _Radar, k_row: np.ndarray, row_ais: np.ndarray, K: int, 
     a, b, r, S, xi = a[keep], b[keep], r[keep], S[keep], xi[keep]
     k, ca, cb = k_row[a], rad.site[a], rad.site[b]
     J = np.concatenate([rad.H[a], -rad.H[b]], axis=2)  # (m, 2, 2 DIM)
-    det = S[:, 0] * S[:, 1] - S[:, 2] ** 2
-    JtSi = np.stack([J[:, 0, :] * S[:, 1, None] - J[:, 1, :] * S[:, 2, None],
-                     J[:, 1, :] * S[:, 0, None] - J[:, 0, :] * S[:, 2, None]],
-                    axis=2) / det[:, None, None]
-    JtSiJ = JtSi[:, :, 0, None] * J[:, None, 0, :] + JtSi[:, :, 1, None] * J[:, None, 1, :]
-    JtSir = JtSi[:, :, 0] * r[:, 0, None] + JtSi[:, :, 1] * r[:, 1, None]
+    JtSiJ, JtSir, _ = _normal_terms(J, S, r)
     p = np.arange(2 * DIM)
     gi = np.where(p < DIM, ca[:, None] * DIM + p, cb[:, None] * DIM + p - DIM)  # (m, 2 DIM)
     cell = (k[:, None, None] * D + gi[:, :, None]) * D + gi[:, None, :]
@@ -1144,6 +1139,22 @@ def _lookup(tracks: np.ndarray, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray
     return pos, (ids >= 0) & (tracks[pos] == ids)
 
 
+def _normal_terms(H: np.ndarray, S: np.ndarray, r: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per row, H^T S^-1 H (n, p, p), H^T S^-1 r (n, p) and det S of residuals ``r`` (n,
+    2), covariances ``S`` (n, 3: xx, yy, xy) and Jacobians ``H`` (n, 2, p)."""
+    det = S[:, 0] * S[:, 1] - S[:, 2] ** 2
+    # H^T S^-1 (n, p, 2) with S^-1 = [[S_yy, -S_xy], [-S_xy, S_xx]] / det
+    HtSi = np.stack([H[:, 0, :] * S[:, 1, None] - H[:, 1, :] * S[:, 2, None],
+                     H[:, 1, :] * S[:, 0, None] - H[:, 0, :] * S[:, 2, None]],
+                    axis=2) / det[:, None, None]
+    # the two-term sums written out (einsum's generic loop is ~4x slower on these 2-long
+    # contractions; the same products, the same sums)
+    HtSiH = HtSi[:, :, 0, None] * H[:, None, 0, :] + HtSi[:, :, 1, None] * H[:, None, 1, :]
+    HtSir = HtSi[:, :, 0] * r[:, 0, None] + HtSi[:, :, 1] * r[:, 1, None]
+    return HtSiH, HtSir, det
+
+
 def _radar_groups(
     xi: np.ndarray, r: np.ndarray, S: np.ndarray, P: np.ndarray, checkable: np.ndarray,
     with_ais: np.ndarray, H: np.ndarray, g: np.ndarray, n_groups: int, thr: _Tables,
@@ -1156,16 +1167,8 @@ def _radar_groups(
     drop = 2 * counts[:, 1] < counts[:, 0]
     kept = checkable & ~(out & drop[g])
     gk = g[kept]
-    Sk, Hk, rk = S[kept], H[kept], r[kept]
-    det = Sk[:, 0] * Sk[:, 1] - Sk[:, 2] ** 2
-    # H^T S^-1 (n, 4, 2) with S^-1 = [[S_yy, -S_xy], [-S_xy, S_xx]] / det
-    HtSi = np.stack([Hk[:, 0, :] * Sk[:, 1, None] - Hk[:, 1, :] * Sk[:, 2, None],
-                     Hk[:, 1, :] * Sk[:, 0, None] - Hk[:, 0, :] * Sk[:, 2, None]],
-                    axis=2) / det[:, None, None]
-    # H^T S^-1 H and H^T S^-1 r, the two-term sums written out (einsum's generic loop
-    # is ~4x slower on these 2-long contractions; the same products, the same sums)
-    HtSiH = HtSi[:, :, 0, None] * Hk[:, None, 0, :] + HtSi[:, :, 1, None] * Hk[:, None, 1, :]
-    HtSir = HtSi[:, :, 0] * rk[:, 0, None] + HtSi[:, :, 1] * rk[:, 1, None]
+    Sk = S[kept]
+    HtSiH, HtSir, det = _normal_terms(H[kept], Sk, r[kept])
     Pk = P[kept]
     trace = (Sk[:, 1] * Pk[:, 0] - 2 * Sk[:, 2] * Pk[:, 2] + Sk[:, 0] * Pk[:, 1]) / det
     terms = np.concatenate([np.ones((gk.size, 1)), xi[kept, None], HtSiH.reshape(-1, DIM * DIM),
