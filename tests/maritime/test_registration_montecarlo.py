@@ -1,0 +1,43 @@
+"""Registration where no ship carries AIS (issue 38 item 1; slow, seeded Monte Carlo of
+``pipeline.experiments.registration_no_ais``): the radar-radar pairs find the faulted
+radar of two, correct it, and correct nothing else.
+
+Run: .venv/bin/pytest -m slow tests/maritime/test_registration_montecarlo.py -s (6 seeds;
+the docs' table is `python -m bench.registration_no_ais --runs 30`)."""
+
+from __future__ import annotations
+
+import polars as pl
+import pytest
+
+from pipeline.experiments.registration_no_ais import FAULTS, run_one, summarise
+
+SEEDS = range(2000, 2006)
+
+
+@pytest.fixture(scope="module")
+def table() -> pl.DataFrame:
+    rows = pl.DataFrame([run_one((s, i)) for i in range(len(FAULTS)) for s in SEEDS])
+    out = summarise(rows)
+    with pl.Config(tbl_cols=-1, tbl_width_chars=250):
+        print("\n", out)
+    return out
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("kind", ["radar_range_bias", "radar_azimuth_bias", "radar_range_gain"])
+def test_the_faulted_radar_is_found_and_corrected_without_ais(table, kind):
+    r = table.filter(pl.col("kind") == kind).row(0, named=True)
+    assert r["rms_on_m"] < 0.7 * r["rms_off_m"], r
+    assert r["p95_on_le_off"] == 1.0 and r["duplicates_on"] < r["duplicates_off"], r
+    assert r["within_95"] >= 5 / 6 and r["applied_mid"] >= 5 / 6, r
+    assert r["other_site_applied_share"] < 0.02 and r["before_applied_share"] < 0.02, r
+
+
+@pytest.mark.slow
+def test_a_clock_offset_is_not_corrected_without_ais(table):
+    # only the two clocks' difference is observable from the pairs: nothing is applied,
+    # and the picture is left as it was (docs/integrity.md §9, Limits)
+    r = table.filter(pl.col("kind") == "radar_time_offset").row(0, named=True)
+    assert r["applied_mid"] == 0.0 and r["rms_on_m"] == r["rms_off_m"], r
+    assert r["within_95"] >= 5 / 6, r
