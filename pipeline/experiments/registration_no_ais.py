@@ -17,36 +17,28 @@ onset) where an estimate was applied (false corrections).
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 
 import numpy as np
 import polars as pl
 
-from pipeline.experiments.channel_montecarlo import maritime_inputs
+from pipeline.experiments.channel_montecarlo import REGISTRATION_OF, Z95, maritime_inputs
 from pipeline.families import load_config
 from pipeline.family import Window
-from pipeline.maritime.config import ChannelFault, maritime_config, with_faults
+from pipeline.maritime.config import ChannelFault, with_faults, with_registration
 from pipeline.maritime.stage import stage
 from pipeline.simulate import DEFAULT_START_NS
 from pipeline.simulate.scenarios import with_scenario
 from pipeline.units import NS
 
 DURATION_S, ONSET_S, FAULT_S, SETTLE_S = 600.0, 240.0, 180.0, 40.0
-#: kind, site, ChannelFault field, injected value, the sensor_registration estimate, sigma
+#: kind, site, injected value (its ChannelFault field and sensor_registration estimate
+#: and sigma: ``REGISTRATION_OF``)
 FAULTS = (
-    ("radar_range_bias", "R2", "range_bias_m", 80.0, "range_bias_m", "sigma_range_bias_m"),
-    ("radar_azimuth_bias", "R1", "azimuth_bias_rad", math.radians(1.0), "azimuth_bias_rad",
-     "sigma_azimuth_bias_rad"),
-    ("radar_range_gain", "R2", "range_gain", 0.006, "range_gain", "sigma_range_gain"),
-    ("radar_time_offset", "R2", "time_offset_s", 5.0, "time_offset_s", "sigma_time_offset_s"),
+    ("radar_range_bias", "R2", 80.0),
+    ("radar_azimuth_bias", "R1", math.radians(1.0)),
+    ("radar_range_gain", "R2", 0.006),
+    ("radar_time_offset", "R2", 5.0),
 )
-
-
-def _with_registration(cfg, on: bool):
-    mc = maritime_config(cfg)
-    fam = dict(cfg.families)
-    fam["maritime"] = replace(mc, registration=replace(mc.registration, enabled=on))
-    return replace(cfg, families=fam)
 
 
 def _ns(s: float) -> int:
@@ -60,7 +52,9 @@ def _fused_errors(out: dict) -> pl.DataFrame:
                                        closed="left"))
 
 
-def _duplicates(e: pl.DataFrame) -> int:
+def duplicates(e: pl.DataFrame) -> int:
+    """(epoch, ship) pairs of the fused ``track_errors`` rows ``e`` followed by more than
+    one fused system track."""
     per = e.group_by("time_ns", "reference_id").agg(pl.col("system_track_id").n_unique())
     return int((per["system_track_id"] > 1).sum())
 
@@ -68,27 +62,28 @@ def _duplicates(e: pl.DataFrame) -> int:
 def run_one(args: tuple[int, int]) -> dict:
     """One seed and fault kind (picklable arguments: the seed, the index in FAULTS)."""
     seed, i = args
-    kind, site, field, value, est, sig = FAULTS[i]
+    kind, site, value = FAULTS[i]
+    est, sig = REGISTRATION_OF[kind]  # the fault's field is named as its estimate
     world = with_scenario(load_config(), ["channel"])
     cfg = with_faults(world, (ChannelFault(kind, ONSET_S, FAULT_S, site_id=site,
-                                           **{field: value}),))
+                                           **{est: value}),))
     window = Window(DEFAULT_START_NS, _ns(DURATION_S))
     inputs, _ = maritime_inputs(cfg, seed, window.start_ns, DURATION_S)
     inputs["ais_reports"] = inputs["ais_reports"].head(0)
     row: dict = {"kind": kind, "seed": seed}
     for on in (False, True):
-        out = stage(inputs, window, _with_registration(cfg, on))
+        out = stage(inputs, window, with_registration(cfg, on))
         e = _fused_errors(out)
         err = e["error_m"].drop_nulls().to_numpy()
         tag = "on" if on else "off"
         row[f"rms_{tag}_m"] = float(np.sqrt(np.mean(err**2)))
         row[f"p95_{tag}_m"] = float(np.quantile(err, 0.95))
-        row[f"duplicates_{tag}"] = _duplicates(e)
+        row[f"duplicates_{tag}"] = duplicates(e)
         if on:
             reg = out["sensor_registration"].unique(["time_ns", "site_id"]).sort("time_ns")
             mid = reg.filter((pl.col("site_id") == site)
                              & (pl.col("time_ns") >= _ns(ONSET_S + FAULT_S / 2))).head(1)
-            row["within_95"] = bool(((mid[est] - value).abs() <= 1.959964 * mid[sig]).item())
+            row["within_95"] = bool(((mid[est] - value).abs() <= Z95 * mid[sig]).item())
             row["applied_mid"] = bool(mid["registration_applied"].item())
             row["estimate_mid"] = float(mid[est].item())
             other = reg.filter(pl.col("site_id") != site)

@@ -369,6 +369,14 @@ def with_faults(cfg: Config, faults: tuple[ChannelFault, ...]) -> Config:
     return replace(cfg, families=fam, scenario_files=cfg.scenario_files or ("(in memory)",))
 
 
+def with_registration(cfg: Config, enabled: bool) -> Config:
+    """``cfg`` with ``[registration] enabled`` set (the rest of the section as it is)."""
+    mc = maritime_config(cfg)
+    fam = dict(cfg.families)
+    fam["maritime"] = replace(mc, registration=replace(mc.registration, enabled=enabled))
+    return replace(cfg, families=fam)
+
+
 def without_faults(cfg: Config) -> Config:
     """``cfg`` with an empty ``[[channel_faults]]`` schedule (the fault-free scenario)."""
     return with_faults(cfg, ())

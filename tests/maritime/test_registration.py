@@ -7,16 +7,16 @@ made worse."""
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 
 import numpy as np
 import polars as pl
 import pytest
 
 from pipeline.experiments.channel_montecarlo import maritime_inputs
+from pipeline.experiments.registration_no_ais import duplicates
 from pipeline.families import load_config
 from pipeline.family import Window
-from pipeline.maritime.config import ChannelFault, maritime_config, with_faults
+from pipeline.maritime.config import ChannelFault, with_faults, with_registration
 from pipeline.maritime.stage import stage
 from pipeline.simulate import DEFAULT_START_NS
 from pipeline.simulate.scenarios import with_scenario
@@ -25,13 +25,6 @@ from pipeline.units import NS
 DURATION_S = 600.0
 FAULT = (240.0, 180.0)  # start, duration, s
 SEED = 1007
-
-
-def _registration(cfg, on: bool):
-    mc = maritime_config(cfg)
-    fam = dict(cfg.families)
-    fam["maritime"] = replace(mc, registration=replace(mc.registration, enabled=on))
-    return replace(cfg, families=fam)
 
 
 @pytest.fixture(scope="module")
@@ -43,7 +36,7 @@ def _run(cfg, faults):
     cfg = with_faults(cfg, faults)
     window = Window(DEFAULT_START_NS, DEFAULT_START_NS + round(DURATION_S * NS))
     inputs, _ = maritime_inputs(cfg, SEED, window.start_ns, DURATION_S)
-    return {on: stage(inputs, window, _registration(cfg, on)) for on in (False, True)}
+    return {on: stage(inputs, window, with_registration(cfg, on)) for on in (False, True)}
 
 
 def _fault(kind: str, site: str, **size) -> tuple[ChannelFault, ...]:
@@ -109,12 +102,10 @@ def test_range_bias_estimate_within_its_interval(range_bias):
 
 def _duplicates(out, t0_s: float, t1_s: float) -> int:
     """(epoch, ship) pairs followed by more than one fused system track."""
-    e = out["track_errors"].filter(
+    return duplicates(out["track_errors"].filter(
         (pl.col("source") == "fused") & (pl.col("reference") == "truth")
         & pl.col("time_ns").is_between(DEFAULT_START_NS + round(t0_s * NS),
-                                       DEFAULT_START_NS + round(t1_s * NS), closed="left"))
-    per = e.group_by("time_ns", "reference_id").agg(pl.col("system_track_id").n_unique())
-    return int((per["system_track_id"] > 1).sum())
+                                       DEFAULT_START_NS + round(t1_s * NS), closed="left")))
 
 
 def test_range_bias_corrected_before_the_association_births_no_duplicate(range_bias, clean):
@@ -185,7 +176,7 @@ def no_ais(world):
     window = Window(DEFAULT_START_NS, DEFAULT_START_NS + round(DURATION_S * NS))
     inputs, _ = maritime_inputs(cfg, SEED, window.start_ns, DURATION_S)
     inputs["ais_reports"] = inputs["ais_reports"].head(0)
-    return {on: stage(inputs, window, _registration(cfg, on)) for on in (False, True)}
+    return {on: stage(inputs, window, with_registration(cfg, on)) for on in (False, True)}
 
 
 def test_without_ais_the_radar_radar_pairs_find_the_biased_radar(no_ais):
