@@ -77,15 +77,22 @@ def assign_sectors(
 ) -> pl.DataFrame:
     """Add ``sector``: name of the first sector (config order) whose polygon contains
     (x_enu_m, y_enu_m); null outside every sector. Vectorised ``shapely.contains_xy``."""
-    x, y = df["x_enu_m"].to_numpy(), df["y_enu_m"].to_numpy()
+    idx = sector_indices(df["x_enu_m"].to_numpy(), df["y_enu_m"].to_numpy(), sectors, region)
+    names = np.array([s.name for s in sectors] + [None], dtype=object)
+    return df.with_columns(pl.Series("sector", names[idx].tolist(), dtype=pl.String))
+
+
+def sector_indices(x: np.ndarray, y: np.ndarray, sectors: Sequence[Sector],
+                   region: RegionConfig) -> np.ndarray:
+    """Index (config order) of the first sector whose polygon contains each (x, y)
+    (regional ENU, m); ``len(sectors)`` outside every sector."""
     idx = np.full(x.size, -1)
     for k, poly in enumerate(sector_polygons(sectors, region)):
         # only the points inside the polygon's bounding box go to GEOS (same answer)
         x0, y0, x1, y1 = poly.bounds
         cand = np.flatnonzero((idx < 0) & (x >= x0) & (x <= x1) & (y >= y0) & (y <= y1))
         idx[cand[shapely.contains_xy(poly, x[cand], y[cand])]] = k
-    names = np.array([s.name for s in sectors] + [None], dtype=object)
-    return df.with_columns(pl.Series("sector", names[idx].tolist(), dtype=pl.String))
+    return np.where(idx < 0, len(sectors), idx)
 
 
 def leg_endpoints(

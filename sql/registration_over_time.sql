@@ -2,8 +2,10 @@
 -- description: each radar's online registration and estimated accuracy per minute
 --   (issue 38; pipeline/maritime/registration.py): the range bias, azimuth bias, clock
 --   offset and range gain (m per km) the batch estimated (reported - true) with their
---   95 % intervals (estimate -/+ 1.96 sigma, means over the minute's epochs), the share
---   of epochs the estimate was applied to the reports before fusion, the largest
+--   95 % intervals (estimate -/+ 1.96 sigma, means over the minute's epochs and the
+--   site's sectors: where a sector is registered on its own, $sector shows it), the share
+--   of epochs the estimate was applied to the reports before fusion and of (epoch,
+--   sector) rows registered per sector (the site's sectors differ), the largest
 --   variance scale of the radar's sectors (1 = the configured sigmas) and the share of
 --   epochs it was fused although the integrity excluded it. The audit's registration
 --   time series.
@@ -17,6 +19,7 @@ SELECT
     make_timestamp(((time_ns // 60000000000) * 60000000)::BIGINT)::TIMESTAMP AS minute_utc,  -- start of the minute
     count(DISTINCT time_ns)::BIGINT                                       AS epochs,
     round(avg(registration_applied::INTEGER), 4)::DOUBLE                  AS registration_applied_share,
+    round(avg((registration_scope = 'sector')::INTEGER), 4)::DOUBLE       AS sector_registration_share,
     round(avg(range_bias_m), 2)::DOUBLE                                   AS range_bias_m,
     round(avg(range_bias_m - 1.959964 * sigma_range_bias_m), 2)::DOUBLE   AS range_ci_low_m,
     round(avg(range_bias_m + 1.959964 * sigma_range_bias_m), 2)::DOUBLE   AS range_ci_high_m,

@@ -5,7 +5,8 @@
 --   the channel integrity's leave-one-out residuals (AIS-identified ships, radar-radar
 --   overlap), their mean and the mean of their 95 % intervals (estimate -/+ 1.96 sigma)
 --   over the epochs, the share of epochs the estimate was applied to the reports before
---   fusion, the variance scale on the reports' covariance (mean and largest; 1 = the
+--   fusion and the share it was the sector's own (the site's sectors differ; else the
+--   site's, the same in each of its sectors), the variance scale on the reports' covariance (mean and largest; 1 = the
 --   configured sigmas) and the share of epochs it was estimated, the share of the
 --   estimate's tracks tested against AIS and of radar-radar pairs without AIS, and the
 --   share of epochs the radar was fused although the integrity excluded it (its
@@ -20,6 +21,7 @@ SELECT
     coalesce(sector, '(outside sectors)')::VARCHAR             AS sector,
     count(*)::BIGINT                                           AS epochs,
     round(avg(registration_applied::INTEGER), 4)::DOUBLE       AS registration_applied_share,
+    round(avg((registration_scope = 'sector')::INTEGER), 4)::DOUBLE AS sector_registration_share,
     round(avg(range_bias_m), 2)::DOUBLE                        AS range_bias_m,
     round(avg(range_bias_m - 1.959964 * sigma_range_bias_m), 2)::DOUBLE AS range_ci_low_m,
     round(avg(range_bias_m + 1.959964 * sigma_range_bias_m), 2)::DOUBLE AS range_ci_high_m,

@@ -127,7 +127,9 @@ class ChannelFault:
     to ranges), ``radar_azimuth_bias`` (``bias_deg`` added to azimuths and courses),
     ``radar_time_offset`` (``offset_s`` added to report times), ``radar_noise`` (range,
     azimuth, course and speed noise x ``factor``; the reported sigmas unchanged),
-    ``radar_range_gain`` (ranges x (1 + ``gain``): a range scale error). AIS
+    ``radar_range_gain`` (ranges x (1 + ``gain``): a range scale error); a bias, clock,
+    gain or noise fault with azimuths acts in [azimuth_from_deg, azimuth_to_deg) only
+    (an encoder error over part of the rotation). AIS
     faults name a vessel (``vessel_id``, 1-based; 0 or absent: the simulator picks, with
     the run's seed, a Class A vessel in the scene for the whole fault, in ``sector`` when
     given):
@@ -263,12 +265,16 @@ class ChannelIntegrityConfig:
 @dataclass(frozen=True)
 class RegistrationConfig:
     """``[registration]``: online registration and estimated accuracy of each radar
-    (``pipeline.maritime.registration``, issue 38): each site's range bias, azimuth bias
-    and clock offset estimated by weighted least squares over the channel integrity's
-    leave-one-out residuals of the epochs within ``window_s`` before or after (or both),
-    applied before fusion; each (site, sector)'s variance scale from the same residuals.
+    (``pipeline.maritime.registration``, issue 38): each site's range bias, azimuth bias,
+    clock offset and range gain estimated by weighted least squares over the channel
+    integrity's leave-one-out residuals (and radar-radar pairs) of the epochs within
+    ``window_s`` before or after (or both), applied before fusion; each (site, sector)'s
+    variance scale from the same residuals.
 
     - ``enabled``: false fuses the reports as reported (the integrity's exclusions alone);
+    - ``per_sector``: a sector whose registration differs from the rest of its site's
+      (a likelihood-ratio test at ``apply_q``) is registered on its own evidence; false:
+      one registration per site;
     - ``window_s``: each one-sided window, s; at most the unit's look-ahead
       (``[ais] identity_window_s``) so that results do not depend on where units are cut;
     - ``decorrelation_s``: how long a radar track's errors stay correlated (the tracker
@@ -276,7 +282,7 @@ class RegistrationConfig:
     - ``jump_q``: false-alarm probability of the test that the windows before and after
       an epoch disagree (a registration jump: the estimate takes the side that fits);
     - ``apply_q``: an estimate is applied once it differs from zero at this probability
-      (chi2(3)), a variance scale once the corrected NIS leaves its chi-square tails at it;
+      (chi2(4)), a variance scale once the corrected NIS leaves its chi-square tails at it;
     - ``min_tracks``: track-epochs in the window before an estimate or a scale is used;
     - ``max_scale``: the largest variance scale;
     - ``readmit_max_scale``: a radar the integrity excluded is fused again (its corrected
@@ -284,6 +290,7 @@ class RegistrationConfig:
       radar much noisier than its sigmas stays excluded."""
 
     enabled: bool = setting(True)
+    per_sector: bool = setting(True)
     window_s: float = setting(40.0, ge=1.0, le=300.0, why=(
         "at least a scan; at most the unit's look-ahead (identity_window_s, 300 s by "
         "default) for results that do not depend on where units are cut"))
@@ -369,11 +376,13 @@ def with_faults(cfg: Config, faults: tuple[ChannelFault, ...]) -> Config:
     return replace(cfg, families=fam, scenario_files=cfg.scenario_files or ("(in memory)",))
 
 
-def with_registration(cfg: Config, enabled: bool) -> Config:
-    """``cfg`` with ``[registration] enabled`` set (the rest of the section as it is)."""
+def with_registration(cfg: Config, enabled: bool, **fields: object) -> Config:
+    """``cfg`` with ``[registration] enabled`` and ``fields`` set (the rest of the section
+    as it is)."""
     mc = maritime_config(cfg)
     fam = dict(cfg.families)
-    fam["maritime"] = replace(mc, registration=replace(mc.registration, enabled=enabled))
+    fam["maritime"] = replace(mc, registration=replace(mc.registration, enabled=enabled,
+                                                       **fields))
     return replace(cfg, families=fam)
 
 

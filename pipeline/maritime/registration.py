@@ -28,8 +28,8 @@ observable from pairs alone: a clock offset common to both radars (only their di
 is), which the prior splits between them (the estimate then differs from zero by less
 than its interval and is not applied).
 
-**Registration** (per site, every sector's evidence: a range, azimuth or clock fault is
-the site's). Over a window W of epochs, the weighted least-squares estimate with the
+**Registration** (per site, every sector's evidence; per sector where the site's sectors
+differ, below). Over a window W of epochs, the weighted least-squares estimate with the
 integrity's wide prior P_0,
 
 .. math:: \\hat\\theta_W = (A_W + P_0^{-1})^{-1} b_W, \\qquad
@@ -55,11 +55,27 @@ too). Windows only (no filter over the whole recording): a unit's lead-in and lo
 (``continuity_margins_s``, >= 300 s) hold every window, so results do not depend on
 where units are cut.
 
+**Per sector where it differs** (``per_sector``): a radar's error need not be the same
+at every azimuth (an encoder error over part of the rotation, a range error on one
+bearing's path). On the site's side of the window each sector g (of the site's radar
+groups, "outside every sector" among them) is fitted on its own sums alone (no pairs),
+and the likelihood-ratio test of one registration for the site's sectors with
+``min_tracks`` against one each (:func:`_sectors_differ`, chi2 of 4(E - 1) dof at
+``apply_q``) decides whether they differ. Where it rejects in most epochs of the window
+both sides (a decision that does not flicker: a track's reports corrected at one epoch
+and not the next fuse into a wrong track), each sector with ``min_tracks`` takes its
+own estimate and covariance, applied whether it differs from zero or not (the site is
+off somewhere; a sector half in the fault has an estimate short of that test, and its
+reports left as reported split off the other radars' tracks) (``registration_scope`` =
+sector); the others keep the site's. A site whose sectors agree keeps one registration,
+to the last digit.
+
 **Correction before the association** (the stage's second pass): where the first pass
 (association, integrity, this step on the reports as reported) applied an estimate
-anywhere, :func:`correct_reports` corrects each synchronised report of site c at epoch k,
-p <- p - H theta, P <- P + H P_theta H^T (H of the report as reported, its site's
-geometry and its velocity; the estimate's own error, honest NEES), and association,
+anywhere, :func:`correct_reports` corrects each synchronised report of site c (of its
+sector where that has its own estimate) at epoch k, p <- p - H theta, P <- P + H
+P_theta H^T (H of the report as reported, its site's geometry and its velocity; the
+estimate's own error, honest NEES), and association,
 integrity and this step run again on them: the corrected radar's tracks join the other
 radars' system tracks instead of splitting off as tracks of their own (duplicates of the
 ships the other radar tracks). The second pass estimates nothing again
@@ -100,14 +116,17 @@ the radar has no reports to fuse.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 import polars as pl
 from numpy.lib.stride_tricks import sliding_window_view
 
+from pipeline.config import RegionConfig, Sector
 from pipeline.filters.quantiles import chi2_ppf, normal_ppf
 from pipeline.frames import velocity_enu
+from pipeline.geometry import sector_indices
 from pipeline.maritime.config import RegistrationConfig
 from pipeline.maritime.integrity import (
     DIM,
@@ -132,11 +151,13 @@ REPORTED_COLUMNS = ("x_enu_m", "y_enu_m", "P_xx", "P_yy", "P_xy")
 
 @dataclass(frozen=True, eq=False)
 class Estimate:
-    """Each site's registration per epoch: ``theta`` (K, C, 4: range bias m, azimuth bias
-    rad, time offset s, range gain), its covariance ``P`` (K, C, 4, 4), the ``side`` of
+    """Each radar group's registration per epoch (group = site * (G + 1) + sector, as in
+    ``RegistrationEvidence``): ``theta`` (K, n_groups, 4: range bias m, azimuth bias rad,
+    time offset s, range gain), its covariance ``P`` (K, n_groups, 4, 4), the ``side`` of
     its window, the track-epochs ``n`` in it, of them ``n_ais`` against AIS and
-    ``n_pair`` radar-radar pairs without AIS, and whether it is ``applied`` (K, C);
-    ``epochs`` (K,)."""
+    ``n_pair`` radar-radar pairs without AIS, whether it is ``applied`` and whether it is
+    the sector's ``own`` (else its site's, the same in each of the site's groups), (K,
+    n_groups); ``epochs`` (K,), ``groups_per_site`` G + 1."""
 
     epochs: np.ndarray
     theta: np.ndarray
@@ -146,6 +167,8 @@ class Estimate:
     n_ais: np.ndarray
     n_pair: np.ndarray
     applied: np.ndarray
+    own: np.ndarray
+    groups_per_site: int
 
     @property
     def theta_used(self) -> np.ndarray:
@@ -292,14 +315,15 @@ def _choose(fits: tuple[_Fit, _Fit, _Fit], cur: np.ndarray, corr: float,
     return np.where(jump, side, BOTH)
 
 
-def _choose_scale(wins: tuple[np.ndarray, ...], cur: np.ndarray, theta: np.ndarray,
+def _choose_scale(wins: tuple[np.ndarray, ...], cur: np.ndarray, nis: list[np.ndarray],
                   corr: float, rc: RegistrationConfig) -> np.ndarray:
     """(K, C) the window of each epoch and site for the variance scale: both, unless the
     corrected NIS per dof before and after differ (an F test of 2n / corr dof each side
     at ``jump_q``: the radar's noise changed), then the side whose NIS per dof is
-    nearer the epoch's own (in ratio)."""
-    per_dof = [_corrected_nis(v, theta) / np.maximum(2 * v[..., _N], 1.0)
-               for v in (*wins[:2], cur)]
+    nearer the epoch's own (in ratio). ``nis``: the corrected NIS sums of the past and
+    future windows and of the epoch."""
+    per_dof = [x / np.maximum(2 * v[..., _N], 1.0)
+               for x, v in zip(nis, (*wins[:2], cur), strict=True)]
     dof = [np.maximum(2 * v[..., _N] / corr, 1.0) for v in wins[:2]]
     with np.errstate(divide="ignore", invalid="ignore"):
         log_f = np.log(np.maximum(per_dof[0], 1e-9) / np.maximum(per_dof[1], 1e-9))
@@ -320,11 +344,10 @@ def _pick(x: list[np.ndarray], side: np.ndarray) -> np.ndarray:
                               axis=0)[0]
 
 
-def _scale(v: np.ndarray, theta: np.ndarray, corr: float, rc: RegistrationConfig
+def _scale(v: np.ndarray, nis: np.ndarray, corr: float, rc: RegistrationConfig
            ) -> tuple[np.ndarray, np.ndarray]:
-    """(scale, applied) of sums ``v`` (..., 24) with the correction ``theta`` (...,
-    4): covariance matching of the corrected residuals (module docstring)."""
-    nis = _corrected_nis(v, theta)
+    """(scale, applied) of sums ``v`` (..., 24) whose corrected NIS sum is ``nis``:
+    covariance matching of the corrected residuals (module docstring)."""
     dof = 2 * v[..., _N]
     with np.errstate(divide="ignore", invalid="ignore"):
         s = 1.0 + (nis - dof) / v[..., _TRACE]
@@ -372,7 +395,7 @@ def _readmitted(ev: RegistrationEvidence, theta_row: np.ndarray, scale: np.ndarr
 
     group_ok = (sums[..., 0] == 0) | passing(sums)
     site_ok = (site[..., 0] > 0) & passing(site)
-    group = (ev.excluded & ~ev.blocked & group_ok & np.repeat(site_ok & applied, G1, axis=1)
+    group = (ev.excluded & ~ev.blocked & group_ok & np.repeat(site_ok, G1, axis=1) & applied
              & (scale <= rc.readmit_max_scale))
     return group, group.reshape(-1)[gid] & ~outlier
 
@@ -398,42 +421,57 @@ def register(
     corr = float(np.clip(rc.decorrelation_s / epoch_period_s, 1.0, 2 * w + 1))
     cur = _evidence(ev)
     per_site = cur.reshape(K, C, G1, _WIDTH).sum(axis=2)
-    site_wins = _windows(per_site, w)
+    site_wins, group_wins = _windows(per_site, w), _windows(cur, w)
     if corrected_by is None:
         pair_wins = [_Pairs(*x) for x in zip(*(_windows(a, w) for a in (
             ev.pair_info, ev.pair_b, ev.pair_nis, ev.pair_n)), strict=True)]
-        est = _estimate(site_wins, pair_wins, per_site, corr, w, rc, ev.epochs)
+        est = _estimate(site_wins, group_wins, pair_wins, per_site, corr, w, rc, ev.epochs, G1)
         theta_used, P_used = est.theta_used, est.cov_used
+        own_site = est.own.reshape(K, C, G1).any(axis=-1)
     else:
         est = corrected_by
         theta_used, P_used = np.zeros_like(est.theta), np.zeros_like(est.P)
+        own_site = np.zeros((K, C), bool)
+    site_theta = theta_used.reshape(K, C, G1, DIM)[:, :, 0]  # where no sector has its own
+
+    def site_nis(site_v: np.ndarray, group_v: np.ndarray) -> np.ndarray:
+        # a site whose sectors are registered on their own: the sum of its sectors'
+        nis = _corrected_nis(site_v, site_theta)
+        if own_site.any():
+            nis = np.where(own_site, _corrected_nis(group_v, theta_used).reshape(K, C, G1)
+                           .sum(axis=-1), nis)
+        return nis
+
     # the variance scale per (site, sector) on the site's window; else the site's
-    side_s = _choose_scale(site_wins, per_site, theta_used, corr, rc)
+    side_s = _choose_scale(site_wins, per_site, [
+        site_nis(site_wins[PAST], group_wins[PAST]), site_nis(site_wins[FUTURE],
+                                                              group_wins[FUTURE]),
+        site_nis(per_site, cur)], corr, rc)
     site_win = _pick(list(site_wins), side_s)
-    group_win = _pick(list(_windows(cur, w)), np.repeat(side_s, G1, axis=1))
-    theta_g = np.repeat(theta_used, G1, axis=1)
-    s_group, s_group_ok = _scale(group_win, theta_g, corr, rc)
-    s_site, s_site_ok = _scale(site_win, theta_used, corr, rc)
+    group_win = _pick(list(group_wins), np.repeat(side_s, G1, axis=1))
+    s_group, s_group_ok = _scale(group_win, _corrected_nis(group_win, theta_used), corr, rc)
+    s_site, s_site_ok = _scale(site_win, site_nis(site_win, group_win), corr, rc)
     s_site_g = np.repeat(s_site, G1, axis=1)
     scale = np.where(s_group_ok, s_group, np.where(np.repeat(s_site_ok, G1, axis=1), s_site_g,
                                                    1.0))
     scale_ok = s_group_ok | np.repeat(s_site_ok, G1, axis=1)
     rk, rg = ev.row_k, ev.row_group
-    rs = rg // G1
-    readmit, readmit_row = _readmitted(ev, theta_used[rk, rs], scale, est.applied, rc, radar_q,
+    readmit, readmit_row = _readmitted(ev, theta_used[rk, rg], scale, est.applied, rc, radar_q,
                                        outlier_q)
     used = associations["used"].to_numpy() | readmit_row
     out = associations.with_columns(pl.Series("used", used))
-    corrected = _correct(out, ev.H, theta_used[rk, rs], P_used[rk, rs], scale[rk, rg])
+    corrected = _correct(out, ev.H, theta_used[rk, rg], P_used[rk, rg], scale[rk, rg])
     present = np.bincount(rk * ng + rg, minlength=K * ng).reshape(K, ng) > 0
     table = _table(ev, present, est, scale, scale_ok, group_win[..., _N], readmit, sites,
                    sector_names)
     return Registration(out, corrected, table, est)
 
 
-def _estimate(site_wins: tuple[np.ndarray, ...], pair_wins: list[_Pairs], per_site: np.ndarray,
-              corr: float, w: int, rc: RegistrationConfig, epochs: np.ndarray) -> Estimate:
-    """Each site's registration on its windows' sums (module docstring)."""
+def _estimate(site_wins: tuple[np.ndarray, ...], group_wins: tuple[np.ndarray, ...],
+              pair_wins: list[_Pairs], per_site: np.ndarray, corr: float, w: int,
+              rc: RegistrationConfig, epochs: np.ndarray, G1: int) -> Estimate:
+    """Each site's registration on its windows' sums, a sector's own where the site's
+    sectors differ (module docstring)."""
     fits = tuple(_joint_fit(v, pw, corr, rc.min_tracks)
                  for v, pw in zip(site_wins, pair_wins, strict=True))
     side = _choose(fits, per_site, corr, rc)
@@ -441,19 +479,76 @@ def _estimate(site_wins: tuple[np.ndarray, ...], pair_wins: list[_Pairs], per_si
     P = _pick([f.P for f in fits], side)
     n, n_ais = _pick([f.n for f in fits], side), _pick([f.n_ais for f in fits], side)
     n_pair = _pick([f.n_pair for f in fits], side)
-    applied = (n >= rc.min_tracks) & (_mahalanobis(theta, P) >= chi2_ppf(1.0 - rc.apply_q, DIM))
     # both sides whole: within a window of the rows' first or last epoch one side is cut
     # short and a jump there unseen (a fault from the first epoch on would be corrected
     # before its onset too)
     k = np.arange(epochs.size)
-    applied &= ((k >= w) & (k < epochs.size - w))[:, None]
-    return Estimate(epochs, theta, P, side, n, n_ais, n_pair, applied)
+    whole = ((k >= w) & (k < epochs.size - w))[:, None]
+    applied = (n >= rc.min_tracks) & _differs_from_zero(theta, P, rc) & whole
+    # the sectors (G1 groups per site), on the site's side of the window
+    v_sector = _pick(list(group_wins), np.repeat(side, G1, axis=1))
+    sector = _fit(v_sector, corr)
+    # the test's decision in most of the window's epochs: a sector's correction does not
+    # flicker on and off where the test is near its threshold (a track's reports corrected
+    # at one epoch and not the next fuse into a wrong track)
+    split = np.zeros_like(applied)
+    if rc.per_sector:
+        differs = _windows(_sectors_differ(v_sector, sector, theta, corr, rc).astype(float), w)
+        split = differs[BOTH] > 0.5 * _windows(np.ones((epochs.size, 1)), w)[BOTH]
+    own = np.repeat(split, G1, axis=1) & (sector.n >= rc.min_tracks)
+
+    def by_group(of_sector: np.ndarray, of_site: np.ndarray) -> np.ndarray:
+        return np.where(own.reshape(*own.shape, *[1] * (of_site.ndim - 2)), of_sector,
+                        np.repeat(of_site, G1, axis=1))
+
+    # a sector of a site whose sectors differ applies its own estimate, zero or not: the
+    # site is off somewhere, and no sector's registration is known to be zero (a sector
+    # half in the fault has an estimate short of its test, and left uncorrected its
+    # reports split off the other radars' tracks: duplicates x2 in the Monte Carlo)
+    return Estimate(epochs, by_group(sector.theta, theta), by_group(sector.P, P),
+                    np.repeat(side, G1, axis=1), by_group(sector.n, n),
+                    by_group(sector.n_ais, n_ais), by_group(np.zeros_like(sector.n), n_pair),
+                    by_group(np.broadcast_to(whole, own.shape), applied), own, G1)
+
+
+def _differs_from_zero(theta: np.ndarray, P: np.ndarray, rc: RegistrationConfig) -> np.ndarray:
+    """theta^T P^-1 theta >= chi2_4(1 - ``apply_q``): the estimate is not zero."""
+    return _mahalanobis(theta, P) >= chi2_ppf(1.0 - rc.apply_q, DIM)
+
+
+def _sectors_differ(v: np.ndarray, sector: _Fit, theta_site: np.ndarray, corr: float,
+                    rc: RegistrationConfig) -> np.ndarray:
+    """(K, C) whether a site's sectors need registrations of their own (``v``: the
+    sectors' sums (K, n_groups, 24), ``sector`` their fits): the likelihood-
+    ratio test of one registration for every sector of the site with ``min_tracks``
+    track-epochs (E of them) against one per sector,
+
+    .. math:: \\Lambda = \\sum_g [\\tilde N_g(\\hat\\theta_{site}) - \\tilde N_g(\\hat\\theta_g)]
+              / (c f) > \\chi^2_{4(E - 1)}(1 - q)
+
+    (c the decorrelation factor, f = max(1, sum N~_g(theta_g) / (2 sum n_g - 4E)) the
+    sectors' own inflation, q = ``apply_q``): a radar whose error is not the same at
+    every azimuth (an encoder error over part of the rotation, a range error on one
+    bearing's path) or in every sector's range band."""
+    (K, ng), C = sector.n.shape, theta_site.shape[1]
+    G1 = ng // max(C, 1)
+    enough = sector.n >= rc.min_tracks
+    v_site = _corrected_nis(v, np.repeat(theta_site, G1, axis=1))
+    gain = np.where(enough, np.maximum(v_site - sector.nis, 0.0), 0.0).reshape(K, C, G1)
+    E = enough.reshape(K, C, G1).sum(axis=-1)
+    nis = np.where(enough, sector.nis, 0.0).reshape(K, C, G1).sum(axis=-1)
+    n = np.where(enough, sector.n, 0.0).reshape(K, C, G1).sum(axis=-1)
+    f = np.maximum(1.0, nis / np.maximum(2 * n - DIM * E, 1.0))
+    dof = np.maximum(DIM * (E - 1), 1)
+    return (E >= 2) & (gain.sum(axis=-1) / (corr * f) > chi2_ppf(1.0 - rc.apply_q, dof))
 
 
 def correct_reports(synced: pl.DataFrame, est: Estimate, site_xy: np.ndarray,
-                    sites: list[str]) -> pl.DataFrame:
+                    sites: list[str], sectors: Sequence[Sector], region: RegionConfig
+                    ) -> pl.DataFrame:
     """The synchronised reports (``synchronise``'s rows) corrected by the registration
-    ``est`` applied at their site and epoch: p <- p - H theta, P <- P + H P_theta H^T, H
+    ``est`` applied at their site, sector (of the report as reported, ``sectors`` in
+    ``region``) and epoch: p <- p - H theta, P <- P + H P_theta H^T, H
     (:func:`~pipeline.maritime.integrity.registration_jacobian`) of the report as
     reported, seen from its site (``site_xy`` (C, 2) in the order of ``sites``); the
     reports as reported kept in ``reported_<column>`` (:func:`as_reported`). Rows of
@@ -462,11 +557,15 @@ def correct_reports(synced: pl.DataFrame, est: Estimate, site_xy: np.ndarray,
     c = synced["site_id"].replace_strict(sites, list(range(len(sites))),
                                          return_dtype=pl.Int64).to_numpy()
     xy = synced.select("x_enu_m", "y_enu_m").to_numpy()
+    # a site's groups share its estimate unless a sector has its own
+    g = c * est.groups_per_site
+    if est.own.any():
+        g = g + sector_indices(xy[:, 0], xy[:, 1], sectors, region)
     vx, vy = velocity_enu(synced["speed_mps"].to_numpy(), synced["course_rad"].to_numpy())
     H = registration_jacobian(xy, site_xy[c], vx, vy)
     kept = synced.with_columns(pl.col(col).alias(f"reported_{col}") for col in REPORTED_COLUMNS)
     # where nothing is applied, x - 0 and 1 P + 0: the bits as reported
-    return _correct(kept, H, est.theta_used[k, c], est.cov_used[k, c], np.ones(k.size))
+    return _correct(kept, H, est.theta_used[k, g], est.cov_used[k, g], np.ones(k.size))
 
 
 SECOND_PASS_SIGMA = 1.0
@@ -514,13 +613,11 @@ def _table(ev: RegistrationEvidence, present: np.ndarray, est: Estimate, scale: 
            sector_names: list[str]) -> pl.DataFrame:
     """``sensor_registration`` rows: one per epoch and (site, sector) with reports."""
     G1 = ev.G + 1
-    theta, P, applied, side, n, n_ais = est.theta, est.P, est.applied, est.side, est.n, est.n_ais
-    n_pair = est.n_pair
     kk, gg = np.nonzero(present)
     cc = gg // G1
     names = [*sector_names, None]
-    sigma = np.sqrt(np.diagonal(P, axis1=-2, axis2=-1))[kk, cc]
-    th = theta[kk, cc]
+    sigma = np.sqrt(np.diagonal(est.P, axis1=-2, axis2=-1))[kk, gg]
+    th = est.theta[kk, gg]
     return pl.DataFrame({
         "time_ns": ev.epochs[kk],
         "site_id": pl.Series([sites[i] for i in cc.tolist()], dtype=pl.String),
@@ -533,11 +630,13 @@ def _table(ev: RegistrationEvidence, present: np.ndarray, est: Estimate, scale: 
         "sigma_azimuth_bias_rad": sigma[:, 1],
         "sigma_time_offset_s": sigma[:, 2],
         "sigma_range_gain": sigma[:, 3],
-        "window": pl.Series([_SIDES[i] for i in side[kk, cc].tolist()], dtype=pl.String),
-        "tracks": n[kk, cc].astype(np.int32),
-        "tracks_ais": n_ais[kk, cc].astype(np.int32),
-        "tracks_pair": n_pair[kk, cc].astype(np.int32),
-        "registration_applied": applied[kk, cc],
+        "window": pl.Series([_SIDES[i] for i in est.side[kk, gg].tolist()], dtype=pl.String),
+        "tracks": est.n[kk, gg].astype(np.int32),
+        "tracks_ais": est.n_ais[kk, gg].astype(np.int32),
+        "tracks_pair": est.n_pair[kk, gg].astype(np.int32),
+        "registration_scope": pl.Series(np.where(est.own[kk, gg], "sector", "site"),
+                                        dtype=pl.String),
+        "registration_applied": est.applied[kk, gg],
         "variance_scale": scale[kk, gg],
         "scale_tracks": scale_n[kk, gg].astype(np.int32),
         "scale_applied": scale_ok[kk, gg],

@@ -123,7 +123,8 @@ def stage(tables: Inputs, window: Window, cfg: Config) -> Outputs:
                                                    track_start_ns, cfg)
     if reg is not None and reg.estimate.applied.any():
         sites = [s.site_id for s in cfg.radar_sites]
-        corrected = correct_reports(synced, reg.estimate, site_positions_enu(cfg), sites)
+        corrected = correct_reports(synced, reg.estimate, site_positions_enu(cfg), sites,
+                                    cfg.sectors, cfg.region)
         if moves_a_report(synced, corrected):
             # the second pass: the reports corrected where a registration moves them, so
             # the corrected radar's tracks associate with the other radars' (no

@@ -19,6 +19,10 @@ Radar (per site, by the sweep time of each report, s since the scenario start):
 - ``radar_noise``: range, azimuth, course and speed noise scaled by the factor; the
   reported sigmas stay as configured (the tracker does not know).
 
+A bias, clock, gain or noise fault with azimuths [from, to) acts there only (an encoder
+error over part of the rotation, a range error over one bearing's path); without them
+(from = to) at every azimuth.
+
 AIS (per station, by the time of each transmission): ``ais_offset`` adds an east/north
 offset to the reported positions; ``ais_stuck`` reports the position, SOG and COG of the
 fault start (a frozen GNSS) with fresh noise; ``ais_mmsi_swap`` makes two stations send
@@ -58,6 +62,14 @@ def _on(f: ChannelFault, t_s: np.ndarray) -> np.ndarray:
     return (t_s >= f.start_s) & (t_s < f.end_s)
 
 
+def _acts(f: ChannelFault, t_s: np.ndarray, az_rad: np.ndarray) -> np.ndarray:
+    """Where a radar fault acts: while it is on, and in its azimuths when it has them."""
+    on = _on(f, t_s)
+    if f.azimuth_from_rad == f.azimuth_to_rad:
+        return on
+    return on & in_azimuths(az_rad, f.azimuth_from_rad, f.azimuth_to_rad)
+
+
 def in_azimuths(az_rad: np.ndarray, lo_rad: float, hi_rad: float) -> np.ndarray:
     """Azimuths in the clockwise interval [lo, hi) (wrapping through north)."""
     width = np.mod(hi_rad - lo_rad, TWO_PI)
@@ -74,7 +86,7 @@ def radar_effects(
     detect = np.ones(n, bool)
     dr, daz, dt, noise = np.zeros(n), np.zeros(n), np.zeros(n), np.ones(n)
     for f in faults:
-        on = _on(f, t_s)
+        on = _on(f, t_s) if f.kind in ("radar_outage", "radar_blank") else _acts(f, t_s, az_rad)
         if f.kind == "radar_outage":
             detect &= ~on
         elif f.kind == "radar_blank":
@@ -182,7 +194,7 @@ def fault_truth(
                 "unit": _UNITS.get(f.kind), "vessel_id": None, "mmsi": None, "detail": None}
         if f.sensor_kind == "radar":
             detail = None
-            if f.kind == "radar_blank":
+            if f.kind == "radar_blank" or f.azimuth_from_rad != f.azimuth_to_rad:
                 detail = (f"azimuth {math.degrees(f.azimuth_from_rad):.1f}-"
                           f"{math.degrees(f.azimuth_to_rad):.1f} deg")
             rows.append({**base, "channel": f.site_id, "detail": detail})

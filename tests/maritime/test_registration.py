@@ -241,3 +241,41 @@ def test_a_correction_within_a_sigma_moves_no_report():
     large = synced.with_columns(pl.col("x_enu_m") - pl.Series([0.0, 16.0]))
     assert not moves_a_report(synced, small)
     assert moves_a_report(synced, large)
+
+
+@pytest.fixture(scope="module")
+def sector_fault(world):
+    """R1's range bias over its azimuths 50-140 deg only (R1 sees inner_channel there,
+    approach_sw around it: a sector half in the fault), registered once per site and per
+    sector where they differ."""
+    cfg = with_faults(world, _fault("radar_range_bias", "R1", range_bias_m=100.0,
+                                    azimuth_from_rad=math.radians(50.0),
+                                    azimuth_to_rad=math.radians(140.0)))
+    window = Window(DEFAULT_START_NS, DEFAULT_START_NS + round(DURATION_S * NS))
+    inputs, _ = maritime_inputs(cfg, SEED, window.start_ns, DURATION_S)
+    return {per: stage(inputs, window, with_registration(cfg, True, per_sector=per))
+            for per in (False, True)}
+
+
+def test_a_fault_over_part_of_the_rotation_is_registered_per_sector(sector_fault):
+    t0, t1 = FAULT[0] + 40.0, FAULT[0] + FAULT[1]
+    during = pl.col("time_ns").is_between(DEFAULT_START_NS + round(t0 * NS),
+                                          DEFAULT_START_NS + round(t1 * NS), closed="left")
+    reg = sector_fault[True]["sensor_registration"].filter((pl.col("site_id") == "R1") & during)
+    own = reg.filter(pl.col("registration_scope") == "sector")
+    assert own.height > 0.5 * reg.height
+    by = own.group_by("sector").agg(pl.col("range_bias_m").median(),
+                                    pl.col("sigma_range_bias_m").median())
+    bias = dict(zip(by["sector"], by["range_bias_m"], strict=True))
+    sigma = dict(zip(by["sector"], by["sigma_range_bias_m"], strict=True))
+    # the sector in the faulted azimuths has the injected bias
+    assert abs(bias["inner_channel"] - 100.0) < 1.96 * sigma["inner_channel"]
+    # one registration per site: the same in every sector (a blend)
+    site = sector_fault[False]["sensor_registration"].filter((pl.col("site_id") == "R1") & during)
+    assert set(site["registration_scope"]) == {"site"}
+    assert _rms(_fused(sector_fault[True], t0, t1)) < 0.9 * _rms(_fused(sector_fault[False], t0,
+                                                                       t1))
+
+
+def test_a_fault_at_every_azimuth_keeps_one_registration_per_site(range_bias):
+    assert set(range_bias[True]["sensor_registration"]["registration_scope"]) == {"site"}

@@ -1,15 +1,20 @@
-"""Registration where no ship carries AIS (issue 38 item 1; slow, seeded Monte Carlo of
-``pipeline.experiments.registration_no_ais``): the radar-radar pairs find the faulted
-radar of two, correct it, and correct nothing else.
+"""Registration where no ship carries AIS and per sector where a radar's error differs
+(issue 38 item 1; slow, seeded Monte Carlo of ``pipeline.experiments.registration_no_ais``
+and ``registration_sectors``): the radar-radar pairs find the faulted radar of two,
+correct it, and correct nothing else; a fault over part of a radar's rotation is
+registered per sector, no worse than one registration per site, and a fault at every
+azimuth keeps one.
 
-Run: .venv/bin/pytest -m slow tests/maritime/test_registration_montecarlo.py -s (6 seeds;
-the docs' table is `python -m bench.registration_no_ais --runs 30`)."""
+Run: .venv/bin/pytest -m slow tests/maritime/test_registration_montecarlo.py -s (6 seeds
+each; the docs' tables are `python -m bench.registration_no_ais --runs 30` and
+`python -m bench.registration_sectors --runs 30`)."""
 
 from __future__ import annotations
 
 import polars as pl
 import pytest
 
+from pipeline.experiments import registration_sectors as sectors
 from pipeline.experiments.registration_no_ais import FAULTS, run_one, summarise
 
 SEEDS = range(2000, 2006)
@@ -41,3 +46,27 @@ def test_a_clock_offset_is_not_corrected_without_ais(table):
     r = table.filter(pl.col("kind") == "radar_time_offset").row(0, named=True)
     assert r["applied_mid"] == 0.0 and r["rms_on_m"] == r["rms_off_m"], r
     assert r["within_95"] >= 5 / 6, r
+
+
+@pytest.fixture(scope="module")
+def by_sector() -> pl.DataFrame:
+    rows = pl.DataFrame([sectors.run_one((s, i)) for i in range(len(sectors.FAULTS))
+                         for s in range(3000, 3006)])
+    out = sectors.summarise(rows)
+    with pl.Config(tbl_cols=-1, tbl_width_chars=250):
+        print("\n", out)
+    return out
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("fault", ["azimuth_bias_in_50_140_deg", "range_bias_in_50_140_deg"])
+def test_a_fault_over_part_of_the_rotation_is_registered_per_sector(by_sector, fault):
+    r = by_sector.filter(pl.col("fault") == fault).row(0, named=True)
+    assert r["p95_sector_le_site"] == 1.0 and r["rms_sector_m"] < 0.9 * r["rms_site_m"], r
+    assert r["sector_share_fault"] > 0.3 and r["sector_share_before"] == 0.0, r
+
+
+@pytest.mark.slow
+def test_a_fault_at_every_azimuth_is_registered_per_site(by_sector):
+    r = by_sector.filter(pl.col("fault") == "azimuth_bias_everywhere").row(0, named=True)
+    assert r["sector_share_fault"] == 0.0 and r["rms_sector_m"] == r["rms_site_m"], r

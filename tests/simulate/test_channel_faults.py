@@ -131,6 +131,26 @@ def test_range_gain_scales_the_true_range_during_the_fault(cfg, clean):
         "R2", "radar_range_gain", 0.006, "ratio")
 
 
+def test_a_range_bias_with_azimuths_acts_there_only(cfg, clean):
+    # an error over part of the rotation (from 300 through north to 30 deg, wrapping)
+    f = ChannelFault("radar_range_bias", 120.0, 90.0, site_id="R2", range_bias_m=100.0,
+                     azimuth_from_rad=math.radians(300), azimuth_to_rad=math.radians(30))
+    sc = run(cfg, f)
+    j = sc.radar_reports.join(clean.radar_reports, on=["site_id", "track_id", "log_time_ns"],
+                              suffix="_clean")
+    assert j.height == clean.radar_reports.height
+    r = j.filter((pl.col("status") != "coasting") & (pl.col("site_id") == "R2") & window(f))
+    # the clean azimuth is the true one within its noise: keep the reports well inside or out
+    az = np.degrees(r["azimuth_rad_clean"].to_numpy())
+    inside = in_azimuths(np.radians(az), math.radians(302), math.radians(28))
+    outside = ~in_azimuths(np.radians(az), math.radians(298), math.radians(32))
+    diff = (r["range_m"] - r["range_m_clean"]).to_numpy()
+    assert inside.sum() > 20 and outside.sum() > 20
+    np.testing.assert_allclose(diff[inside], 100.0, atol=1e-6)
+    np.testing.assert_allclose(diff[outside], 0.0, atol=1e-9)
+    assert sc.fault_truth["detail"].item() == "azimuth 300.0-30.0 deg"
+
+
 def test_noise_scales_the_errors(cfg, clean):
     f = ChannelFault("radar_noise", 120.0, 90.0, site_id="R1", factor=4.0)
     j = run(cfg, f).radar_reports.join(clean.radar_reports, on=["site_id", "track_id",

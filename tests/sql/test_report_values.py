@@ -852,6 +852,7 @@ def test_sensor_registration(world):
     want = r.group_by("site", "site_id", "sector").agg(
         pl.len().alias("epochs"),
         pl.col("registration_applied").mean().alias("registration_applied_share"),
+        (pl.col("registration_scope") == "sector").mean().alias("sector_registration_share"),
         *interval("range_bias_m", "sigma_range_bias_m"),
         *interval("azimuth_bias_rad", "sigma_azimuth_bias_rad", 180.0 / math.pi),
         *interval("time_offset_s", "sigma_time_offset_s"),
@@ -879,7 +880,8 @@ def test_sensor_registration(world):
          range_gain_ci_low_m_per_km=5.1e-4, range_gain_ci_high_m_per_km=5.1e-4,
          variance_scale_mean=5.1e-4,
          variance_scale_max=5.1e-4, registration_applied_share=5.1e-5,
-         scale_applied_share=5.1e-5, ais_track_share=5.1e-5, pair_track_share=5.1e-5,
+         sector_registration_share=5.1e-5, scale_applied_share=5.1e-5,
+         ais_track_share=5.1e-5, pair_track_share=5.1e-5,
          readmitted_share=5.1e-5)
     # the scene's radar faults (a range bias of R2 among them) are estimated and applied
     assert got["registration_applied_share"].max() > 0
@@ -894,6 +896,7 @@ def test_registration_over_time(world):
     want = r.group_by("site", "site_id", "minute").agg(
         pl.col("time_ns").n_unique().alias("epochs"),
         pl.col("registration_applied").mean().alias("registration_applied_share"),
+        (pl.col("registration_scope") == "sector").mean().alias("sector_registration_share"),
         pl.col("range_bias_m").mean(),
         (pl.col("range_bias_m") - z * pl.col("sigma_range_bias_m")).mean().alias(
             "range_ci_low_m"),
@@ -913,7 +916,7 @@ def test_registration_over_time(world):
          azimuth_bias_deg=5.1e-5, azimuth_ci_high_deg=5.1e-5, time_offset_s=5.1e-4,
          range_gain_m_per_km=5.1e-4, range_gain_ci_high_m_per_km=5.1e-4,
          variance_scale_max=5.1e-4, registration_applied_share=5.1e-5,
-         readmitted_share=5.1e-5)
+         sector_registration_share=5.1e-5, readmitted_share=5.1e-5)
     # the minutes of the scene's R2 range bias: estimated near its injected 80 m, applied
     applied = got.filter((pl.col("site_id") == "R2") & (pl.col("registration_applied_share") == 1))
     assert applied.height and applied["range_bias_m"].max() > 40.0
