@@ -256,10 +256,11 @@ def registration_over_time(rows: list[dict[str, Any]], start_ns: int, end_ns: in
                 x=t, y=[r[v] for r in sel], name=site, legendgroup=site, showlegend=row == 1,
                 mode="lines+markers", line=dict(color=colour, width=1.5),
                 marker=dict(size=[7 if a else 3 for a in applied], color=colour),
-                customdata=[[r["registration_applied_share"], r["readmitted_share"]]
-                            for r in sel],
+                customdata=[[r["registration_applied_share"], r["readmitted_share"],
+                             r.get("sector_registration_share")] for r in sel],
                 hovertemplate="%{x|%H:%M} UTC: %{y}<br>applied %{customdata[0]}, fused "
-                              "although excluded %{customdata[1]}<extra>" + site + "</extra>",
+                              "although excluded %{customdata[1]}, sectors registered on "
+                              "their own %{customdata[2]}<extra>" + site + "</extra>",
                 row=row, col=1)
     fig = _layout(fig, "Online registration per radar (reported − true; large markers: "
                   "applied before fusion)", height=190 * len(_REGISTRATION_PANELS))
