@@ -64,11 +64,11 @@ and the likelihood-ratio test of one registration for the site's sectors with
 ``apply_q``) decides whether they differ. Where it rejects in most epochs of the window
 both sides (a decision that does not flicker: a track's reports corrected at one epoch
 and not the next fuse into a wrong track), each sector with ``min_tracks`` takes its
-own estimate and covariance, applied whether it differs from zero or not (the site is
-off somewhere; a sector half in the fault has an estimate short of that test, and its
-reports left as reported split off the other radars' tracks) (``registration_scope`` =
-sector); the others keep the site's. A site whose sectors agree keeps one registration,
-to the last digit.
+own estimate and covariance (``registration_scope`` = sector), applied whether it
+differs from zero or not: the site is off somewhere, and a sector half in the fault has
+an estimate short of that test whose reports, left as reported, split off the other
+radars' tracks. The other sectors keep the site's. A site whose sectors agree keeps one
+registration, to the last digit.
 
 **Correction before the association** (the stage's second pass): where the first pass
 (association, integrity, this step on the reports as reported) applied an estimate
@@ -529,7 +529,7 @@ def _sectors_differ(v: np.ndarray, sector: _Fit, theta_site: np.ndarray, corr: f
     (c the decorrelation factor, f = max(1, sum N~_g(theta_g) / (2 sum n_g - 4E)) the
     sectors' own inflation, q = ``apply_q``): a radar whose error is not the same at
     every azimuth (an encoder error over part of the rotation, a range error on one
-    bearing's path) or in every sector's range band."""
+    bearing's path)."""
     (K, ng), C = sector.n.shape, theta_site.shape[1]
     G1 = ng // max(C, 1)
     enough = sector.n >= rc.min_tracks
