@@ -2,24 +2,25 @@
 -- description: each radar's online registration and estimated accuracy per minute
 --   (issue 38; pipeline/maritime/registration.py): the range bias, azimuth bias, clock
 --   offset and range gain (m per km) the batch estimated (reported - true) with their
---   95 % intervals (estimate -/+ 1.96 sigma, means over the minute's epochs and the
---   site's sectors: where a sector is registered on its own, $sector shows it), the share
---   of epochs the estimate was applied to the reports before fusion and of (epoch,
---   sector) rows registered per sector (the site's sectors differ), the largest
---   variance scale of the radar's sectors (1 = the configured sigmas) and the share of
---   epochs it was fused although the integrity excluded it. The audit's registration
---   time series.
--- grain: one row per (site, radar site, minute)
+--   95 % intervals (estimate -/+ 1.96 sigma, means over the minute's epochs and sectors),
+--   the share of epochs the estimate was applied to the reports before fusion, the
+--   largest variance scale of the radar's sectors (1 = the configured sigmas) and the
+--   share of epochs it was fused although the integrity excluded it: the site's
+--   registration (registered_sector NULL) and, where the site's sectors differ, each
+--   sector's own (registered_sector: its name) in rows of their own. The audit's
+--   registration time series.
+-- grain: one row per (site, radar site, registered sector or NULL, minute)
 -- params: $start_ns (BIGINT, inclusive), $end_ns (BIGINT, exclusive),
 --         $sector (VARCHAR, NULL = every sector), $site (VARCHAR, NULL = every site)
 -- source table: sensor_registration (written by `surveil batch`)
 SELECT
     site::VARCHAR                                                         AS site,
     site_id::VARCHAR                                                      AS site_id,
+    CASE WHEN registration_scope = 'sector'
+         THEN coalesce(sector, '(outside sectors)') END::VARCHAR          AS registered_sector,
     make_timestamp(((time_ns // 60000000000) * 60000000)::BIGINT)::TIMESTAMP AS minute_utc,  -- start of the minute
     count(DISTINCT time_ns)::BIGINT                                       AS epochs,
     round(avg(registration_applied::INTEGER), 4)::DOUBLE                  AS registration_applied_share,
-    round(avg((registration_scope = 'sector')::INTEGER), 4)::DOUBLE       AS sector_registration_share,
     round(avg(range_bias_m), 2)::DOUBLE                                   AS range_bias_m,
     round(avg(range_bias_m - 1.959964 * sigma_range_bias_m), 2)::DOUBLE   AS range_ci_low_m,
     round(avg(range_bias_m + 1.959964 * sigma_range_bias_m), 2)::DOUBLE   AS range_ci_high_m,
@@ -41,5 +42,5 @@ WHERE time_ns >= $start_ns
   AND time_ns < $end_ns
   AND (CAST($sector AS VARCHAR) IS NULL OR coalesce(sector, '(outside sectors)') = CAST($sector AS VARCHAR))
   AND (CAST($site AS VARCHAR) IS NULL OR site = CAST($site AS VARCHAR))
-GROUP BY site, site_id, time_ns // 60000000000
-ORDER BY site, site_id, minute_utc;
+GROUP BY site, site_id, registered_sector, time_ns // 60000000000
+ORDER BY site, site_id, registered_sector NULLS FIRST, minute_utc;

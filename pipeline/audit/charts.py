@@ -235,32 +235,43 @@ _REGISTRATION_PANELS = (
 def registration_over_time(rows: list[dict[str, Any]], start_ns: int, end_ns: int
                            ) -> go.Figure | None:
     """Each radar's online registration per minute (range, azimuth, clock, gain; the 95 %
-    interval as a band, markers where the estimate was applied) and its variance scale."""
+    interval as a band, markers where the estimate was applied) and its variance scale;
+    a sector registered on its own (the site's sectors differ) as a dashed or dotted line
+    of the site's colour, its interval in the hover (a sector with few tracks has a wide
+    one: as a band it would hide every other line)."""
     if not rows:
         return None
     fig = make_subplots(rows=len(_REGISTRATION_PANELS), cols=1, shared_xaxes=True,
                         vertical_spacing=0.05,
                         subplot_titles=[p[0] for p in _REGISTRATION_PANELS])
     sites = sorted({r["site_id"] for r in rows})
-    for k, site in enumerate(sites):
-        sel = [r for r in rows if r["site_id"] == site]
-        colour = SOURCE_COLOURS[k % len(SOURCE_COLOURS)]
+    series = sorted({(r["site_id"], r.get("registered_sector")) for r in rows},
+                    key=lambda s: (s[0], s[1] is not None, s[1] or ""))
+    dashes = ("dash", "dot", "dashdot", "longdash", "longdashdot")
+    for site_id, sector in series:
+        sel = [r for r in rows
+               if r["site_id"] == site_id and r.get("registered_sector") == sector]
+        colour = SOURCE_COLOURS[sites.index(site_id) % len(SOURCE_COLOURS)]
+        own = sorted({s for i, s in series if i == site_id and s is not None})
+        dash = "solid" if sector is None else dashes[own.index(sector) % len(dashes)]
+        name = site_id if sector is None else f"{site_id} · {sector}"
         t = [r["minute_utc"] for r in sel]
         applied = [r["registration_applied_share"] > 0 for r in sel]
         for row, (_, v, lo, hi) in enumerate(_REGISTRATION_PANELS, start=1):
-            if lo is not None:  # the interval as a band under the estimate
+            if lo is not None and sector is None:  # the interval as a band under it
                 fig.add_scatter(x=t + t[::-1], y=[r[hi] for r in sel] + [r[lo] for r in sel][::-1],
                                 fill="toself", fillcolor=colour, opacity=0.18, mode="none",
                                 hoverinfo="skip", showlegend=False, row=row, col=1)
+            interval = [[r[lo], r[hi]] if lo is not None else [None, None] for r in sel]
             fig.add_scatter(
-                x=t, y=[r[v] for r in sel], name=site, legendgroup=site, showlegend=row == 1,
-                mode="lines+markers", line=dict(color=colour, width=1.5),
+                x=t, y=[r[v] for r in sel], name=name, legendgroup=name, showlegend=row == 1,
+                mode="lines+markers", line=dict(color=colour, width=1.5, dash=dash),
                 marker=dict(size=[7 if a else 3 for a in applied], color=colour),
-                customdata=[[r["registration_applied_share"], r["readmitted_share"],
-                             r.get("sector_registration_share")] for r in sel],
-                hovertemplate="%{x|%H:%M} UTC: %{y}<br>applied %{customdata[0]}, fused "
-                              "although excluded %{customdata[1]}, sectors registered on "
-                              "their own %{customdata[2]}<extra>" + site + "</extra>",
+                customdata=[[r["registration_applied_share"], r["readmitted_share"], *i]
+                            for r, i in zip(sel, interval, strict=True)],
+                hovertemplate="%{x|%H:%M} UTC: %{y} (95 %: %{customdata[2]} to "
+                              "%{customdata[3]})<br>applied %{customdata[0]}, fused although "
+                              "excluded %{customdata[1]}<extra>" + name + "</extra>",
                 row=row, col=1)
     fig = _layout(fig, "Online registration per radar (reported − true; large markers: "
                   "applied before fusion)", height=190 * len(_REGISTRATION_PANELS))

@@ -132,9 +132,8 @@ def sections(data: AuditData) -> list[Section]:
         "estimated them "
         "from AIS ships and radar overlap (95% interval as a band; large markers: the minutes "
         "the estimate was removed from the reports before fusion) and the variance scale on "
-        "its reports' covariance (1: the configured sigmas). Where a site's sectors differ "
-        "each is registered on its own: the series is their mean, the sensor_registration "
-        "report has each sector's.",
+        "its reports' covariance (1: the configured sigmas). Where a site's sectors differ, "
+        "each sector registered on its own has a dashed line of the site's colour.",
         ("registration_over_time", "sensor_registration"),
         charts.registration_over_time(rows("registration_over_time"), data.start_ns,
                                       data.end_ns))

@@ -890,13 +890,14 @@ def test_sensor_registration(world):
 @covers("registration_over_time")
 def test_registration_over_time(world):
     r = table(world, "sensor_registration").with_columns(
-        (pl.col("time_ns") // 60_000_000_000).alias("minute"))
+        (pl.col("time_ns") // 60_000_000_000).alias("minute"),
+        pl.when(pl.col("registration_scope") == "sector")
+        .then(pl.col("sector").fill_null(OUTSIDE)).alias("registered_sector"))
     z = 1.959964
     deg = 180.0 / math.pi
-    want = r.group_by("site", "site_id", "minute").agg(
+    want = r.group_by("site", "site_id", "registered_sector", "minute").agg(
         pl.col("time_ns").n_unique().alias("epochs"),
         pl.col("registration_applied").mean().alias("registration_applied_share"),
-        (pl.col("registration_scope") == "sector").mean().alias("sector_registration_share"),
         pl.col("range_bias_m").mean(),
         (pl.col("range_bias_m") - z * pl.col("sigma_range_bias_m")).mean().alias(
             "range_ci_low_m"),
@@ -912,11 +913,11 @@ def test_registration_over_time(world):
     ).with_columns(pl.from_epoch(pl.col("minute") * 60, time_unit="s").alias("minute_utc")
                    ).drop("minute")
     got = report(world, "registration_over_time").select(want.columns)
-    same(got, want, ["site", "site_id", "minute_utc"], atol=0.0051,
+    same(got, want, ["site", "site_id", "registered_sector", "minute_utc"], atol=0.0051,
          azimuth_bias_deg=5.1e-5, azimuth_ci_high_deg=5.1e-5, time_offset_s=5.1e-4,
          range_gain_m_per_km=5.1e-4, range_gain_ci_high_m_per_km=5.1e-4,
          variance_scale_max=5.1e-4, registration_applied_share=5.1e-5,
-         sector_registration_share=5.1e-5, readmitted_share=5.1e-5)
+         readmitted_share=5.1e-5)
     # the minutes of the scene's R2 range bias: estimated near its injected 80 m, applied
     applied = got.filter((pl.col("site_id") == "R2") & (pl.col("registration_applied_share") == 1))
     assert applied.height and applied["range_bias_m"].max() > 40.0
