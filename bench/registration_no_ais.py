@@ -12,25 +12,28 @@ from __future__ import annotations
 
 import argparse
 from concurrent.futures import ProcessPoolExecutor
+from types import ModuleType
 
 import polars as pl
 
-from pipeline.experiments.registration_no_ais import FAULTS, run_one, summarise
+from pipeline.experiments import registration_no_ais
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def drive(experiment: ModuleType, first_seed: int, description: str) -> None:
+    """Run ``experiment``'s ``run_one`` for every seed and fault of its ``FAULTS`` (options
+    ``--runs``, ``--first-seed``, ``--workers``) and print its ``summarise`` table."""
+    ap = argparse.ArgumentParser(description=description)
     ap.add_argument("--runs", type=int, default=20)
-    ap.add_argument("--first-seed", type=int, default=2000)
+    ap.add_argument("--first-seed", type=int, default=first_seed)
     ap.add_argument("--workers", type=int, default=2)
     a = ap.parse_args()
-    jobs = [(s, i) for i in range(len(FAULTS)) for s in range(a.first_seed,
-                                                              a.first_seed + a.runs)]
+    jobs = [(s, i) for i in range(len(experiment.FAULTS))
+            for s in range(a.first_seed, a.first_seed + a.runs)]
     with ProcessPoolExecutor(a.workers) as pool:
-        rows = pl.DataFrame(list(pool.map(run_one, jobs)))
+        rows = pl.DataFrame(list(pool.map(experiment.run_one, jobs)))
     with pl.Config(tbl_cols=-1, tbl_width_chars=250, tbl_rows=-1):
-        print(summarise(rows))
+        print(experiment.summarise(rows))
 
 
 if __name__ == "__main__":
-    main()
+    drive(registration_no_ais, first_seed=2000, description=__doc__.splitlines()[0])

@@ -262,6 +262,15 @@ REGISTRATION_OF = {
 Z95 = 1.959963984540054
 
 
+def site_registration(out: dict) -> pl.DataFrame:
+    """``sensor_registration`` of the stage output ``out``, one row per (epoch, site): the
+    site's estimate (the same in each of its sectors; a sector registered on its own left
+    out), in time order."""
+    reg = out["sensor_registration"].filter(
+        pl.col("registration_scope").fill_null("site") == "site")
+    return reg.unique(["time_ns", "site_id"], keep="first", maintain_order=True).sort("time_ns")
+
+
 def _registration(on: dict, clean: dict, f: dict) -> dict[str, float | bool | None]:
     """For a range, azimuth or clock fault: whether the faulted site's estimate at the
     middle of the fault holds the injected value in its 95 % interval
@@ -275,15 +284,14 @@ def _registration(on: dict, clean: dict, f: dict) -> dict[str, float | bool | No
     t0, t1 = f["start_ns"], f["end_ns"]
     settle = t0 + (t1 - t0) // 3
 
-    def within(reg: pl.DataFrame, value: float) -> pl.DataFrame:
-        return (reg.filter((pl.col("site_id") == f["channel"])
-                           & pl.col("time_ns").is_between(settle, t1, closed="left"))
-                .unique("time_ns").sort("time_ns")
-                .select("time_ns", ((pl.col(est) - value).abs() <= Z95 * pl.col(sig))
-                        .alias("within")))
+    def within(out: dict, value: float) -> pl.DataFrame:
+        reg = site_registration(out).filter(
+            (pl.col("site_id") == f["channel"])
+            & pl.col("time_ns").is_between(settle, t1, closed="left"))
+        return reg.select("time_ns", ((pl.col(est) - value).abs() <= Z95 * pl.col(sig))
+                          .alias("within"))
 
-    fault, free = within(on["sensor_registration"], f["value"]), within(
-        clean["sensor_registration"], 0.0)
+    fault, free = within(on, f["value"]), within(clean, 0.0)
     mid = fault.filter(pl.col("time_ns") >= (t0 + t1) // 2).head(1)["within"]
     return {
         "registration_within_95": bool(mid[0]) if mid.len() else None,

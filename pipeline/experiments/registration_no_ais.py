@@ -21,7 +21,12 @@ import math
 import numpy as np
 import polars as pl
 
-from pipeline.experiments.channel_montecarlo import REGISTRATION_OF, Z95, maritime_inputs
+from pipeline.experiments.channel_montecarlo import (
+    REGISTRATION_OF,
+    Z95,
+    maritime_inputs,
+    site_registration,
+)
 from pipeline.families import load_config
 from pipeline.family import Window
 from pipeline.maritime.config import ChannelFault, with_faults, with_registration
@@ -45,11 +50,17 @@ def _ns(s: float) -> int:
     return DEFAULT_START_NS + round(s * NS)
 
 
-def _fused_errors(out: dict) -> pl.DataFrame:
-    return out["track_errors"].filter(
+def fused_accuracy(out: dict, start_ns: int, end_ns: int, tag: str) -> dict[str, float]:
+    """``rms_<tag>_m``, ``p95_<tag>_m`` of the stage output ``out``'s fused errors against
+    truth in [start_ns, end_ns) and ``duplicates_<tag>``: the (epoch, ship) pairs followed
+    by more than one fused system track there."""
+    e = out["track_errors"].filter(
         (pl.col("source") == "fused") & (pl.col("reference") == "truth")
-        & pl.col("time_ns").is_between(_ns(ONSET_S + SETTLE_S), _ns(ONSET_S + FAULT_S),
-                                       closed="left"))
+        & pl.col("time_ns").is_between(start_ns, end_ns, closed="left"))
+    err = e["error_m"].drop_nulls().to_numpy()
+    return {f"rms_{tag}_m": float(np.sqrt(np.mean(err**2))),
+            f"p95_{tag}_m": float(np.quantile(err, 0.95)),
+            f"duplicates_{tag}": duplicates(e)}
 
 
 def duplicates(e: pl.DataFrame) -> int:
@@ -57,6 +68,7 @@ def duplicates(e: pl.DataFrame) -> int:
     one fused system track."""
     per = e.group_by("time_ns", "reference_id").agg(pl.col("system_track_id").n_unique())
     return int((per["system_track_id"] > 1).sum())
+
 
 
 def run_one(args: tuple[int, int]) -> dict:
@@ -73,14 +85,10 @@ def run_one(args: tuple[int, int]) -> dict:
     row: dict = {"kind": kind, "seed": seed}
     for on in (False, True):
         out = stage(inputs, window, with_registration(cfg, on))
-        e = _fused_errors(out)
-        err = e["error_m"].drop_nulls().to_numpy()
-        tag = "on" if on else "off"
-        row[f"rms_{tag}_m"] = float(np.sqrt(np.mean(err**2)))
-        row[f"p95_{tag}_m"] = float(np.quantile(err, 0.95))
-        row[f"duplicates_{tag}"] = duplicates(e)
+        row |= fused_accuracy(out, _ns(ONSET_S + SETTLE_S), _ns(ONSET_S + FAULT_S),
+                              "on" if on else "off")
         if on:
-            reg = out["sensor_registration"].unique(["time_ns", "site_id"]).sort("time_ns")
+            reg = site_registration(out)
             mid = reg.filter((pl.col("site_id") == site)
                              & (pl.col("time_ns") >= _ns(ONSET_S + FAULT_S / 2))).head(1)
             row["within_95"] = bool(((mid[est] - value).abs() <= Z95 * mid[sig]).item())

@@ -23,11 +23,10 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 import polars as pl
 
 from pipeline.experiments.channel_montecarlo import maritime_inputs
-from pipeline.experiments.registration_no_ais import duplicates
+from pipeline.experiments.registration_no_ais import fused_accuracy
 from pipeline.families import load_config
 from pipeline.family import Window
 from pipeline.maritime.config import ChannelFault, with_faults, with_registration
@@ -67,15 +66,8 @@ def run_one(args: tuple[int, int]) -> dict:
     row: dict = {"fault": name, "seed": seed}
     for per_sector in (False, True):
         out = stage(inputs, window, with_registration(cfg, True, per_sector=per_sector))
-        e = out["track_errors"].filter(
-            (pl.col("source") == "fused") & (pl.col("reference") == "truth")
-            & pl.col("time_ns").is_between(_ns(ONSET_S + SETTLE_S), _ns(ONSET_S + FAULT_S),
-                                           closed="left"))
-        err = e["error_m"].drop_nulls().to_numpy()
-        tag = "sector" if per_sector else "site"
-        row[f"rms_{tag}_m"] = float(np.sqrt(np.mean(err**2)))
-        row[f"p95_{tag}_m"] = float(np.quantile(err, 0.95))
-        row[f"duplicates_{tag}"] = duplicates(e)
+        row |= fused_accuracy(out, _ns(ONSET_S + SETTLE_S), _ns(ONSET_S + FAULT_S),
+                              "sector" if per_sector else "site")
         if per_sector:
             reg = out["sensor_registration"].filter(pl.col("site_id") == SITE)
             split = pl.col("registration_scope") == "sector"

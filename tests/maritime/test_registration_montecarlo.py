@@ -11,22 +11,27 @@ each; the docs' tables are `python -m bench.registration_no_ais --runs 30` and
 
 from __future__ import annotations
 
+from types import ModuleType
+
 import polars as pl
 import pytest
 
-from pipeline.experiments import registration_sectors as sectors
-from pipeline.experiments.registration_no_ais import FAULTS, run_one, summarise
+from pipeline.experiments import registration_no_ais, registration_sectors
 
-SEEDS = range(2000, 2006)
+
+def _summary(experiment: ModuleType, seeds: range) -> pl.DataFrame:
+    """``experiment``'s summary table over ``seeds`` and every fault (printed with -s)."""
+    rows = pl.DataFrame([experiment.run_one((s, i)) for i in range(len(experiment.FAULTS))
+                         for s in seeds])
+    out = experiment.summarise(rows)
+    with pl.Config(tbl_cols=-1, tbl_width_chars=250):
+        print("\n", out)
+    return out
 
 
 @pytest.fixture(scope="module")
 def table() -> pl.DataFrame:
-    rows = pl.DataFrame([run_one((s, i)) for i in range(len(FAULTS)) for s in SEEDS])
-    out = summarise(rows)
-    with pl.Config(tbl_cols=-1, tbl_width_chars=250):
-        print("\n", out)
-    return out
+    return _summary(registration_no_ais, range(2000, 2006))
 
 
 @pytest.mark.slow
@@ -50,12 +55,7 @@ def test_a_clock_offset_is_not_corrected_without_ais(table):
 
 @pytest.fixture(scope="module")
 def by_sector() -> pl.DataFrame:
-    rows = pl.DataFrame([sectors.run_one((s, i)) for i in range(len(sectors.FAULTS))
-                         for s in range(3000, 3006)])
-    out = sectors.summarise(rows)
-    with pl.Config(tbl_cols=-1, tbl_width_chars=250):
-        print("\n", out)
-    return out
+    return _summary(registration_sectors, range(3000, 3006))
 
 
 @pytest.mark.slow
