@@ -654,3 +654,35 @@ def _with_leave_one_out_d2(df: pl.DataFrame) -> pl.DataFrame:
     return tmp.with_columns(
         pl.when(pl.col("_n") > 1).then(d2).otherwise(None).alias("mahalanobis_d2")
     ).drop(*(e.meta.output_name() for e in o_cols), "_n")
+
+
+def split_parents(associations: pl.DataFrame, track_timeout_s: float) -> pl.DataFrame:
+    """The system track each system track split from: for a track whose first epoch
+    holds local tracks that, at their previous report (at most ``track_timeout_s``
+    before), belonged to one other system track, (system_track_id, parent_track_id,
+    split_ns = the child's first epoch). A track born of new local tracks only, or of
+    local tracks from several system tracks, has no row.
+
+    Consumes associations: time_ns, site_id, local_track_id, system_track_id (every
+    associated row, fused or not: a row left out of the fusion still says which system
+    track its radar track was on)."""
+    key = ["site_id", "local_track_id"]
+    rows = associations.select("time_ns", *key, "system_track_id")
+    if not rows["time_ns"].is_sorted():
+        rows = rows.sort("time_ns", maintain_order=True)
+    first = rows.filter(pl.col("time_ns") == pl.col("time_ns").min().over("system_track_id"))
+    # each first row's local track at its report before (an as-of join: ~9x a sort of
+    # every row by local track)
+    moved = first.join_asof(
+        rows.select(pl.col("time_ns").alias("previous_ns"), *key,
+                    pl.col("system_track_id").alias("parent_track_id")),
+        left_on="time_ns", right_on="previous_ns", by=key, strategy="backward",
+        allow_exact_matches=False, check_sortedness=False,
+    ).filter(pl.col("parent_track_id").is_not_null()
+             & (pl.col("parent_track_id") != pl.col("system_track_id"))
+             & (pl.col("time_ns") - pl.col("previous_ns") <= round(track_timeout_s * NS)))
+    return (moved.group_by("system_track_id", pl.col("time_ns").alias("split_ns"))
+            .agg(pl.col("parent_track_id").unique())
+            .filter(pl.col("parent_track_id").list.len() == 1)
+            .select("system_track_id", pl.col("parent_track_id").list.first(), "split_ns")
+            .sort("system_track_id"))

@@ -76,7 +76,12 @@ import numpy as np
 import polars as pl
 
 from pipeline.config import AisConfig, RegionConfig
-from pipeline.filters.sequential import fixed_lag_decision, held_cumsum, wald_boundaries
+from pipeline.filters.sequential import (
+    fixed_lag_decision,
+    held_cumsum,
+    held_decision,
+    wald_boundaries,
+)
 from pipeline.frames import geodetic_to_enu
 from pipeline.geometry import position_covariance
 from pipeline.maritime.associate import assign, assign_grouped, gate_threshold
@@ -149,11 +154,15 @@ def identify(
     *,
     cfg: AisConfig,
     region: RegionConfig,
+    lineage: pl.DataFrame | None = None,
 ) -> tuple[pl.DataFrame, pl.DataFrame]:
     """Match AIS reports to fused tracks and give each fused point its confirmed identity.
 
     Consumes system_tracks: time_ns, system_track_id, x_enu_m, y_enu_m, sigma_x_m,
-    sigma_y_m, cov_xy_m2 (or P_xx, P_yy, P_xy); ais_reports as in :func:`ais_at_epochs`.
+    sigma_y_m, cov_xy_m2 (or P_xx, P_yy, P_xy); ais_reports as in :func:`ais_at_epochs`;
+    ``lineage``: the track each track split from
+    (:func:`~pipeline.maritime.associate.split_parents`; its confirmed identities carry
+    over to the split, :func:`confirmed_identity`).
 
     Returns ``(identifications, system_tracks)``: identifications rows (time_ns,
     system_track_id, mmsi, ais_time_ns, mahalanobis_d2), and system_tracks with an
@@ -165,7 +174,8 @@ def identify(
     gate = gate_threshold(cfg.gate_probability)
     pairs = _gated_pairs(tracks, ais, gate)
     matches, rival = _assign(tracks, ais, pairs, gate)
-    mmsi = confirmed_identity(tracks, ais, matches.with_columns(rival_llr=rival), cfg, gate)
+    mmsi = confirmed_identity(tracks, ais, matches.with_columns(rival_llr=rival), cfg, gate,
+                              lineage)
     out = tracks.drop("mmsi", strict=False).with_columns(mmsi)
     return matches, out
 
@@ -317,10 +327,11 @@ def _match_reference(tracks: pl.DataFrame, ais: pl.DataFrame, gate: float) -> pl
 
 
 def identity_evidence(tracks: pl.DataFrame, ais: pl.DataFrame, matches: pl.DataFrame,
-                      cfg: AisConfig, gate: float) -> pl.DataFrame:
+                      cfg: AisConfig, gate: float, extra: pl.DataFrame | None = None
+                      ) -> pl.DataFrame:
     """The per-epoch log-likelihood ratio ``llr`` of every candidate pair (module
-    docstring): one row per point of a track and MMSI that matched it at least once,
-    sorted by (system_track_id, mmsi, time_ns).
+    docstring): one row per point of a track and MMSI that matched it at least once (or
+    is in ``extra``: system_track_id, mmsi), sorted by (system_track_id, mmsi, time_ns).
 
     Consumes tracks: time_ns, system_track_id; ais (the AIS picture, :func:`ais_at_epochs`):
     time_ns, mmsi; matches: time_ns, system_track_id, mmsi, mahalanobis_d2, rival_llr."""
@@ -328,7 +339,10 @@ def identity_evidence(tracks: pl.DataFrame, ais: pl.DataFrame, matches: pl.DataF
     match_llr = (math.log(cfg.match_probability / cfg.stray_match_probability)
                  + math.log(gate / 2.0))
     miss_llr = math.log((1.0 - cfg.match_probability) / (1.0 - cfg.stray_match_probability))
-    candidates = matches.select("system_track_id", "mmsi").unique()
+    candidates = matches.select("system_track_id", "mmsi")
+    if extra is not None:
+        candidates = pl.concat([candidates, extra.select(candidates.columns)])
+    candidates = candidates.unique()
     reported = ais.select("time_ns", "mmsi").unique().with_columns(reported=pl.lit(True))
     matched = matches.select(*key, llr_match=pl.min_horizontal(
         match_llr - 0.5 * pl.col("mahalanobis_d2"), pl.col("rival_llr")))
@@ -345,30 +359,94 @@ def identity_evidence(tracks: pl.DataFrame, ais: pl.DataFrame, matches: pl.DataF
 
 
 def confirmed_identity(tracks: pl.DataFrame, ais: pl.DataFrame, matches: pl.DataFrame,
-                       cfg: AisConfig, gate: float) -> pl.Series:
+                       cfg: AisConfig, gate: float, lineage: pl.DataFrame | None = None
+                       ) -> pl.Series:
     """The confirmed MMSI of each point of ``tracks`` (sorted by time_ns,
     system_track_id), as an ``mmsi`` Series aligned with it (null: none confirmed).
 
     Each pair's test is :func:`~pipeline.filters.sequential.held_cumsum` over its rows of
-    :func:`identity_evidence`; all pairs in one scan (segments), no loop over tracks."""
+    :func:`identity_evidence`; all pairs in one scan (segments), no loop over tracks.
+
+    **A split keeps the name.** A track that split from a named one (``lineage``:
+    system_track_id, parent_track_id, split_ns) starts its test of each MMSI its parent
+    had confirmed at the split where the parent's test stood: confirmed, with the
+    parent's sum. Its radar tracks carried that evidence; a track born of them a few
+    seconds ago (a faulty radar's reports leaving the gate, the other radar's track
+    losing the id) is otherwise unnamed until it gathers the evidence anew, often longer
+    than it lives. The same test withdraws an inherited MMSI the evidence turns against
+    (with the fixed lag, from the child's first point on)."""
     lo, hi = wald_boundaries(cfg.false_identification_probability,
                              cfg.missed_identification_probability)
+    lag_ns = round(cfg.identity_lag_s * NS)
     ev = identity_evidence(tracks, ais, matches, cfg, gate)
-    sid, mmsi = ev["system_track_id"].to_numpy(), ev["mmsi"].to_numpy()
-    start = np.r_[True, (sid[1:] != sid[:-1]) | (mmsi[1:] != mmsi[:-1])] if ev.height \
-        else np.empty(0, bool)
-    s = held_cumsum(ev["llr"].to_numpy(), start, lo, hi)
-    confirmed = fixed_lag_decision(s, start, lo, hi, ev["time_ns"].to_numpy(),
-                                   round(cfg.identity_lag_s * NS))
+    inherited = _inherited(ev, lineage, lo, hi)
+    if inherited.height:
+        pair = ["system_track_id", "mmsi"]
+        # the inherited pairs the child never matched: their evidence is misses and 0s
+        unmatched = inherited.select(pair).unique().join(ev.select(pair).unique(), on=pair,
+                                                         how="anti")
+        ev = pl.concat([
+            inherited,
+            *(e.with_columns(rank=pl.lit(2, pl.Int8)) for e in (
+                ev, identity_evidence(tracks, ais, matches.clear(), cfg, gate,
+                                      extra=unmatched))),
+        ]).sort("system_track_id", "mmsi", "time_ns", "rank")
+    s, confirmed = _sequential_test(ev, lo, hi, lag_ns)
+    real = ev["rank"].to_numpy() == 2 if inherited.height else np.ones(ev.height, bool)
     # several confirmed MMSIs on a track: the largest sum (rounded: the scan's sums
     # differ in the last bits with the rows before them), then the smaller MMSI
     best = (
         ev.select("time_ns", "system_track_id", "mmsi")
         .with_columns(score=np.round(s, 6))
-        .filter(pl.Series(confirmed))
+        .filter(pl.Series(confirmed & real))
         .sort("score", "mmsi", descending=[True, False])
         .unique(["time_ns", "system_track_id"], keep="first")
     )
     return tracks.select("time_ns", "system_track_id").join(
         best.select("time_ns", "system_track_id", "mmsi"),
         on=["time_ns", "system_track_id"], how="left", maintain_order="left")["mmsi"]
+
+
+def _segment_starts(ev: pl.DataFrame) -> np.ndarray:
+    """True at the first row of each (system_track_id, mmsi) pair of ``ev`` (sorted)."""
+    if not ev.height:
+        return np.empty(0, bool)
+    sid, mmsi = ev["system_track_id"].to_numpy(), ev["mmsi"].to_numpy()
+    return np.r_[True, (sid[1:] != sid[:-1]) | (mmsi[1:] != mmsi[:-1])]
+
+
+def _sequential_test(ev: pl.DataFrame, lo: float, hi: float, lag_ns: int
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """(held sum, fixed-lag decision) of every row of ``ev``, pair by pair."""
+    start = _segment_starts(ev)
+    s = held_cumsum(ev["llr"].to_numpy(), start, lo, hi)
+    return s, fixed_lag_decision(s, start, lo, hi, ev["time_ns"].to_numpy(), lag_ns)
+
+
+def _inherited(ev: pl.DataFrame, lineage: pl.DataFrame | None, lo: float, hi: float
+               ) -> pl.DataFrame:
+    """Rows that start a split track's test of each MMSI its parent had confirmed at the
+    split (causal decision), at the parent's last point before it: one row of llr ``hi``
+    (the test confirmed) and one that brings the sum to the parent's (``rank`` 0 and 1;
+    columns of :func:`identity_evidence`)."""
+    cols = {"time_ns": pl.Int64, "system_track_id": pl.Int64, "mmsi": pl.Int64,
+            "llr": pl.Float64, "rank": pl.Int8}
+    if lineage is None or not lineage.height or not ev.height:
+        return pl.DataFrame(schema=cols)
+    start = _segment_starts(ev)
+    s = held_cumsum(ev["llr"].to_numpy(), start, lo, hi)
+    state = ev.select("time_ns", "system_track_id", "mmsi").with_columns(
+        s=s, up=held_decision(s, start, lo, hi))
+    at_split = (
+        state.join(lineage.rename({"system_track_id": "child",
+                                   "parent_track_id": "system_track_id"}),
+                   on="system_track_id")
+        .filter(pl.col("time_ns") < pl.col("split_ns"))
+        .group_by("child", "mmsi", maintain_order=True).last()
+        .filter("up")
+    )
+    first = at_split.select("time_ns", pl.col("child").alias("system_track_id"), "mmsi",
+                            pl.lit(hi).alias("llr"), pl.lit(0, pl.Int8).alias("rank"))
+    second = first.with_columns(at_split["s"].alias("llr") - hi, pl.lit(1, pl.Int8).alias("rank"))
+    return pl.concat([first, second]).select(
+        pl.col(c).cast(t) for c, t in cols.items())

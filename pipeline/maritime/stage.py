@@ -33,7 +33,7 @@ from pipeline.config import Config
 from pipeline.family import Family, Inputs, Outputs, TableInput, Window
 from pipeline.geometry import add_geodetic, assign_sectors, cross_track
 from pipeline.maritime.align import align_reports
-from pipeline.maritime.associate import associate_tracks
+from pipeline.maritime.associate import associate_tracks, split_parents
 from pipeline.maritime.config import DECLARATION, SECTIONS, maritime_config, parse_maritime
 from pipeline.maritime.cross_track import cross_track_by_leg
 from pipeline.maritime.evaluate import radar_detection
@@ -138,7 +138,9 @@ def stage(tables: Inputs, window: Window, cfg: Config) -> Outputs:
     fused = assign_sectors(fused, cfg.sectors, cfg.region)
     fused = cross_track(fused, cfg.fairway_legs, cfg.region, mc.max_cross_track_m)
     ais_used = ais.join(integrity.ais_excluded, on=["mmsi", "time_ns"], how="anti")
-    identifications, fused = identify(fused, ais_used, cfg=cfg.ais, region=cfg.region)
+    identifications, fused = identify(
+        fused, ais_used, cfg=cfg.ais, region=cfg.region,
+        lineage=split_parents(associated, mc.association.track_timeout_s))
     # the reconstructed reference of the AIS vessels the integrity kept (issue 37), over
     # the whole tracked span (its smoothing reaches into the margins)
     reference, knots = reconstruct(ais_used, cfg.region, cfg.ais, mc.reference)

@@ -32,6 +32,7 @@ from pipeline.maritime.associate import (
     association_gate,
     gate_threshold,
     gated_d2,
+    split_parents,
     velocity_covariance,
 )
 from pipeline.maritime.config import AssociationConfig, maritime_config
@@ -415,3 +416,24 @@ def test_leave_one_out_d2_is_to_the_matrix_fusion_of_the_others():
         assert d2 == pytest.approx(D @ np.linalg.solve(S, D), rel=1e-9)
         D_axis = p[i] - _per_axis_eq14([P[j] for j in others], [p[j] for j in others])
         assert abs(D_axis @ np.linalg.solve(S, D_axis) - d2) > 0.1 * d2  # would differ
+
+
+def test_split_parents_from_the_first_epoch_of_each_track():
+    """A track's parent: the one system track its local tracks were on at their previous
+    report (within the timeout). Track 20 splits from 10 (R2's track 2 leaves it);
+    track 30 is born of a new local track; track 40 of local tracks from two tracks;
+    track 50 of one last seen on track 10 longer than the timeout ago."""
+    s = NS
+    rows = [  # time_s, site, local, system
+        (0, "R1", 1, 10), (0, "R2", 2, 10), (4, "R1", 1, 10), (4, "R2", 2, 20),
+        (8, "R2", 2, 20), (8, "R1", 1, 10),
+        (4, "R3", 7, 30),
+        (0, "R1", 5, 11), (0, "R2", 6, 12), (4, "R1", 5, 40), (4, "R2", 6, 40),
+        (0, "R3", 9, 10), (60, "R3", 9, 50),
+    ]
+    t, site, local, sid = zip(*rows, strict=True)
+    a = pl.DataFrame({"time_ns": [v * s for v in t], "site_id": site,
+                      "local_track_id": local, "system_track_id": sid},
+                     schema_overrides={"local_track_id": pl.Int64, "system_track_id": pl.Int64})
+    got = split_parents(a, track_timeout_s=30.0)
+    assert got.rows() == [(20, 10, 4 * s)]
