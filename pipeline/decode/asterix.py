@@ -75,9 +75,7 @@ from __future__ import annotations
 import json
 import logging
 import math
-import os
 import re
-import tempfile
 from collections import Counter
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -90,6 +88,7 @@ import pyarrow as pa
 from pipeline.decode.asterix_editions import (
     DEFAULT_EDITIONS,
     definition_file,
+    definitions_folder,
     known_editions,
     parse_edition_metadata,
 )
@@ -189,11 +188,10 @@ def _ensure_definitions() -> None:
         patched = _patched_definition(src.read_text())
         if patched is None:
             continue
-        fd, tmp = tempfile.mkstemp(prefix=f"surveil_{name}_", suffix=".xml")
-        with os.fdopen(fd, "w") as f:
-            f.write(patched)
-        _SHIPPED_FILES[int(name[3:])] = tmp  # kept: loaded again after another edition
-        asterix.init(tmp)
+        tmp = definitions_folder() / f"surveil_{name}.xml"
+        tmp.write_text(patched)
+        _SHIPPED_FILES[int(name[3:])] = str(tmp)  # kept: loaded again after another edition
+        asterix.init(str(tmp))
     _DEFINITIONS_READY = True
 
 

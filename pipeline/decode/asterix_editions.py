@@ -39,8 +39,10 @@ plausible values (:func:`pipeline.decode.asterix.implausible`).
 
 from __future__ import annotations
 
+import atexit
 import os
 import re
+import shutil
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -290,17 +292,27 @@ def definition_xml(ed: Edition, shipped_xml: str) -> str:
 
 
 _FILES: dict[tuple[int, str], str] = {}
+_FOLDER: dict[int, Path] = {}  # pid -> this process's folder of definition files
+
+
+def definitions_folder() -> Path:
+    """This process's folder for the definition files handed to ``asterix_decoder`` (it
+    reads them by path while the process lives); removed when the process exits, so a
+    nightly run leaves nothing in the temporary directory. A forked child makes its own."""
+    pid = os.getpid()
+    if pid not in _FOLDER:
+        _FOLDER[pid] = Path(tempfile.mkdtemp(prefix=f"surveil-asterix-{pid}-"))
+        atexit.register(shutil.rmtree, _FOLDER[pid], ignore_errors=True)
+    return _FOLDER[pid]
 
 
 def definition_file(cat: int, version: str, shipped_path: str) -> str:
     """Path of the definition file of an edition of :data:`EDITIONS` (written once per
-    process into a temporary folder)."""
+    process into :func:`definitions_folder`)."""
     key = (cat, version)
     if key not in _FILES:
         xml = definition_xml(EDITIONS[cat][version], Path(shipped_path).read_text())
-        folder = Path(tempfile.gettempdir()) / f"surveil-asterix-{os.getpid()}"
-        folder.mkdir(exist_ok=True)
-        path = folder / f"asterix_cat{cat:03d}_{version.replace('.', '_')}.xml"
+        path = definitions_folder() / f"asterix_cat{cat:03d}_{version.replace('.', '_')}.xml"
         path.write_text(xml)
         _FILES[key] = str(path)
     return _FILES[key]

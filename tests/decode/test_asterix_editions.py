@@ -6,6 +6,7 @@ by config / channel metadata."""
 from __future__ import annotations
 
 import math
+import os
 import struct
 
 import numpy as np
@@ -161,3 +162,20 @@ def test_config_editions_are_validated():
     assert parse_editions({"editions": {"010": "0.24", "62": "0.17"}}) == {10: "0.24", 62: "0.17"}
     with pytest.raises(ConfigError, match=r"CAT021 edition '9\.9' is not one we decode"):
         parse_editions({"editions": {"021": "9.9"}})
+
+
+def test_a_process_leaves_no_definition_file_behind(tmp_path):
+    """The definition files handed to asterix_decoder live while the process does: a
+    nightly run must not leave its CAT048/065 and edition files in the temporary folder."""
+    import subprocess
+    import sys
+
+    code = ("import os, tempfile\n"
+            "from pipeline.decode.asterix import use_edition\n"
+            "use_edition(10, '0.24')\n"
+            "print(len(os.listdir(tempfile.gettempdir())))\n")
+    env = {**os.environ, "TMPDIR": str(tmp_path)}
+    done = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
+                          text=True, check=True)
+    assert int(done.stdout.strip().splitlines()[-1]) >= 1  # the folder while it ran
+    assert list(tmp_path.iterdir()) == []
