@@ -1,7 +1,7 @@
 -- name: radar_bias_by_site
 -- description: registration bias of each radar site (reported - true) estimated from the
---   AIS reports of cooperative ships by `surveil calibrate-radars`: range bias, azimuth
---   (north alignment) bias and time offset with their 95% confidence intervals, the
+--   AIS reports of cooperative ships by `surveil calibrate-radars`: range bias, range gain
+--   (m per km), azimuth (north alignment) bias and time offset with their 95% confidence intervals, the
 --   reports and ships used and the fit's residuals. One row per estimation window whose
 --   start lies in the window. Radar sites are not in sectors: the sector parameter is unused.
 -- grain: one row per (site, estimation window, radar site)
@@ -25,6 +25,9 @@ SELECT
     round(time_offset_s, 3)::DOUBLE                         AS time_offset_s,
     round(time_offset_ci_low_s, 3)::DOUBLE                  AS time_ci_low_s,
     round(time_offset_ci_high_s, 3)::DOUBLE                 AS time_ci_high_s,
+    round(range_gain * 1e3, 3)::DOUBLE                      AS range_gain_m_per_km,  -- NULL: estimated before the gain was
+    round(range_gain_ci_low * 1e3, 3)::DOUBLE               AS range_gain_ci_low_m_per_km,
+    round(range_gain_ci_high * 1e3, 3)::DOUBLE              AS range_gain_ci_high_m_per_km,
     round(rms_range_residual_m, 2)::DOUBLE                  AS rms_range_residual_m,
     round(rms_azimuth_residual_deg, 4)::DOUBLE              AS rms_azimuth_residual_deg,
     round(reduced_chi2, 3)::DOUBLE                          AS reduced_chi2

@@ -201,22 +201,26 @@ def cross_track_along(rows: list[dict[str, Any]], req: RequirementsConfig
 
 
 def radar_bias(rows: list[dict[str, Any]]) -> go.Figure | None:
-    """Range, azimuth and time bias per site with their 95% intervals."""
+    """Range bias, range gain, azimuth bias and time offset per site with their 95%
+    intervals (a row estimated before the gain was has no gain bar)."""
     if not rows:
         return None
-    fig = make_subplots(rows=1, cols=3, subplot_titles=["range bias, m", "azimuth bias, deg",
-                                                        "time offset, s"])
+    panels = (("range bias, m", "range_bias_m", "range_ci_low_m", "range_ci_high_m"),
+              ("range gain, m per km", "range_gain_m_per_km", "range_gain_ci_low_m_per_km",
+               "range_gain_ci_high_m_per_km"),
+              ("azimuth bias, deg", "azimuth_bias_deg", "azimuth_ci_low_deg",
+               "azimuth_ci_high_deg"),
+              ("time offset, s", "time_offset_s", "time_ci_low_s", "time_ci_high_s"))
+    fig = make_subplots(rows=1, cols=len(panels), subplot_titles=[p[0] for p in panels])
     sites = [f"{r['site_id']}<br>{r['window_start_utc']:%H:%M}" for r in rows]
-    for col, (v, lo, hi) in enumerate((("range_bias_m", "range_ci_low_m", "range_ci_high_m"),
-                                       ("azimuth_bias_deg", "azimuth_ci_low_deg",
-                                        "azimuth_ci_high_deg"),
-                                       ("time_offset_s", "time_ci_low_s", "time_ci_high_s")),
-                                      start=1):
-        vals = [r[v] for r in rows]
+    for col, (_, v, lo, hi) in enumerate(panels, start=1):
+        vals = [r.get(v) for r in rows]
         fig.add_bar(x=sites, y=vals, showlegend=False, marker_color=FUSED,
                     error_y=dict(type="data", symmetric=False,
-                                 array=[r[hi] - r[v] for r in rows],
-                                 arrayminus=[r[v] - r[lo] for r in rows]),
+                                 array=[None if r.get(v) is None else r[hi] - r[v]
+                                        for r in rows],
+                                 arrayminus=[None if r.get(v) is None else r[v] - r[lo]
+                                             for r in rows]),
                     row=1, col=col)
     return _layout(fig, "Radar registration bias with 95% intervals (reported − true)",
                    height=330)

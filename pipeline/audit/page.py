@@ -125,7 +125,8 @@ def sections(data: AuditData) -> list[Section]:
         ev.drilldown_map(rows("target_points")), table=ev.drilldown_table(
             rows("target_drilldown")))
     add("bias", "Radar registration bias",
-        "Range, azimuth and time bias of each site estimated from AIS, with 95% intervals.",
+        "Range bias, range gain, azimuth bias and time offset of each site estimated from AIS, "
+        "with 95% intervals.",
         ("radar_bias_by_site",), charts.radar_bias(rows("radar_bias_by_site")))
     add("registration", "Online registration and estimated accuracy",
         "Each radar's range bias, azimuth bias, clock offset and range gain as the batch "

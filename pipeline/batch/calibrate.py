@@ -88,6 +88,8 @@ def render(est: pl.DataFrame) -> str:
             f"[{r['azimuth_bias_ci_low_deg']:+.4f}, {r['azimuth_bias_ci_high_deg']:+.4f}]",
             f"  time offset  {r['time_offset_s']:+9.3f} s    [{r['time_offset_ci_low_s']:+.3f}, "
             f"{r['time_offset_ci_high_s']:+.3f}]",
+            f"  range gain   {r['range_gain'] * 1e3:+9.3f} m/km "
+            f"[{r['range_gain_ci_low'] * 1e3:+.3f}, {r['range_gain_ci_high'] * 1e3:+.3f}]",
         ]
     lines += ["", "# to apply in batch: [radar_bias] apply = true, and", correction_toml(est)]
     return "\n".join(lines)

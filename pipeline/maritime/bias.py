@@ -1,20 +1,21 @@
-"""Radar registration bias: range bias, azimuth (north-alignment) bias and time offset of
-each radar site, estimated from the AIS reports of cooperative ships, and applied to
-the radar reports before alignment.
+"""Radar registration bias: range bias, range gain, azimuth (north-alignment) bias and
+time offset of each radar site, estimated from the AIS reports of cooperative ships, and
+applied to the radar reports before alignment.
 
 Model (per site; "reported - true"). A report stamped t_rep of a ship whose true sweep
 time was t = t_rep - dt, at true range r and azimuth az (site frame, true north):
 
-.. math:: r_{rep} = r(t) + b_r + e_r, \\qquad az_{rep} + \\alpha = az(t) + b_{az} + e_{az}
+.. math:: r_{rep} = (1 + g)\\, r(t) + b_r + e_r, \\qquad
+          az_{rep} + \\alpha = az(t) + b_{az} + e_{az}
 
 with alpha the configured north alignment (``radar_sites.north_alignment_deg``) and
 e_r, e_az the report's noise (sigma_range_m, sigma_azimuth_rad). The reference is the
 ship's AIS track interpolated to t_rep (cubic Hermite with the reports' SOG/COG, see
 :func:`interpolate_ais`; GNSS sigma ``[ais] sigma_position_m``). Since
 p(t) = p(t_rep - dt) ~ p_ref(t_rep) - v dt, the residuals are linear in
-theta = (b_r, b_az, dt):
+theta = (b_r, b_az, dt, g) (to first order: g dt is dropped):
 
-.. math:: r_{rep} - r_{ref} = b_r - (u_r \\cdot v)\\, dt, \\qquad
+.. math:: r_{rep} - r_{ref} = b_r + g\\, r_{ref} - (u_r \\cdot v)\\, dt, \\qquad
           az_{rep} + \\alpha - az_{ref} = b_{az} - \\frac{u_{az} \\cdot v}{r}\\, dt
 
 u_r = (sin az, cos az) along the line of sight, u_az = (cos az, -sin az) the direction
@@ -22,22 +23,26 @@ of increasing azimuth, v the ship's velocity (AIS SOG/COG). Weighted least squar
 (weights 1/(sigma_radar^2 + sigma_AIS^2), the AIS sigma taken across the line of sight
 as sigma_AIS / r for azimuth), with outlier rejection: reports whose normalised range or
 azimuth residual exceeds ``outlier_sigma`` are dropped and the fit repeated until the
-set is stable. Covariance (A^T W A)^-1, scaled by the reduced chi-square when it is
-above 1, and by (1 + rho) / (1 - rho) for the lag-1 correlation rho of consecutive
-residuals of one track (a smoothing site tracker, or coasted reports, make
-consecutive errors alike; independent errors give rho ~ 0 and no change). The
+set is stable. The range gain (a range clock's scale error: 0.001 = 1 m per km) is
+told from the bias by ships at different ranges; a prior g ~ N(0, ``prior_range_gain``^2)
+(a pseudo-observation) holds it where every matched ship is at one range, and the bias
+there is the fit's as without it. Covariance (A^T W A)^-1, scaled by the reduced
+chi-square when it is above 1, and by (1 + rho) / (1 - rho) for the lag-1 correlation
+rho of consecutive residuals of one track (a smoothing site tracker, or coasted
+reports, make consecutive errors alike; independent errors give rho ~ 0 and no
+change). The
 intervals are normal (large samples), at ``confidence``. The time offset is
 observable because ships move toward, away from and across the line of sight; ships
 at rest constrain only b_r and b_az.
 
 Which AIS ship a local track follows: a sample of each track's reports is compared
 with every MMSI's interpolated AIS position (Mahalanobis distance with the radar
-sigmas widened by the prior bias allowance ``prior_range_bias_m`` /
-``prior_azimuth_bias_deg``); the track takes the MMSI nearest to at least
+sigmas widened by the prior bias allowance ``prior_range_bias_m``, ``prior_range_gain``
+times the range, ``prior_azimuth_bias_deg``); the track takes the MMSI nearest to at least
 ``min_track_share`` of its sampled reports, inside the gate.
 
 Correction (``[radar_bias] apply = true``, in pipeline/maritime/align.py before alignment):
-range_m - b_r, azimuth_rad - b_az, course_rad - b_az (the tracker's courses are read in
+(range_m - b_r) / (1 + g), azimuth_rad - b_az, course_rad - b_az (the tracker's courses are read in
 the same biased azimuth reference), time_ns - dt.
 """
 
@@ -75,7 +80,7 @@ def correct_registration(
 
     b_az = per_site("azimuth_bias_rad")
     return radar_tracks.with_columns(
-        pl.col("range_m") - per_site("range_bias_m"),
+        (pl.col("range_m") - per_site("range_bias_m")) / (1.0 + per_site("range_gain")),
         (pl.col("azimuth_rad") - b_az) % TWO_PI,
         (pl.col("course_rad") - b_az) % TWO_PI,
         pl.col("time_ns") - (per_site("time_offset_s") * NS).round().cast(pl.Int64),
@@ -216,7 +221,8 @@ def match_tracks(
     if cand.height == 0:
         return pl.DataFrame(schema={"local_track_id": pl.Int64, "mmsi": pl.Int64})
     cand = _residuals(cand, site.north_alignment_rad)
-    var_r = pl.col("sigma_range_m") ** 2 + sigma_ais_m**2 + cfg.prior_range_bias_m**2
+    var_r = (pl.col("sigma_range_m") ** 2 + sigma_ais_m**2 + cfg.prior_range_bias_m**2
+             + (cfg.prior_range_gain * pl.col("r_ref")) ** 2)
     var_az = (
         pl.col("sigma_azimuth_rad") ** 2
         + (sigma_ais_m / pl.col("r_ref")) ** 2
@@ -247,8 +253,8 @@ def match_tracks(
 
 @dataclass(frozen=True)
 class BiasFit:
-    """Estimate theta = (range bias m, azimuth bias rad, time offset s), its covariance,
-    and the bookkeeping of the fit."""
+    """Estimate theta = (range bias m, azimuth bias rad, time offset s, range gain), its
+    covariance, and the bookkeeping of the fit."""
 
     theta: np.ndarray
     cov: np.ndarray
@@ -268,51 +274,61 @@ def fit_bias(
     outlier_sigma: float,
     track: np.ndarray | None = None,
     max_iter: int = 20,
+    *,
+    range_ref_m: np.ndarray | None = None,
+    prior_range_gain: float = 0.01,
 ) -> BiasFit:
     """Weighted least squares of the linear model of the module docstring, with
     iterative rejection of reports whose normalised residual exceeds ``outlier_sigma``.
 
     Arrays (n,): residuals (m, rad), partial derivatives d res / d dt (m/s, rad/s),
-    sigmas (m, rad); ``track``: the local track of each report, in time order within a
-    track, for the serial-correlation factor (see :func:`serial_inflation`). Raises
-    ValueError with fewer than 4 usable reports.
+    sigmas (m, rad), ``range_ref_m`` the reference ranges (the range gain's partial
+    derivative; None: every report at range 0, the gain held at its prior 0);
+    ``track``: the local track of each report, in time order within a track, for the
+    serial-correlation factor (see :func:`serial_inflation`). The gain is solved in m
+    per km (its column in km: a well-conditioned system) under the prior
+    N(0, ``prior_range_gain``^2). Raises ValueError with fewer than 4 usable reports.
     """
     n = res_r.size
-    A = np.zeros((2 * n, 3))
-    A[:n, 0], A[n:, 1] = 1.0, 1.0
-    A[:n, 2], A[n:, 2] = dr_ddt, daz_ddt
-    y = np.concatenate([res_r, res_az])
-    sig = np.concatenate([sigma_r, sigma_az])
-    used = np.isfinite(y[:n]) & np.isfinite(y[n:]) & np.isfinite(A[:n, 2]) & np.isfinite(A[n:, 2])
+    r_km = np.zeros(n) if range_ref_m is None else np.asarray(range_ref_m) / 1e3
+    A = np.zeros((2 * n + 1, 4))
+    A[:n, 0], A[n:2 * n, 1] = 1.0, 1.0
+    A[:n, 2], A[n:2 * n, 2] = dr_ddt, daz_ddt
+    A[:n, 3], A[-1, 3] = r_km, 1.0  # the last row: the gain's prior, 0 +- sigma
+    y = np.concatenate([res_r, res_az, [0.0]])
+    sig = np.concatenate([sigma_r, sigma_az, [prior_range_gain * 1e3]])
+    used = (np.isfinite(y[:n]) & np.isfinite(y[n:2 * n]) & np.isfinite(A[:n, 2])
+            & np.isfinite(A[n:2 * n, 2]) & np.isfinite(r_km))
     for _ in range(max_iter):
         if used.sum() < 4:
             raise ValueError(f"only {int(used.sum())} usable reports: cannot fit the bias")
-        rows = np.concatenate([used, used])
+        rows = np.concatenate([used, used, [True]])
         Aw = A[rows] / sig[rows, None]
         theta, *_ = np.linalg.lstsq(Aw, y[rows] / sig[rows], rcond=None)
         z = (y - A @ theta) / sig
-        keep = (np.abs(z[:n]) <= outlier_sigma) & (np.abs(z[n:]) <= outlier_sigma) & used
+        keep = (np.abs(z[:n]) <= outlier_sigma) & (np.abs(z[n:2 * n]) <= outlier_sigma) & used
         if np.array_equal(keep, used):
             break
         used = keep
-    rows = np.concatenate([used, used])
-    Aw = A[rows] / sig[rows, None]
-    dof = max(int(rows.sum()) - 3, 1)
+    rows = np.concatenate([used, used, [False]])
+    Aw = np.vstack([A[rows] / sig[rows, None], A[-1:] / sig[-1]])
+    dof = max(int(rows.sum()) - 4, 1)
     chi2_red = float(np.sum(z[rows] ** 2) / dof)
     e = y - A @ theta
     inflation = (
         1.0
         if track is None
-        else serial_inflation(z[:n][used], z[n:][used], np.asarray(track)[used])
+        else serial_inflation(z[:n][used], z[n:2 * n][used], np.asarray(track)[used])
     )
     cov = np.linalg.inv(Aw.T @ Aw) * max(1.0, chi2_red) * inflation
+    to_gain = np.array([1.0, 1.0, 1.0, 1e-3])  # m per km -> dimensionless
     return BiasFit(
-        theta=theta,
-        cov=cov,
+        theta=theta * to_gain,
+        cov=cov * np.outer(to_gain, to_gain),
         used=used,
         reduced_chi2=chi2_red,
         rms_range_m=float(np.sqrt(np.mean(e[:n][used] ** 2))),
-        rms_azimuth_rad=float(np.sqrt(np.mean(e[n:][used] ** 2))),
+        rms_azimuth_rad=float(np.sqrt(np.mean(e[n:2 * n][used] ** 2))),
     )
 
 
@@ -348,6 +364,9 @@ BIAS_COLUMNS = (
     "time_offset_s",
     "time_offset_ci_low_s",
     "time_offset_ci_high_s",
+    "range_gain",
+    "range_gain_ci_low",
+    "range_gain_ci_high",
     "rms_range_residual_m",
     "rms_azimuth_residual_deg",
     "reduced_chi2",
@@ -389,6 +408,8 @@ def estimate_site_bias(
         sigma_az,
         cfg.outlier_sigma,
         track=df["local_track_id"].to_numpy(),
+        range_ref_m=df["r_ref"].to_numpy(),
+        prior_range_gain=cfg.prior_range_gain,
     )
     return fit, df.with_columns(pl.Series("used", fit.used))
 
@@ -433,6 +454,9 @@ def estimate_biases(
                 "time_offset_s": th[2],
                 "time_offset_ci_low_s": th[2] - z * sd[2],
                 "time_offset_ci_high_s": th[2] + z * sd[2],
+                "range_gain": th[3],
+                "range_gain_ci_low": th[3] - z * sd[3],
+                "range_gain_ci_high": th[3] + z * sd[3],
                 "rms_range_residual_m": fit.rms_range_m,
                 "rms_azimuth_residual_deg": deg(fit.rms_azimuth_rad),
                 "reduced_chi2": fit.reduced_chi2,
@@ -452,6 +476,7 @@ def correction_toml(estimates: pl.DataFrame) -> str:
         lines.append(
             f"{r['site_id']} = {{ range_bias_m = {r['range_bias_m']:.2f}, "
             f"azimuth_bias_deg = {r['azimuth_bias_deg']:.4f}, "
-            f"time_offset_s = {r['time_offset_s']:.3f} }}"
+            f"time_offset_s = {r['time_offset_s']:.3f}, "
+            f"range_gain = {r['range_gain']:.6f} }}"
         )
     return "\n".join(lines)

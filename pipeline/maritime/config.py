@@ -68,11 +68,14 @@ class AssociationConfig:
 
 @dataclass(frozen=True)
 class SiteBias:
-    """Registration bias of one site, reported - true: range (m), azimuth (rad), time (s)."""
+    """Registration bias of one site, reported - true: range (m), azimuth (rad), time (s),
+    and range gain (dimensionless: reported range = (1 + range_gain) true range +
+    range_bias_m; 0.001 = 1 m per km)."""
 
     range_bias_m: float = setting(0.0, ge=-1e4, le=1e4)
     azimuth_bias_rad: float = setting(0.0, unit="deg", ge=-180.0, le=180.0)
     time_offset_s: float = setting(0.0, ge=-3600.0, le=3600.0)
+    range_gain: float = setting(0.0, ge=-0.1, le=0.1)
 
 
 @dataclass(frozen=True)
@@ -86,6 +89,7 @@ class RadarBiasConfig:
     max_ais_gap_s: float = setting(40.0, gt=0.0, le=3600.0, why=AIS_AGE_WHY)
     prior_range_bias_m: float = positive(100.0)
     prior_azimuth_bias_rad: float = setting(1.0, unit="deg", gt=0.0, le=180.0)
+    prior_range_gain: float = setting(0.01, gt=0.0, le=0.1)
     gate_probability: float = gate(0.999)
     min_track_share: float = setting(0.8, gt=0.0, le=1.0)
     min_reports_per_track: int = count(10)

@@ -54,9 +54,11 @@ it with time = that sweep time, published at the end of the scan (log time):
   archived), so the log opens, like a cut from a continuous archive, with confirmed
   tracks; ships that arrive later start with "new" tracks.
 - registration bias (``[radar_bias.simulate]``, see :mod:`pipeline.maritime.bias`; none by
-  default): the site's range_bias_m is added to every range, azimuth_bias_deg to every
-  azimuth and course (a misaligned antenna encoder), and time_offset_s to every report
-  time (a clock offset; the log time is the recorder's and is not shifted).
+  default): every measured range is scaled by 1 + range_gain and the site's
+  range_bias_m added to it (a range clock's scale error, a trigger delay),
+  azimuth_bias_deg added to every azimuth and course (a misaligned antenna encoder), and
+  time_offset_s to every report time (a clock offset; the log time is the recorder's and
+  is not shifted).
 
 AIS: see :mod:`pipeline.simulate.ais_traffic` (ITU-R M.1371 intervals, pyais encoding).
 
@@ -596,7 +598,10 @@ def _site_reports(
         rep = np.flatnonzero((status > 0) & (ts >= 0.0) & ~radar_silent(faults, tk + T))
         if rep.size == 0:
             continue
-        r_m = np.abs(r + bias.range_bias_m + f_dr + site.sigma_range_m * f_noise * z[:, 2])
+        measured = r + f_dr + site.sigma_range_m * f_noise * z[:, 2]
+        # (1 + gain) x measured + bias, summed so that no gain gives the same bits as before
+        r_m = np.abs(r + bias.range_bias_m + f_dr + site.sigma_range_m * f_noise * z[:, 2]
+                     + bias.range_gain * measured)
         az_m = np.mod(
             az + bias.azimuth_bias_rad + f_daz + site.sigma_azimuth_rad * f_noise * z[:, 3],
             TWO_PI,
