@@ -71,8 +71,9 @@ def test_shipped_config_parses_to_the_same_objects_as_before():
     """tests/data/shipped_config.repr was recorded from the hand-written parsers (9392eae),
     when the demo's fault schedules were in the site config: the demo site with its
     scenario files (config/scenarios/) on top parses to exactly those objects (since
-    2026-12-04 with ``range_gain=0.0`` in every ChannelFault and ``prior_range_gain=0.01``
-    in RadarBiasConfig: the fields were added, nothing else moved)."""
+    2026-12-04 with ``range_gain=0.0`` in every ChannelFault, ``prior_range_gain=0.01``
+    in RadarBiasConfig and the stated-accuracy check's two settings in
+    RegistrationConfig: the fields were added, nothing else moved)."""
     from pipeline.simulate.scenarios import with_scenario
 
     world = with_scenario(load_config(), ["channel", "airfield", "ownship"])

@@ -291,7 +291,12 @@ class RegistrationConfig:
     - ``max_scale``: the largest variance scale;
     - ``readmit_max_scale``: a radar the integrity excluded is fused again (its corrected
       and rescaled residuals passing) only while its variance scale is at most this: a
-      radar much noisier than its sigmas stays excluded."""
+      radar much noisier than its sigmas stays excluded;
+    - ``accuracy_window_s``, ``accuracy_min_scale``: the stated-accuracy check
+      (:func:`pipeline.maritime.registration.stated_accuracy_scale`): a site whose reports
+      are noisier than their sigmas say by at least ``accuracy_min_scale`` in variance in
+      three quarters of the minutes within ``accuracy_window_s`` of an epoch is tracked
+      on its covariances scaled by that much there."""
 
     enabled: bool = setting(True)
     per_sector: bool = setting(True)
@@ -308,6 +313,11 @@ class RegistrationConfig:
     readmit_max_scale: float = setting(2.0, ge=1.0, le=1e4, why=(
         "a radar 1.4x as noisy as its sigmas (2x in variance) adds little to the other "
         "radars and its tracks split off the association"))
+    accuracy_window_s: float = setting(300.0, ge=60.0, le=300.0, why=(
+        "five minutes or more on either side: a fault of a few minutes is not a standing "
+        "misstatement; at most the unit's look-ahead (identity_window_s, 300 s by default)"))
+    accuracy_min_scale: float = setting(1.3, ge=1.0, le=100.0, why=(
+        "sigmas stated 15 % too small or more: less changes no exclusion"))
 
 
 @dataclass(frozen=True)

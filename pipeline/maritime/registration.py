@@ -552,7 +552,8 @@ def correct_reports(synced: pl.DataFrame, est: Estimate, site_xy: np.ndarray,
     (:func:`~pipeline.maritime.integrity.registration_jacobian`) of the report as
     reported, seen from its site (``site_xy`` (C, 2) in the order of ``sites``); the
     reports as reported kept in ``reported_<column>`` (:func:`as_reported`). Rows of
-    an epoch and site where nothing is applied stay as they are, to the last digit."""
+    an epoch and site where nothing is applied stay as they are, to the last digit
+    (reports already scaled by :func:`scale_covariances` keep their ``reported_*``)."""
     k = np.searchsorted(est.epochs, synced["time_ns"].to_numpy())
     c = synced["site_id"].replace_strict(sites, list(range(len(sites))),
                                          return_dtype=pl.Int64).to_numpy()
@@ -563,9 +564,95 @@ def correct_reports(synced: pl.DataFrame, est: Estimate, site_xy: np.ndarray,
         g = g + sector_indices(xy[:, 0], xy[:, 1], sectors, region)
     vx, vy = velocity_enu(synced["speed_mps"].to_numpy(), synced["course_rad"].to_numpy())
     H = registration_jacobian(xy, site_xy[c], vx, vy)
-    kept = synced.with_columns(pl.col(col).alias(f"reported_{col}") for col in REPORTED_COLUMNS)
+    kept = synced if "reported_P_xx" in synced.columns else synced.with_columns(
+        pl.col(col).alias(f"reported_{col}") for col in REPORTED_COLUMNS)
     # where nothing is applied, x - 0 and 1 P + 0: the bits as reported
     return _correct(kept, H, est.theta_used[k, g], est.cov_used[k, g], np.ones(k.size))
+
+
+ACCURACY_BUCKET_S = 60.0
+"""The stated-accuracy check's time bins (UTC minutes: the same bins in every unit)."""
+ACCURACY_QUANTILE = 0.25
+"""Of the bins around an epoch, the quantile taken: a fault in up to three quarters of
+them does not move it; a standing misstatement is in all of them."""
+ACCURACY_MIN_BINS = 5
+"""Bins with ``min_tracks`` tested rows needed around an epoch before anything is
+scaled there."""
+
+
+def stated_accuracy_scale(ev: RegistrationEvidence, rc: RegistrationConfig) -> np.ndarray:
+    """(K, C) the variance scale each site's stated covariances need at each epoch, 1
+    where they are right (issue 38, item 2: estimated accuracy in place of the stated).
+
+    A radar whose reports are noisier than their sigmas say fails the integrity test all
+    the time; with every radar so, nothing is fused. Per site and UTC minute, the
+    covariance matching of its rows tested (against their AIS report or two other
+    radars: ``ev.row_r``, ``ev.row_innov_cov``) by the median, robust to a minority of
+    outliers: s = median(xi) / ln 4 (the median of chi2 with 2 dof), xi = r^T S^-1 r,
+    with ``min_tracks`` rows or more. Per epoch, the ``ACCURACY_QUANTILE`` of its
+    minute and the whole minutes within ``accuracy_window_s`` on either side (9 for 300
+    s; at least ``ACCURACY_MIN_BINS`` of them with rows enough): a
+    fault of a few minutes (the integrity's to find) leaves it at 1, a misstatement that
+    lasts raises every minute. Applied where it reaches ``accuracy_min_scale``, clipped
+    to ``max_scale``. The reference's own covariance is in S: with AIS (3 m) it is small;
+    against two other radars stated as wrongly, S is as wrong as the radar and s the
+    same factor."""
+    K, C, G1 = ev.epochs.size, ev.C, ev.G + 1
+    out = np.ones((K, C))
+    S, r = ev.row_innov_cov, ev.row_r
+    with np.errstate(invalid="ignore", divide="ignore"):
+        xi = (S[:, 1] * r[:, 0] ** 2 - 2 * S[:, 2] * r[:, 0] * r[:, 1]
+              + S[:, 0] * r[:, 1] ** 2) / (S[:, 0] * S[:, 1] - S[:, 2] ** 2)
+    ok = ev.row_tested & np.isfinite(xi)
+    if K == 0 or not ok.any():
+        return out
+    bin_ns = round(ACCURACY_BUCKET_S * 1e9)
+    epoch_bin = ev.epochs // bin_ns
+    first = int(epoch_bin[0])
+    per_bin = (pl.DataFrame({"site": (ev.row_group[ok] // G1).astype(np.int64),
+                             "bin": epoch_bin[ev.row_k[ok]] - first, "xi": xi[ok]})
+               .group_by("site", "bin").agg(pl.col("xi").median(), pl.len().alias("n"))
+               .filter(pl.col("n") >= rc.min_tracks))
+    nb = int(epoch_bin[-1]) - first + 1
+    # whole minutes within the window: the last one ends by t + accuracy_window_s, so a
+    # unit's look-ahead holds every one of them (results do not depend on unit cuts)
+    w = int(rc.accuracy_window_s // ACCURACY_BUCKET_S) - 1
+    dense = np.full((nb + 2 * w, C), np.nan)
+    dense[per_bin["bin"].to_numpy() + w, per_bin["site"].to_numpy()] = (
+        per_bin["xi"].to_numpy() / np.log(4.0))
+    around = sliding_window_view(dense, 2 * w + 1, axis=0)  # (nb, C, 2w + 1)
+    enough = np.sum(np.isfinite(around), axis=-1) >= ACCURACY_MIN_BINS
+    with np.errstate(invalid="ignore"):
+        q = np.where(enough, np.nanquantile(np.where(enough[..., None], around, 0.0),
+                                            ACCURACY_QUANTILE, axis=-1), 1.0)
+    scale = np.where(q >= rc.accuracy_min_scale, np.minimum(q, rc.max_scale), 1.0)
+    return scale[epoch_bin - first]
+
+
+def scale_covariances(synced: pl.DataFrame, epochs: np.ndarray, scale: np.ndarray,
+                      sites: list[str]) -> pl.DataFrame:
+    """The synchronised reports with each site's covariance scaled by ``scale`` (K, C) at
+    their epoch (``epochs``, sites in the order of ``sites``), the reports as reported
+    kept in ``reported_<column>`` (:func:`as_reported`); a scale of 1: the bits as
+    reported."""
+    k = np.searchsorted(epochs, synced["time_ns"].to_numpy())
+    c = synced["site_id"].replace_strict(sites, list(range(len(sites))),
+                                         return_dtype=pl.Int64).to_numpy()
+    s = scale[k, c]
+    return synced.with_columns(pl.col(col).alias(f"reported_{col}") for col in REPORTED_COLUMNS
+                               ).with_columns(pl.col(col) * s for col in ("P_xx", "P_yy", "P_xy"))
+
+
+def with_stated_scale(table: pl.DataFrame, epochs: np.ndarray, stated: np.ndarray | None,
+                      sites: list[str]) -> pl.DataFrame:
+    """``sensor_registration`` rows with ``stated_accuracy_scale``: the factor their
+    site's stated covariances were tracked on (1: as stated)."""
+    if stated is None:
+        return table.with_columns(pl.lit(1.0).alias("stated_accuracy_scale"))
+    k = np.searchsorted(epochs, table["time_ns"].to_numpy())
+    c = table["site_id"].replace_strict(sites, list(range(len(sites))),
+                                        return_dtype=pl.Int64).to_numpy()
+    return table.with_columns(pl.Series("stated_accuracy_scale", stated[k, c]))
 
 
 SECOND_PASS_SIGMA = 1.0

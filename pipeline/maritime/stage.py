@@ -48,6 +48,9 @@ from pipeline.maritime.registration import (
     correct_reports,
     moves_a_report,
     register,
+    scale_covariances,
+    stated_accuracy_scale,
+    with_stated_scale,
 )
 from pipeline.maritime.score import pair_with_truth, score_tracks
 from pipeline.maritime.siap import siap_by_sector
@@ -118,11 +121,20 @@ def stage(tables: Inputs, window: Window, cfg: Config) -> Outputs:
     aligned, unknown = align_reports(tables["radar_tracks"], cfg)
     epochs = epoch_grid(track_start_ns, track_end_ns, mc.sync.epoch_period_s)
     synced = synchronise(aligned, epochs_ns=epochs, sync=mc.sync)
-    # the channels' health is tested on the reports as reported (the first pass)
+    # the channels' health is tested on the reports as reported (the first pass), on
+    # covariances the stated-accuracy check scaled where it finds them too small
     associated, fusable, integrity, reg = _tracked(synced, aligned, ais, epochs,
                                                    track_start_ns, cfg)
+    sites = [s.site_id for s in cfg.radar_sites]
+    stated = (stated_accuracy_scale(integrity.evidence, mc.registration) if reg is not None
+              else None)
+    if stated is not None and (stated > 1.0).any():
+        # a site noisier than its sigmas say for minutes on end: tracked again on its
+        # covariances scaled so (else it fails the integrity test all along)
+        synced = scale_covariances(synced, integrity.evidence.epochs, stated, sites)
+        associated, fusable, integrity, reg = _tracked(synced, aligned, ais, epochs,
+                                                       track_start_ns, cfg)
     if reg is not None and reg.estimate.applied.any():
-        sites = [s.site_id for s in cfg.radar_sites]
         corrected = correct_reports(synced, reg.estimate, site_positions_enu(cfg), sites,
                                     cfg.sectors, cfg.region)
         if moves_a_report(synced, corrected):
@@ -131,8 +143,12 @@ def stage(tables: Inputs, window: Window, cfg: Config) -> Outputs:
             # duplicate born); its integrity test decides which radar rows are fused
             associated, fusable, _, reg = _tracked(corrected, aligned, ais, epochs,
                                                    track_start_ns, cfg, reg.estimate)
-            associated = as_reported(associated)
+    if "reported_P_xx" in associated.columns:
+        associated = as_reported(associated)
     registration = reg.table if reg is not None else pl.DataFrame()
+    if registration.height:
+        registration = with_stated_scale(registration, integrity.evidence.epochs, stated,
+                                          sites)
     fused = fuse(fusable.filter(pl.col("used")))
     fused = add_geodetic(fused, cfg.region)
     fused = assign_sectors(fused, cfg.sectors, cfg.region)
