@@ -327,9 +327,9 @@ def misstated(world):
     for name, faults in (("stated", ()), ("half", ()), ("half_off", ()),
                          ("half_fault", _fault("radar_range_bias", "R2", range_bias_m=80.0))):
         cfg = with_faults(world, faults)
-        if name == "half_off":
-            cfg = with_sections(cfg, registration=off)
         inputs, _ = maritime_inputs(cfg, SEED, window.start_ns, DURATION_S)
+        if name == "half_off":  # the same inputs as "half"
+            cfg = with_sections(cfg, registration=off)
         if name.startswith("half"):
             inputs = {**inputs, "radar_tracks": inputs["radar_tracks"].with_columns(
                 pl.col("sigma_range_m") * 0.5, pl.col("sigma_azimuth_rad") * 0.5)}
