@@ -30,9 +30,8 @@ there is the fit's as without it. Covariance (A^T W A)^-1, scaled by the reduced
 chi-square when it is above 1, and by (1 + rho) / (1 - rho) for the lag-1 correlation
 rho of consecutive residuals of one track (a smoothing site tracker, or coasted
 reports, make consecutive errors alike; independent errors give rho ~ 0 and no
-change). The
-intervals are normal (large samples), at ``confidence``. The time offset is
-observable because ships move toward, away from and across the line of sight; ships
+change). The intervals are normal (large samples), at ``confidence``. The time offset
+is observable because ships move toward, away from and across the line of sight; ships
 at rest constrain only b_r and b_az.
 
 Which AIS ship a local track follows: a sample of each track's reports is compared
@@ -42,8 +41,8 @@ times the range, ``prior_azimuth_bias_deg``); the track takes the MMSI nearest t
 ``min_track_share`` of its sampled reports, inside the gate.
 
 Correction (``[radar_bias] apply = true``, in pipeline/maritime/align.py before alignment):
-(range_m - b_r) / (1 + g), azimuth_rad - b_az, course_rad - b_az (the tracker's courses are read in
-the same biased azimuth reference), time_ns - dt.
+(range_m - b_r) / (1 + g), azimuth_rad - b_az, course_rad - b_az (the tracker's courses
+are read in the same biased azimuth reference), time_ns - dt.
 """
 
 from __future__ import annotations
@@ -310,10 +309,11 @@ def fit_bias(
         if np.array_equal(keep, used):
             break
         used = keep
-    rows = np.concatenate([used, used, [False]])
-    Aw = np.vstack([A[rows] / sig[rows, None], A[-1:] / sig[-1]])
-    dof = max(int(rows.sum()) - 4, 1)
-    chi2_red = float(np.sum(z[rows] ** 2) / dof)
+    rows = np.concatenate([used, used, [True]])  # the data kept and the prior
+    Aw = A[rows] / sig[rows, None]
+    data = rows[:-1]
+    dof = max(int(data.sum()) - 4, 1)
+    chi2_red = float(np.sum(z[:-1][data] ** 2) / dof)
     e = y - A @ theta
     inflation = (
         1.0

@@ -554,9 +554,7 @@ def correct_reports(synced: pl.DataFrame, est: Estimate, site_xy: np.ndarray,
     reports as reported kept in ``reported_<column>`` (:func:`as_reported`). Rows of
     an epoch and site where nothing is applied stay as they are, to the last digit
     (reports already scaled by :func:`scale_covariances` keep their ``reported_*``)."""
-    k = np.searchsorted(est.epochs, synced["time_ns"].to_numpy())
-    c = synced["site_id"].replace_strict(sites, list(range(len(sites))),
-                                         return_dtype=pl.Int64).to_numpy()
+    k, c = _epoch_and_site(synced, est.epochs, sites)
     xy = synced.select("x_enu_m", "y_enu_m").to_numpy()
     # a site's groups share its estimate unless a sector has its own
     g = c * est.groups_per_site
@@ -635,10 +633,7 @@ def scale_covariances(synced: pl.DataFrame, epochs: np.ndarray, scale: np.ndarra
     their epoch (``epochs``, sites in the order of ``sites``), the reports as reported
     kept in ``reported_<column>`` (:func:`as_reported`); a scale of 1: the bits as
     reported."""
-    k = np.searchsorted(epochs, synced["time_ns"].to_numpy())
-    c = synced["site_id"].replace_strict(sites, list(range(len(sites))),
-                                         return_dtype=pl.Int64).to_numpy()
-    s = scale[k, c]
+    s = scale[_epoch_and_site(synced, epochs, sites)]
     return synced.with_columns(pl.col(col).alias(f"reported_{col}") for col in REPORTED_COLUMNS
                                ).with_columns(pl.col(col) * s for col in ("P_xx", "P_yy", "P_xy"))
 
@@ -649,10 +644,16 @@ def with_stated_scale(table: pl.DataFrame, epochs: np.ndarray, stated: np.ndarra
     site's stated covariances were tracked on (1: as stated)."""
     if stated is None:
         return table.with_columns(pl.lit(1.0).alias("stated_accuracy_scale"))
-    k = np.searchsorted(epochs, table["time_ns"].to_numpy())
-    c = table["site_id"].replace_strict(sites, list(range(len(sites))),
-                                        return_dtype=pl.Int64).to_numpy()
-    return table.with_columns(pl.Series("stated_accuracy_scale", stated[k, c]))
+    return table.with_columns(pl.Series("stated_accuracy_scale",
+                                        stated[_epoch_and_site(table, epochs, sites)]))
+
+
+def _epoch_and_site(rows: pl.DataFrame, epochs: np.ndarray, sites: list[str]
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """(epoch index in ``epochs``, site index in ``sites``) of each row (time_ns, site_id)."""
+    return (np.searchsorted(epochs, rows["time_ns"].to_numpy()),
+            rows["site_id"].replace_strict(sites, list(range(len(sites))),
+                                           return_dtype=pl.Int64).to_numpy())
 
 
 SECOND_PASS_SIGMA = 1.0

@@ -598,10 +598,9 @@ def _site_reports(
         rep = np.flatnonzero((status > 0) & (ts >= 0.0) & ~radar_silent(faults, tk + T))
         if rep.size == 0:
             continue
-        measured = r + f_dr + site.sigma_range_m * f_noise * z[:, 2]
+        e_r = site.sigma_range_m * f_noise * z[:, 2]
         # (1 + gain) x measured + bias, summed so that no gain gives the same bits as before
-        r_m = np.abs(r + bias.range_bias_m + f_dr + site.sigma_range_m * f_noise * z[:, 2]
-                     + bias.range_gain * measured)
+        r_m = np.abs(r + bias.range_bias_m + f_dr + e_r + bias.range_gain * (r + f_dr + e_r))
         az_m = np.mod(
             az + bias.azimuth_bias_rad + f_daz + site.sigma_azimuth_rad * f_noise * z[:, 3],
             TWO_PI,
