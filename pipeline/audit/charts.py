@@ -232,6 +232,8 @@ _REGISTRATION_PANELS = (
     ("clock offset, s", "time_offset_s", "time_ci_low_s", "time_ci_high_s"),
     ("range gain, m per km", "range_gain_m_per_km", "range_gain_ci_low_m_per_km",
      "range_gain_ci_high_m_per_km"),
+    ("stated range variance scale", "stated_range_scale_max", None, None),
+    ("stated azimuth variance scale", "stated_azimuth_scale_max", None, None),
     ("variance scale (largest sector)", "variance_scale_max", None, None),
 )
 

@@ -132,8 +132,10 @@ def sections(data: AuditData) -> list[Section]:
         "Each radar's range bias, azimuth bias, clock offset and range gain as the batch "
         "estimated them "
         "from AIS ships and radar overlap (95% interval as a band; large markers: the minutes "
-        "the estimate was removed from the reports before fusion) and the variance scale on "
-        "its reports' covariance (1: the configured sigmas). Where a site's sectors differ, "
+        "the estimate was removed from the reports before fusion), the factors its stated "
+        "range and azimuth variances were found too small by for minutes on end and tracked "
+        "on (1: as stated) and the variance scale on top of them (1: the stated or so scaled "
+        "sigmas). Where a site's sectors differ, "
         "each sector registered on its own has a dashed line of the site's colour.",
         ("registration_over_time", "sensor_registration"),
         charts.registration_over_time(rows("registration_over_time"), data.start_ns,

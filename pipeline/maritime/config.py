@@ -296,7 +296,8 @@ class RegistrationConfig:
       (:func:`pipeline.maritime.registration.stated_accuracy_scale`): a site whose reports
       are noisier than their sigmas say by at least ``accuracy_min_scale`` in variance in
       three quarters of the minutes within ``accuracy_window_s`` of an epoch is tracked
-      on its covariances scaled by that much there."""
+      on its covariances scaled there, along the line of sight and across it each by
+      its own factor (an axis below ``accuracy_min_scale`` as stated)."""
 
     enabled: bool = setting(True)
     per_sector: bool = setting(True)

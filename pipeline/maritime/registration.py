@@ -576,11 +576,40 @@ them does not move it; a standing misstatement is in all of them."""
 ACCURACY_MIN_BINS = 5
 """Bins with ``min_tracks`` tested rows needed around an epoch before anything is
 scaled there."""
+STATED_AXES = ("range", "azimuth")
+"""The axes the stated-accuracy check scales on their own: along the line of sight
+(the radar's range sigma) and across it (rho times its azimuth sigma)."""
+
+
+def _quadratic(axes: np.ndarray, P: np.ndarray) -> np.ndarray:
+    """(n, 2) u^T P u for each row's two ``axes`` (n, 2, 2) and its covariance ``P``
+    (n, 3: xx, yy, xy)."""
+    return (axes[..., 0] ** 2 * P[:, None, 0] + 2 * axes[..., 0] * axes[..., 1] * P[:, None, 2]
+            + axes[..., 1] ** 2 * P[:, None, 1])
+
+
+def _row_nis(ev: RegistrationEvidence) -> np.ndarray:
+    """(n, 5) each row's normalised squared residual, each divided by its median where
+    S is right (1 then): r^T S^-1 r / ln 4 (chi2 with 2 dof), and along its line of
+    sight and across it, z = (u^T r)^2 / (u^T S u) / chi2_1^-1(0.5) (u_r: the first
+    column of the row's registration Jacobian ``ev.H``, u_az its normal); then the
+    radar's own share of u^T S u on each axis, f = u^T P u / u^T S u."""
+    S, r = ev.row_innov_cov, ev.row_r
+    u = ev.H[:, :, 0]
+    axes = np.stack([u, np.stack([u[:, 1], -u[:, 0]], axis=-1)], axis=1)  # (n, 2 axes, 2)
+    ur = np.einsum("nai,ni->na", axes, r)
+    uSu = _quadratic(axes, S)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        xi = (S[:, 1] * r[:, 0] ** 2 - 2 * S[:, 2] * r[:, 0] * r[:, 1]
+              + S[:, 0] * r[:, 1] ** 2) / (S[:, 0] * S[:, 1] - S[:, 2] ** 2)
+        return np.column_stack([xi / np.log(4.0), ur**2 / uSu / chi2_ppf(0.5, 1),
+                                _quadratic(axes, ev.row_cov) / uSu])
 
 
 def stated_accuracy_scale(ev: RegistrationEvidence, rc: RegistrationConfig) -> np.ndarray:
-    """(K, C) the variance scale each site's stated covariances need at each epoch, 1
-    where they are right (issue 38, item 2: estimated accuracy in place of the stated).
+    """(K, C, 2) the variance scale each site's stated covariances need at each epoch
+    along the line of sight and across it (:data:`STATED_AXES`), 1 where they are right
+    (issue 38, item 2: estimated accuracy in place of the stated).
 
     A radar whose reports are noisier than their sigmas say fails the integrity test all
     the time; with every radar so, nothing is fused. Per site and UTC minute, the
@@ -589,63 +618,91 @@ def stated_accuracy_scale(ev: RegistrationEvidence, rc: RegistrationConfig) -> n
     outliers: s = median(xi) / ln 4 (the median of chi2 with 2 dof), xi = r^T S^-1 r,
     with ``min_tracks`` rows or more. Per epoch, the ``ACCURACY_QUANTILE`` of its
     minute and the whole minutes within ``accuracy_window_s`` on either side (9 for 300
-    s; at least ``ACCURACY_MIN_BINS`` of them with rows enough): a
-    fault of a few minutes (the integrity's to find) leaves it at 1, a misstatement that
-    lasts raises every minute. Applied where it reaches ``accuracy_min_scale``, clipped
-    to ``max_scale``. The reference's own covariance is in S: with AIS (3 m) it is small;
-    against two other radars stated as wrongly, S is as wrong as the radar and s the
-    same factor."""
+    s; at least ``ACCURACY_MIN_BINS`` of them with rows enough): a fault of a few
+    minutes (the integrity's to find) leaves it below ``accuracy_min_scale``, a
+    misstatement that lasts raises every minute. Where it reaches it, each axis takes
+    its own scale by the same rule (z = (u^T r)^2 / (u^T S u), chi2 with 1 dof,
+    :func:`_row_nis`), clipped to ``max_scale``, 1 on an axis below the threshold: range
+    and azimuth sigmas are stated apart (a site config, a recorder), the cross-range
+    error rho sigma_az grows with range and the range error does not, so one factor on
+    both is wrong at every range (azimuth sigmas stated at half: ~2 where the cross-range
+    needs 4). The reference's own covariance is in S: an axis's scale is the radar's,
+    s = 1 + (m - 1) / f with m the matched factor of u^T S u and f the radar's median
+    share of it (the reference as stated: an AIS report; against two other radars
+    stated as wrongly s reads high, a conservative weight)."""
     K, C, G1 = ev.epochs.size, ev.C, ev.G + 1
-    out = np.ones((K, C))
-    S, r = ev.row_innov_cov, ev.row_r
-    with np.errstate(invalid="ignore", divide="ignore"):
-        xi = (S[:, 1] * r[:, 0] ** 2 - 2 * S[:, 2] * r[:, 0] * r[:, 1]
-              + S[:, 0] * r[:, 1] ** 2) / (S[:, 0] * S[:, 1] - S[:, 2] ** 2)
-    ok = ev.row_tested & np.isfinite(xi)
+    out = np.ones((K, C, len(STATED_AXES)))
+    z = _row_nis(ev)
+    ok = ev.row_tested & np.isfinite(z).all(axis=1)
     if K == 0 or not ok.any():
         return out
     bin_ns = round(ACCURACY_BUCKET_S * 1e9)
     epoch_bin = ev.epochs // bin_ns
     first = int(epoch_bin[0])
-    per_bin = (pl.DataFrame({"site": (ev.row_group[ok] // G1).astype(np.int64),
-                             "bin": epoch_bin[ev.row_k[ok]] - first, "xi": xi[ok]})
-               .group_by("site", "bin").agg(pl.col("xi").median(), pl.len().alias("n"))
-               .filter(pl.col("n") >= rc.min_tracks))
+    axes = [f"z_{axis}" for axis in STATED_AXES]
+    share = [f"share_{axis}" for axis in STATED_AXES]
+    per_bin = (pl.DataFrame(z[ok], schema=["z", *axes, *share], orient="row").with_columns(
+        site=(ev.row_group[ok] // G1).astype(np.int64), bin=epoch_bin[ev.row_k[ok]] - first)
+        .group_by("site", "bin").agg(pl.all().median(), pl.len().alias("n"))
+        .filter(pl.col("n") >= rc.min_tracks)
+        # the radar's own variance s times its share, the reference's as stated
+        .with_columns((1.0 + (pl.col(a) - 1.0) / pl.col(f)).alias(a)
+                      for a, f in zip(axes, share, strict=True)))
     nb = int(epoch_bin[-1]) - first + 1
     # whole minutes within the window: the last one ends by t + accuracy_window_s, so a
     # unit's look-ahead holds every one of them (results do not depend on unit cuts)
     w = int(rc.accuracy_window_s // ACCURACY_BUCKET_S) - 1
-    dense = np.full((nb + 2 * w, C), np.nan)
+    dense = np.full((nb + 2 * w, C, 3), np.nan)
     dense[per_bin["bin"].to_numpy() + w, per_bin["site"].to_numpy()] = (
-        per_bin["xi"].to_numpy() / np.log(4.0))
-    around = sliding_window_view(dense, 2 * w + 1, axis=0)  # (nb, C, 2w + 1)
+        per_bin.select("z", *axes).to_numpy())
+    around = sliding_window_view(dense, 2 * w + 1, axis=0)  # (nb, C, 3, 2w + 1)
     enough = np.sum(np.isfinite(around), axis=-1) >= ACCURACY_MIN_BINS
     with np.errstate(invalid="ignore"):
         q = np.where(enough, np.nanquantile(np.where(enough[..., None], around, 0.0),
                                             ACCURACY_QUANTILE, axis=-1), 1.0)
-    scale = np.where(q >= rc.accuracy_min_scale, np.minimum(q, rc.max_scale), 1.0)
+    scaled = (q[..., :1] >= rc.accuracy_min_scale) & (q[..., 1:] >= rc.accuracy_min_scale)
+    scale = np.where(scaled, np.minimum(q[..., 1:], rc.max_scale), 1.0)
     return scale[epoch_bin - first]
 
 
 def scale_covariances(synced: pl.DataFrame, epochs: np.ndarray, scale: np.ndarray,
-                      sites: list[str]) -> pl.DataFrame:
-    """The synchronised reports with each site's covariance scaled by ``scale`` (K, C) at
-    their epoch (``epochs``, sites in the order of ``sites``), the reports as reported
-    kept in ``reported_<column>`` (:func:`as_reported`); a scale of 1: the bits as
-    reported."""
-    s = scale[_epoch_and_site(synced, epochs, sites)]
+                      sites: list[str], site_xy: np.ndarray) -> pl.DataFrame:
+    """The synchronised reports with each site's covariance scaled by ``scale`` (K, C, 2:
+    range, azimuth) at their epoch (``epochs``, sites in the order of ``sites`` at
+    ``site_xy``), P <- D P D with D = sqrt(s_r) u_r u_r^T + sqrt(s_az) u_az u_az^T (u_r
+    the report's line of sight: a covariance stated in range and azimuth scaled on each,
+    positive definite whatever its axes); the reports as reported kept in
+    ``reported_<column>`` (:func:`as_reported`); a report whose scale is 1 on both axes:
+    the bits as reported."""
+    k, c = _epoch_and_site(synced, epochs, sites)
+    s = scale[k, c]
+    d = synced.select("x_enu_m", "y_enu_m").to_numpy() - site_xy[c]
+    u = d / np.maximum(np.hypot(d[:, 0], d[:, 1]), 1.0)[:, None]
+    a, b = np.sqrt(s[:, 0]), np.sqrt(s[:, 1])
+    D = np.empty((synced.height, 2, 2))
+    D[:, 0, 0] = a * u[:, 0] ** 2 + b * u[:, 1] ** 2
+    D[:, 1, 1] = a * u[:, 1] ** 2 + b * u[:, 0] ** 2
+    D[:, 0, 1] = D[:, 1, 0] = (a - b) * u[:, 0] * u[:, 1]
+    xx, xy, yy = (synced[col].to_numpy() for col in ("P_xx", "P_xy", "P_yy"))
+    P = np.stack([xx, xy, xy, yy], axis=-1).reshape(-1, 2, 2)
+    DPD = np.einsum("nij,njk,nlk->nil", D, P, D)
+    same = (s == 1.0).all(axis=1)
+    scaled = {col: np.where(same, P[:, i, j], DPD[:, i, j])
+              for col, (i, j) in (("P_xx", (0, 0)), ("P_yy", (1, 1)), ("P_xy", (0, 1)))}
     return synced.with_columns(pl.col(col).alias(f"reported_{col}") for col in REPORTED_COLUMNS
-                               ).with_columns(pl.col(col) * s for col in ("P_xx", "P_yy", "P_xy"))
+                               ).with_columns(pl.Series(col, v) for col, v in scaled.items())
 
 
 def with_stated_scale(table: pl.DataFrame, epochs: np.ndarray, stated: np.ndarray | None,
                       sites: list[str]) -> pl.DataFrame:
-    """``sensor_registration`` rows with ``stated_accuracy_scale``: the factor their
-    site's stated covariances were tracked on (1: as stated)."""
+    """``sensor_registration`` rows with ``stated_range_variance_scale`` and
+    ``stated_azimuth_variance_scale``: the factors their site's stated covariances were
+    tracked on along and across the line of sight (1: as stated)."""
+    names = [f"stated_{axis}_variance_scale" for axis in STATED_AXES]
     if stated is None:
-        return table.with_columns(pl.lit(1.0).alias("stated_accuracy_scale"))
-    return table.with_columns(pl.Series("stated_accuracy_scale",
-                                        stated[_epoch_and_site(table, epochs, sites)]))
+        return table.with_columns(pl.lit(1.0).alias(n) for n in names)
+    s = stated[_epoch_and_site(table, epochs, sites)]
+    return table.with_columns(pl.Series(n, s[:, i]) for i, n in enumerate(names))
 
 
 def _epoch_and_site(rows: pl.DataFrame, epochs: np.ndarray, sites: list[str]

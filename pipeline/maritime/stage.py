@@ -131,7 +131,8 @@ def stage(tables: Inputs, window: Window, cfg: Config) -> Outputs:
     if stated is not None and (stated > 1.0).any():
         # a site noisier than its sigmas say for minutes on end: tracked again on its
         # covariances scaled so (else it fails the integrity test all along)
-        synced = scale_covariances(synced, integrity.evidence.epochs, stated, sites)
+        synced = scale_covariances(synced, integrity.evidence.epochs, stated, sites,
+                                   site_positions_enu(cfg))
         associated, fusable, integrity, reg = _tracked(synced, aligned, ais, epochs,
                                                        track_start_ns, cfg)
     if reg is not None and reg.estimate.applied.any():

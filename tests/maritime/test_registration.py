@@ -282,57 +282,107 @@ def test_a_fault_at_every_azimuth_keeps_one_registration_per_site(range_bias):
     assert set(range_bias[True]["sensor_registration"]["registration_scope"]) == {"site"}
 
 
-def _evidence(variance_factor: np.ndarray, *, sites: int = 1, seed: int = 3):
+def _evidence(variance_factor: np.ndarray, *, azimuth_factor: np.ndarray | None = None,
+              radar_share: float = 1.0, sites: int = 1, seed: int = 3):
     """Evidence of one row per (epoch, site) tested against a reference of covariance
-    I (m^2) whose residual's variance is ``variance_factor`` (K,) times that: the fields
-    :func:`stated_accuracy_scale` reads."""
+    I (m^2; ``radar_share`` of it the radar's own) whose residual's variance is
+    ``variance_factor`` (K,) times that along the row's line of sight and
+    ``azimuth_factor`` (default the same) across it, seen at a random bearing: the
+    fields :func:`stated_accuracy_scale` reads."""
     from types import SimpleNamespace
 
     rng = np.random.default_rng(seed)
     K = variance_factor.size
+    across = variance_factor if azimuth_factor is None else azimuth_factor
     rows = np.repeat(np.arange(K), 40 * sites)  # 40 tracks per site and epoch
     site = np.tile(np.repeat(np.arange(sites), 40), K)
-    r = rng.standard_normal((rows.size, 2)) * np.sqrt(variance_factor[rows])[:, None]
+    bearing = rng.uniform(0.0, 2 * np.pi, rows.size)
+    u = np.column_stack([np.sin(bearing), np.cos(bearing)])  # line of sight (east, north)
+    e = rng.standard_normal((rows.size, 2)) * np.sqrt(
+        np.column_stack([variance_factor[rows], across[rows]]))
+    r = e[:, :1] * u + e[:, 1:] * np.column_stack([u[:, 1], -u[:, 0]])
+    H = np.zeros((rows.size, 2, 4))
+    H[:, :, 0] = u
     S = np.tile([1.0, 1.0, 0.0], (rows.size, 1))
     return SimpleNamespace(epochs=DEFAULT_START_NS + np.arange(K) * NS, C=sites, G=0,
-                           row_k=rows, row_group=site, row_r=r, row_innov_cov=S,
-                           row_tested=np.ones(rows.size, bool))
+                           row_k=rows, row_group=site, row_r=r, row_innov_cov=S, H=H,
+                           row_cov=radar_share * S, row_tested=np.ones(rows.size, bool))
 
 
 def test_stated_accuracy_scale_finds_a_standing_misstatement_and_ignores_a_fault(world):
-    """A radar 3x noisier in variance than stated all along: scaled by about 3 at every
-    epoch; one 16x noisier for 3 of 20 minutes (a fault, the integrity's to find) and
-    one as stated: 1 everywhere, to the bit."""
+    """A radar 3x noisier in variance than stated all along: scaled by about 3 on both
+    axes at every epoch; 4x across the line of sight only (its azimuth sigma stated at
+    half): about 4 across, as stated along; 4x noisier where half of S is the
+    reference's: 4, not the 2.5 of the whole residual; one 16x noisier for 3 of 20 minutes (a
+    fault, the integrity's to find) and one as stated: 1 everywhere, to the bit."""
     from pipeline.maritime.config import maritime_config
     from pipeline.maritime.registration import stated_accuracy_scale
 
     rc = maritime_config(world).registration
     K = 1200
     standing = stated_accuracy_scale(_evidence(np.full(K, 3.0)), rc)
-    assert standing.shape == (K, 1) and np.all((standing > 2.6) & (standing < 3.4))
+    assert standing.shape == (K, 1, 2) and np.all((standing > 2.6) & (standing < 3.4))
+    azimuth = stated_accuracy_scale(
+        _evidence(np.ones(K), azimuth_factor=np.full(K, 4.0)), rc)
+    assert np.all(azimuth[..., 0] == 1.0)
+    assert np.all((azimuth[..., 1] > 3.4) & (azimuth[..., 1] < 4.6))
+    # half of S the reference's (as stated): 2.5x in all is the radar's own 4x
+    shared = stated_accuracy_scale(_evidence(np.full(K, 2.5), radar_share=0.5), rc)
+    assert np.all((shared > 3.4) & (shared < 4.6))
     fault = np.ones(K)
     fault[600:780] = 16.0
     assert np.all(stated_accuracy_scale(_evidence(fault), rc) == 1.0)
     assert np.all(stated_accuracy_scale(_evidence(np.ones(K)), rc) == 1.0)
 
 
+def test_scale_covariances_scales_range_and_azimuth_on_their_own():
+    """P <- D P D on the line of sight's axes: a report due east of its site, stated
+    (range 15 m, cross-range 80 m), scaled (4, 9) becomes (30 m, 240 m) on the same
+    axes; one north-east keeps its principal axes along and across the line of sight;
+    a report whose scale is 1 keeps its bits."""
+    from pipeline.maritime.registration import scale_covariances
+
+    synced = pl.DataFrame({
+        "time_ns": [0, 0, 10], "site_id": ["A", "A", "A"],
+        "x_enu_m": [1000.0, 700.0, 1000.0], "y_enu_m": [0.0, 700.0, 0.0],
+        "P_xx": [225.0, 3312.5, 225.1], "P_yy": [6400.0, 3312.5, 6400.3],
+        "P_xy": [0.0, -3087.5, 0.7]})
+    scale = np.array([[[4.0, 9.0]], [[1.0, 1.0]]])  # (K = 2 epochs, C = 1 site, 2 axes)
+    out = scale_covariances(synced, np.array([0, 10]), scale, ["A"], np.zeros((1, 2)))
+    assert out["P_xx"][0] == pytest.approx(900.0) and out["P_yy"][0] == pytest.approx(57600.0)
+    assert out["P_xy"][0] == pytest.approx(0.0, abs=1e-9)
+    # north-east: along (1, 1)/sqrt 2 the variance 225 -> 900, across 6400 -> 57600
+    P = np.array([[out["P_xx"][1], out["P_xy"][1]], [out["P_xy"][1], out["P_yy"][1]]])
+    u, w = np.array([1.0, 1.0]) / np.sqrt(2), np.array([1.0, -1.0]) / np.sqrt(2)
+    assert u @ P @ u == pytest.approx(900.0) and w @ P @ w == pytest.approx(57600.0)
+    assert u @ P @ w == pytest.approx(0.0, abs=1e-6)
+    assert out.row(2, named=True)["P_xx"] == 225.1 and out["P_xy"][2] == 0.7
+    assert (out["reported_P_yy"] == synced["P_yy"]).all()
+
+
+AXES = ["stated_range_variance_scale", "stated_azimuth_variance_scale"]
+
+
 @pytest.fixture(scope="module")
 def misstated(world):
     """The clean scene with both radars' position sigmas stated at half their noise
-    (the reports' own sigma columns: what a site's recorder says), and as stated; and
-    the scene with R2's range bias of 80 m (360-540 s), stated at half."""
+    (the reports' own sigma columns: what a site's recorder says), with their azimuth
+    sigmas only at half, and as stated; and the scene with R2's range bias of 80 m
+    (360-540 s), stated at half."""
     window = Window(DEFAULT_START_NS, DEFAULT_START_NS + round(DURATION_S * NS))
     out = {}
     off = {**world.section("registration"), "accuracy_min_scale": 100.0}  # the check off
-    for name, faults in (("stated", ()), ("half", ()), ("half_off", ()),
+    half = {"sigma_range_m": 0.5, "sigma_azimuth_rad": 0.5}
+    for name, faults in (("stated", ()), ("half", ()), ("half_off", ()), ("azimuth_half", ()),
                          ("half_fault", _fault("radar_range_bias", "R2", range_bias_m=80.0))):
         cfg = with_faults(world, faults)
         inputs, _ = maritime_inputs(cfg, SEED, window.start_ns, DURATION_S)
         if name == "half_off":  # the same inputs as "half"
             cfg = with_sections(cfg, registration=off)
-        if name.startswith("half"):
+        if name.startswith("half") or name == "azimuth_half":
+            factors = half if name.startswith("half") else {"sigma_azimuth_rad": 0.5}
             inputs = {**inputs, "radar_tracks": inputs["radar_tracks"].with_columns(
-                pl.col("sigma_range_m") * 0.5, pl.col("sigma_azimuth_rad") * 0.5)}
+                pl.col(col) * f for col, f in factors.items())}
         out[name] = stage(inputs, window, cfg)
     return out
 
@@ -344,10 +394,10 @@ def test_sigmas_stated_too_small_are_scaled_not_every_radar_excluded(misstated):
     as good as with the right sigmas; with the right sigmas nothing is scaled."""
     stated, half = misstated["stated"], misstated["half"]
     assert misstated["half_off"]["associations"]["used"].mean() < 0.2
-    assert (stated["sensor_registration"]["stated_accuracy_scale"] == 1.0).all()
-    scale = half["sensor_registration"].group_by("site_id").agg(
-        pl.col("stated_accuracy_scale").median())["stated_accuracy_scale"]
-    assert ((scale > 2.5) & (scale < 4.5)).all(), scale
+    for axis in AXES:
+        assert (stated["sensor_registration"][axis] == 1.0).all()
+    scale = half["sensor_registration"].group_by("site_id").agg(pl.col(AXES).median())
+    assert ((scale[AXES].to_numpy() > 2.5) & (scale[AXES].to_numpy() < 4.5)).all(), scale
     assert half["associations"]["used"].mean() > 0.95
     h = half["maritime_channel_health"].filter(pl.col("sensor_kind") == "radar")
     assert h["excluded"].mean() < 0.05
@@ -357,6 +407,21 @@ def test_sigmas_stated_too_small_are_scaled_not_every_radar_excluded(misstated):
     # the associations keep the sigmas as reported
     a = half["associations"]
     assert (a["sigma_x_m"] ** 2 - a["P_xx"]).abs().max() < 1e-6
+
+
+def test_azimuth_sigmas_stated_too_small_are_scaled_across_the_line_of_sight(misstated):
+    """Azimuth sigmas stated at half, range sigmas right: one factor on both axes (~2,
+    the whole NIS's) left the cross-range 2x too small and the range 2x too large
+    (20 seeds: fused RMS 52.0 m for 40.4 m, docs/integrity.md §9); scaled on each axis on
+    its own (about 4 across, 1 along) the picture is about as good as with the right
+    sigmas."""
+    reg = misstated["azimuth_half"]["sensor_registration"]
+    scale = reg.group_by("site_id").agg(pl.col(AXES).median())
+    assert (scale[AXES[0]] == 1.0).all(), scale
+    assert ((scale[AXES[1]] > 2.5) & (scale[AXES[1]] < 4.5)).all(), scale
+    err = {k: _fused(misstated[k], 0.0, DURATION_S) for k in ("stated", "azimuth_half")}
+    assert _rms(err["azimuth_half"]) < 1.15 * _rms(err["stated"])
+    assert np.quantile(err["azimuth_half"], 0.95) < 1.1 * np.quantile(err["stated"], 0.95)
 
 
 def test_a_fault_is_still_found_on_scaled_covariances(misstated):
