@@ -4,8 +4,9 @@
 --   offset and range gain (m per km) the batch estimated (reported - true) with their
 --   95 % intervals (estimate -/+ 1.96 sigma, means over the minute's epochs and sectors),
 --   the share of epochs the estimate was applied to the reports before fusion, the
---   largest factors on the site's stated range and azimuth variances (the stated-
---   accuracy check; 1 = as stated), the largest variance scale of the radar's sectors
+--   largest factors on the site's stated range and azimuth variances and the larger
+--   of its speed and course variances' (the stated-accuracy check; 1 = as stated), the
+--   largest variance scale of the radar's sectors
 --   on top of them (1 = the stated or so scaled sigmas) and the
 --   share of epochs it was fused although the integrity excluded it: the site's
 --   registration (registered_sector NULL) and, where the site's sectors differ, each
@@ -39,6 +40,8 @@ SELECT
     round(avg(1000 * (range_gain + 1.959964 * sigma_range_gain)), 3)::DOUBLE AS range_gain_ci_high_m_per_km,
     round(max(stated_range_variance_scale), 3)::DOUBLE                    AS stated_range_scale_max,  -- NULL: batched before the per-axis check
     round(max(stated_azimuth_variance_scale), 3)::DOUBLE                  AS stated_azimuth_scale_max,
+    round(greatest(max(stated_speed_variance_scale), max(stated_course_variance_scale)), 3)::DOUBLE
+                                                                          AS stated_velocity_scale_max,  -- the larger of speed and course
     round(max(variance_scale), 3)::DOUBLE                                 AS variance_scale_max,
     round(avg(readmitted::INTEGER), 4)::DOUBLE                            AS readmitted_share
 FROM sensor_registration

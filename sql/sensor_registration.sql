@@ -6,9 +6,9 @@
 --   overlap), their mean and the mean of their 95 % intervals (estimate -/+ 1.96 sigma)
 --   over the epochs, the share of epochs the estimate was applied to the reports before
 --   fusion and the share it was the sector's own (the site's sectors differ; else the
---   site's, the same in each of its sectors), the factors on the site's stated range
---   and azimuth variances the stated-accuracy check found (means; 1 = as stated: a site
---   noisier than its sigmas for minutes on end), the variance scale on top of it (mean and largest; 1 = the
+--   site's, the same in each of its sectors), the factors on the site's stated range,
+--   azimuth, speed and course variances the stated-accuracy check found (means; 1 = as
+--   stated: a site noisier than its sigmas for minutes on end), the variance scale on top of it (mean and largest; 1 = the
 --   stated or so scaled sigmas) and the share of epochs it was estimated, the share of the
 --   estimate's tracks tested against AIS and of radar-radar pairs without AIS, and the
 --   share of epochs the radar was fused although the integrity excluded it (its
@@ -40,6 +40,8 @@ SELECT
     round(avg(1000 * (range_gain + 1.959964 * sigma_range_gain)), 3)::DOUBLE AS range_gain_ci_high_m_per_km,
     round(avg(stated_range_variance_scale), 3)::DOUBLE         AS stated_range_scale_mean,    -- NULL: batched before the per-axis check
     round(avg(stated_azimuth_variance_scale), 3)::DOUBLE       AS stated_azimuth_scale_mean,
+    round(avg(stated_speed_variance_scale), 3)::DOUBLE         AS stated_speed_scale_mean,    -- NULL: batched before the velocity check
+    round(avg(stated_course_variance_scale), 3)::DOUBLE        AS stated_course_scale_mean,
     round(avg(variance_scale), 3)::DOUBLE                      AS variance_scale_mean,
     round(max(variance_scale), 3)::DOUBLE                      AS variance_scale_max,
     round(avg(scale_applied::INTEGER), 4)::DOUBLE              AS scale_applied_share,

@@ -234,6 +234,8 @@ _REGISTRATION_PANELS = (
      "range_gain_ci_high_m_per_km"),
     ("stated range variance scale", "stated_range_scale_max", None, None),
     ("stated azimuth variance scale", "stated_azimuth_scale_max", None, None),
+    ("stated speed / course variance scale (the larger)", "stated_velocity_scale_max", None,
+     None),
     ("variance scale (largest sector)", "variance_scale_max", None, None),
 )
 

@@ -133,7 +133,8 @@ def sections(data: AuditData) -> list[Section]:
         "estimated them "
         "from AIS ships and radar overlap (95% interval as a band; large markers: the minutes "
         "the estimate was removed from the reports before fusion), the factors its stated "
-        "range and azimuth variances were found too small by for minutes on end and tracked "
+        "range, azimuth and speed or course variances were found too small by for minutes "
+        "on end and tracked "
         "on (1: as stated) and the variance scale on top of them (1: the stated or so scaled "
         "sigmas). Where a site's sectors differ, "
         "each sector registered on its own has a dashed line of the site's colour.",

@@ -297,7 +297,9 @@ class RegistrationConfig:
       are noisier than their sigmas say by at least ``accuracy_min_scale`` in variance in
       three quarters of the minutes within ``accuracy_window_s`` of an epoch is tracked
       on its covariances scaled there, along the line of sight and across it each by
-      its own factor (an axis below ``accuracy_min_scale`` as stated)."""
+      its own factor (an axis below ``accuracy_min_scale`` as stated), and its speed and
+      course sigmas by the same rule against its ships' AIS SOG and COG
+      (:func:`~pipeline.maritime.registration.stated_velocity_scale`)."""
 
     enabled: bool = setting(True)
     per_sector: bool = setting(True)

@@ -168,7 +168,10 @@ class RegistrationEvidence:
     d(position)/d(range bias, azimuth bias, time offset, range gain), its leave-one-out residual
     ``row_r`` (n, 2) and its covariance ``row_innov_cov`` (n, 3) (NaN: no other radar,
     no AIS report on the track), ``row_tested`` (in the test: its AIS report or two
-    other radars), its own covariance ``row_cov`` (n, 3). ``G``, ``C``: sectors, sites.
+    other radars), its own covariance ``row_cov`` (n, 3), its speed, course and their
+    sigmas ``row_velocity`` (n, 4: m/s, rad) and the SOG and COG of the AIS report its
+    track was tested against ``row_ais_velocity`` (n, 2; NaN: none, or not given).
+    ``G``, ``C``: sectors, sites.
     ``pair_info`` (K, 4C, 4C: A of the pairs), ``pair_b`` (K, 4C), ``pair_nis`` (K,),
     ``pair_n`` (K, C): the radar-radar evidence of tracks without a transponder seen by
     two sites (:func:`_pair_evidence`), in every site's registration at once."""
@@ -189,6 +192,8 @@ class RegistrationEvidence:
     row_innov_cov: np.ndarray
     row_tested: np.ndarray
     row_cov: np.ndarray
+    row_velocity: np.ndarray
+    row_ais_velocity: np.ndarray
     G: int
     C: int
     pair_info: np.ndarray
@@ -234,6 +239,7 @@ class _Ais:
     ref_m: np.ndarray  # transponder index
     ref_xy: np.ndarray  # (r, 2) extrapolated to the epoch
     ref_info: np.ndarray  # (r, 5)
+    ref_velocity: np.ndarray  # (r, 2) SOG m/s, COG rad of the report (NaN: not given)
     ref_sector: np.ndarray
     ref_near: np.ndarray  # (r, C)
     rep_bounds: np.ndarray  # (K + 1,) reports decided at each epoch (the next epoch)
@@ -480,12 +486,18 @@ def _ais_arrays(
     var = ic.ais_sigma_position_m**2
     ref_xy = ref.select("x_enu_m", "y_enu_m").to_numpy()
     ref_cov = ref.select("P_xx", "P_yy", "P_xy").to_numpy()
+    ref_velocity = ref.select("mmsi", "ais_time_ns").join(
+        reports.select("mmsi", pl.col("time_ns").alias("ais_time_ns"), "sog_mps", "cog_rad")
+        .unique(["mmsi", "ais_time_ns"], keep="last"),
+        on=["mmsi", "ais_time_ns"], how="left", maintain_order="left",
+    ).select(pl.col("sog_mps", "cog_rad").cast(pl.Float64).fill_null(np.nan)).to_numpy()
     return _Ais(
         ref_bounds=np.searchsorted(ref["time_ns"].to_numpy(),
                                    np.append(epochs, np.iinfo(np.int64).max)),
         ref_m=np.searchsorted(mmsi, ref["mmsi"].to_numpy()),
         ref_xy=ref_xy,
         ref_info=_info(ref_cov, ref_xy[:, 0], ref_xy[:, 1]),
+        ref_velocity=ref_velocity,
         ref_sector=sectors_of(ref),
         ref_near=geo.near(ref_xy),
         rep_bounds=np.searchsorted(kk, np.arange(epochs.size + 1)),
@@ -977,6 +989,7 @@ def check_channels(
     row_innov_cov = np.full((assoc.height, 3), np.nan)
     row_tested = np.zeros(assoc.height, bool)
     row_ais = np.zeros(assoc.height, bool)  # the row's track carries a transponder in service
+    row_ais_velocity = np.full((assoc.height, 2), np.nan)  # that transponder's SOG, COG
     # an epoch without radar rows, AIS references or reports, with no radar group out of
     # service and no scan down, decides nothing and changes no state: skipped (an hour of
     # sparse AIS without radar: its ~1,100 epochs cost 0.4 CPU-s, now the few with reports)
@@ -1004,6 +1017,11 @@ def check_channels(
         one = hit & (n_ais[pos] == 1) if T else hit
         ais_info = _sums(pos[one], ais.ref_info[ra:rb][one], T)
         has_ais = n_ais == 1
+        if one.any():
+            slot_ref = np.full(T, -1)
+            slot_ref[pos[one]] = ra + np.flatnonzero(one)
+            ref_row = slot_ref[inv]
+            row_ais_velocity[a:b][ref_row >= 0] = ais.ref_velocity[ref_row[ref_row >= 0]]
         # -- radar checks against the picture without the channel (eq. 14 leave-one-out)
         info = rad.info[a:b]
         own = info * in_use[:, None]
@@ -1074,7 +1092,10 @@ def check_channels(
         epochs=epochs, A=ro.A.reshape(K, n_groups, DIM, DIM), b=ro.b, nis=ro.nis, n=ro.n,
         trace=ro.trace, n_ais=ro.n_ais, blocked=ro.checked & ro.eta & (ro.check == 3),
         excluded=ro.excluded, row_k=k_row, row_group=rad.group, H=rad.H, row_r=row_r,
-        row_innov_cov=row_innov_cov, row_tested=row_tested, row_cov=rad.P, G=G, C=C,
+        row_innov_cov=row_innov_cov, row_tested=row_tested, row_cov=rad.P,
+        row_velocity=assoc.select("speed_mps", "course_rad", "sigma_speed_mps",
+                                  "sigma_course_rad").to_numpy(),
+        row_ais_velocity=row_ais_velocity, G=G, C=C,
         pair_info=pair_info, pair_b=pair_b, pair_nis=pair_nis, pair_n=pair_n)
     return IntegrityResult(health=health, associations=assoc.with_columns(
         pl.Series("used", used)), ais_excluded=ais_excluded, evidence=evidence)

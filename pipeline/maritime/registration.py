@@ -145,8 +145,10 @@ _NIS, _N, _TRACE, _NAIS = (DIM * DIM + DIM + i for i in range(4))
 _WIDTH = _NAIS + 1
 
 
-REPORTED_COLUMNS = ("x_enu_m", "y_enu_m", "P_xx", "P_yy", "P_xy")
-"""The columns :func:`correct_reports` corrects (kept as reported in ``reported_*``)."""
+REPORTED_COLUMNS = ("x_enu_m", "y_enu_m", "P_xx", "P_yy", "P_xy", "sigma_speed_mps",
+                    "sigma_course_rad")
+"""The columns :func:`correct_reports` corrects and :func:`scale_covariances` scales (kept
+as reported in ``reported_*``)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -579,6 +581,11 @@ scaled there."""
 STATED_AXES = ("range", "azimuth")
 """The axes the stated-accuracy check scales on their own: along the line of sight
 (the radar's range sigma) and across it (rho times its azimuth sigma)."""
+VELOCITY_AXES = ("speed", "course")
+"""The velocity's: the radar's speed and course sigmas."""
+MIN_COURSE_SPEED_MPS = 1.0
+"""Slower than this (the radar's track or the AIS report), the course is not compared
+(a drifting ship's COG is noise) and the row is left out of the velocity check."""
 
 
 def _quadratic(axes: np.ndarray, P: np.ndarray) -> np.ndarray:
@@ -616,31 +623,69 @@ def stated_accuracy_scale(ev: RegistrationEvidence, rc: RegistrationConfig) -> n
     covariance matching of its rows tested (against their AIS report or two other
     radars: ``ev.row_r``, ``ev.row_innov_cov``) by the median, robust to a minority of
     outliers: s = median(xi) / ln 4 (the median of chi2 with 2 dof), xi = r^T S^-1 r,
-    with ``min_tracks`` rows or more. Per epoch, the ``ACCURACY_QUANTILE`` of its
-    minute and the whole minutes within ``accuracy_window_s`` on either side (9 for 300
-    s; at least ``ACCURACY_MIN_BINS`` of them with rows enough): a fault of a few
-    minutes (the integrity's to find) leaves it below ``accuracy_min_scale``, a
-    misstatement that lasts raises every minute. Where it reaches it, each axis takes
-    its own scale by the same rule (z = (u^T r)^2 / (u^T S u), chi2 with 1 dof,
-    :func:`_row_nis`), clipped to ``max_scale``, 1 on an axis below the threshold: range
-    and azimuth sigmas are stated apart (a site config, a recorder), the cross-range
-    error rho sigma_az grows with range and the range error does not, so one factor on
-    both is wrong at every range (azimuth sigmas stated at half: ~2 where the cross-range
-    needs 4). The reference's own covariance is in S: an axis's scale is the radar's,
-    s = 1 + (m - 1) / f with m the matched factor of u^T S u and f the radar's median
-    share of it (the reference as stated: an AIS report; against two other radars
-    stated as wrongly s reads high, a conservative weight)."""
-    K, C, G1 = ev.epochs.size, ev.C, ev.G + 1
-    out = np.ones((K, C, len(STATED_AXES)))
+    with ``min_tracks`` rows or more; per epoch, its standing value
+    (:func:`_standing`): a fault of a few minutes (the integrity's to find) leaves it
+    below ``accuracy_min_scale``, a misstatement that lasts raises every minute. Where
+    it reaches it, each axis takes its own scale by the same rule (z = (u^T r)^2 / (u^T
+    S u), chi2 with 1 dof, :func:`_row_nis`), clipped to ``max_scale``, 1 on an axis
+    below the threshold: range and azimuth sigmas are stated apart (a site config, a
+    recorder), the cross-range error rho sigma_az grows with range and the range error
+    does not, so one factor on both is wrong at every range (azimuth sigmas stated at
+    half: ~2 where the cross-range needs 4). The reference's own covariance is in S: an
+    axis's scale is the radar's, s = 1 + (m - 1) / f with m the matched factor of u^T S
+    u and f the radar's median share of it (the reference as stated: an AIS report;
+    against two other radars stated as wrongly s reads high, a conservative weight)."""
     z = _row_nis(ev)
     ok = ev.row_tested & np.isfinite(z).all(axis=1)
+    return _standing(ev, ok, z, rc)
+
+
+def stated_velocity_scale(ev: RegistrationEvidence, rc: RegistrationConfig,
+                          sigma_sog_mps: float, sigma_cog_rad: float) -> np.ndarray:
+    """(K, C, 2) the variance scale each site's stated speed and course sigmas need at
+    each epoch (:data:`VELOCITY_AXES`), 1 where they are right: the check of
+    :func:`stated_accuracy_scale` on the velocity. A radar's velocity sigmas stated too
+    small split its tracks in the association (its velocity cost): all four sigmas of
+    both radars stated at half, 532 (epoch, ship) pairs followed by two fused tracks for
+    18 and 65.8 m fused RMS for 40.4 with the position sigmas alone scaled (20 seeds,
+    docs/integrity.md §9; with this check 52 and 46.2 m). Rows whose
+    track carries an AIS report (``ev.row_ais_velocity``) and both move at least
+    :data:`MIN_COURSE_SPEED_MPS`: z = (v - SOG)^2 / (sigma_v^2 + sigma_sog^2) and
+    wrap(c - COG)^2 / (sigma_c^2 + sigma_cog^2), each over chi2_1's median, the radar's
+    share f = sigma^2 / (sigma^2 + sigma_AIS^2) (the transponder's as configured: the
+    integrity's ``ais_sigma_sog_mps``, ``ais_sigma_cog_rad``), gated by their sum over
+    ln 4 as the position's."""
+    v, va = ev.row_velocity, ev.row_ais_velocity
+    with np.errstate(invalid="ignore"):
+        ok = (np.isfinite(va).all(axis=1) & np.isfinite(v).all(axis=1)
+              & (v[:, 0] >= MIN_COURSE_SPEED_MPS) & (va[:, 0] >= MIN_COURSE_SPEED_MPS))
+    var_radar = v[:, 2:] ** 2
+    var = var_radar + np.array([sigma_sog_mps, sigma_cog_rad]) ** 2
+    d = np.column_stack([v[:, 0] - va[:, 0], np.angle(np.exp(1j * (v[:, 1] - va[:, 1])))])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        zz = d**2 / var
+        z = np.column_stack([zz.sum(axis=1) / np.log(4.0), zz / chi2_ppf(0.5, 1),
+                             var_radar / var])
+    return _standing(ev, ok & np.isfinite(z).all(axis=1), z, rc)
+
+
+def _standing(ev: RegistrationEvidence, ok: np.ndarray, z: np.ndarray,
+              rc: RegistrationConfig) -> np.ndarray:
+    """(K, C, 2) the standing scales of the rows ``ok`` with ``z`` (n, 5: the whole
+    normalised square, the two axes' and the radar's share of each, each 1 where the
+    sigmas are right): per site and UTC minute with ``min_tracks`` rows the medians, an
+    axis's m taken to the radar's own s = 1 + (m - 1) / f; per epoch the
+    ``ACCURACY_QUANTILE`` of its minute and the whole minutes within
+    ``accuracy_window_s`` on either side (9 for 300 s; at least ``ACCURACY_MIN_BINS``
+    of them with rows enough); an axis's where it and the whole reach
+    ``accuracy_min_scale``, clipped to ``max_scale``, else 1."""
+    K, C, G1 = ev.epochs.size, ev.C, ev.G + 1
     if K == 0 or not ok.any():
-        return out
+        return np.ones((K, C, 2))
     bin_ns = round(ACCURACY_BUCKET_S * 1e9)
     epoch_bin = ev.epochs // bin_ns
     first = int(epoch_bin[0])
-    axes = [f"z_{axis}" for axis in STATED_AXES]
-    share = [f"share_{axis}" for axis in STATED_AXES]
+    axes, share = ["z_0", "z_1"], ["share_0", "share_1"]
     per_bin = (pl.DataFrame(z[ok], schema=["z", *axes, *share], orient="row").with_columns(
         site=(ev.row_group[ok] // G1).astype(np.int64), bin=epoch_bin[ev.row_k[ok]] - first)
         .group_by("site", "bin").agg(pl.all().median(), pl.len().alias("n"))
@@ -666,14 +711,16 @@ def stated_accuracy_scale(ev: RegistrationEvidence, rc: RegistrationConfig) -> n
 
 
 def scale_covariances(synced: pl.DataFrame, epochs: np.ndarray, scale: np.ndarray,
-                      sites: list[str], site_xy: np.ndarray) -> pl.DataFrame:
+                      velocity_scale: np.ndarray, sites: list[str], site_xy: np.ndarray
+                      ) -> pl.DataFrame:
     """The synchronised reports with each site's covariance scaled by ``scale`` (K, C, 2:
     range, azimuth) at their epoch (``epochs``, sites in the order of ``sites`` at
     ``site_xy``), P <- D P D with D = sqrt(s_r) u_r u_r^T + sqrt(s_az) u_az u_az^T (u_r
     the report's line of sight: a covariance stated in range and azimuth scaled on each,
-    positive definite whatever its axes); the reports as reported kept in
-    ``reported_<column>`` (:func:`as_reported`); a report whose scale is 1 on both axes:
-    the bits as reported."""
+    positive definite whatever its axes), and its speed and course sigmas by the square
+    roots of ``velocity_scale`` (K, C, 2); the reports as reported kept in
+    ``reported_<column>`` (:func:`as_reported`); a report whose scales are 1: the bits
+    as reported."""
     k, c = _epoch_and_site(synced, epochs, sites)
     s = scale[k, c]
     d = synced.select("x_enu_m", "y_enu_m").to_numpy() - site_xy[c]
@@ -689,19 +736,24 @@ def scale_covariances(synced: pl.DataFrame, epochs: np.ndarray, scale: np.ndarra
     same = (s == 1.0).all(axis=1)
     scaled = {col: np.where(same, P[:, i, j], DPD[:, i, j])
               for col, (i, j) in (("P_xx", (0, 0)), ("P_yy", (1, 1)), ("P_xy", (0, 1)))}
+    sv = np.sqrt(velocity_scale[k, c])  # x * 1.0: the bits as reported
+    scaled |= {"sigma_speed_mps": synced["sigma_speed_mps"].to_numpy() * sv[:, 0],
+               "sigma_course_rad": synced["sigma_course_rad"].to_numpy() * sv[:, 1]}
     return synced.with_columns(pl.col(col).alias(f"reported_{col}") for col in REPORTED_COLUMNS
                                ).with_columns(pl.Series(col, v) for col, v in scaled.items())
 
 
-def with_stated_scale(table: pl.DataFrame, epochs: np.ndarray, stated: np.ndarray | None,
-                      sites: list[str]) -> pl.DataFrame:
-    """``sensor_registration`` rows with ``stated_range_variance_scale`` and
-    ``stated_azimuth_variance_scale``: the factors their site's stated covariances were
-    tracked on along and across the line of sight (1: as stated)."""
-    names = [f"stated_{axis}_variance_scale" for axis in STATED_AXES]
+def with_stated_scale(table: pl.DataFrame, epochs: np.ndarray,
+                      stated: tuple[np.ndarray, np.ndarray] | None, sites: list[str]
+                      ) -> pl.DataFrame:
+    """``sensor_registration`` rows with ``stated_<axis>_variance_scale`` of the
+    position's (range, azimuth) and velocity's (speed, course) ``stated`` scales: the
+    factors their site's stated sigmas were tracked on (1: as stated)."""
+    names = [f"stated_{axis}_variance_scale" for axis in (*STATED_AXES, *VELOCITY_AXES)]
     if stated is None:
         return table.with_columns(pl.lit(1.0).alias(n) for n in names)
-    s = stated[_epoch_and_site(table, epochs, sites)]
+    at = _epoch_and_site(table, epochs, sites)
+    s = np.concatenate([stated[0][at], stated[1][at]], axis=1)
     return table.with_columns(pl.Series(n, s[:, i]) for i, n in enumerate(names))
 
 

@@ -27,6 +27,7 @@ then do not depend on where units are cut (tests/jobs/test_unit_cuts.py).
 
 from __future__ import annotations
 
+import numpy as np
 import polars as pl
 
 from pipeline.config import Config
@@ -34,12 +35,23 @@ from pipeline.family import Family, Inputs, Outputs, TableInput, Window
 from pipeline.geometry import add_geodetic, assign_sectors, cross_track
 from pipeline.maritime.align import align_reports
 from pipeline.maritime.associate import associate_tracks, split_parents
-from pipeline.maritime.config import DECLARATION, SECTIONS, maritime_config, parse_maritime
+from pipeline.maritime.config import (
+    DECLARATION,
+    SECTIONS,
+    MaritimeConfig,
+    maritime_config,
+    parse_maritime,
+)
 from pipeline.maritime.cross_track import cross_track_by_leg
 from pipeline.maritime.evaluate import radar_detection
 from pipeline.maritime.fuse import fuse
 from pipeline.maritime.identity import identify
-from pipeline.maritime.integrity import IntegrityResult, check_channels, site_positions_enu
+from pipeline.maritime.integrity import (
+    IntegrityResult,
+    RegistrationEvidence,
+    check_channels,
+    site_positions_enu,
+)
 from pipeline.maritime.reference import reconstruct, truth_reference
 from pipeline.maritime.registration import (
     Estimate,
@@ -50,6 +62,7 @@ from pipeline.maritime.registration import (
     register,
     scale_covariances,
     stated_accuracy_scale,
+    stated_velocity_scale,
     with_stated_scale,
 )
 from pipeline.maritime.score import pair_with_truth, score_tracks
@@ -126,12 +139,11 @@ def stage(tables: Inputs, window: Window, cfg: Config) -> Outputs:
     associated, fusable, integrity, reg = _tracked(synced, aligned, ais, epochs,
                                                    track_start_ns, cfg)
     sites = [s.site_id for s in cfg.radar_sites]
-    stated = (stated_accuracy_scale(integrity.evidence, mc.registration) if reg is not None
-              else None)
-    if stated is not None and (stated > 1.0).any():
+    stated = (_stated_scales(integrity.evidence, mc) if reg is not None else None)
+    if stated is not None and any((s > 1.0).any() for s in stated):
         # a site noisier than its sigmas say for minutes on end: tracked again on its
         # covariances scaled so (else it fails the integrity test all along)
-        synced = scale_covariances(synced, integrity.evidence.epochs, stated, sites,
+        synced = scale_covariances(synced, integrity.evidence.epochs, *stated, sites,
                                    site_positions_enu(cfg))
         associated, fusable, integrity, reg = _tracked(synced, aligned, ais, epochs,
                                                        track_start_ns, cfg)
@@ -207,6 +219,15 @@ def stage(tables: Inputs, window: Window, cfg: Config) -> Outputs:
         LEAD_ASSOCIATIONS: lead.select("time_ns", "site_id", "local_track_id",
                                        "system_track_id"),
     }
+
+
+def _stated_scales(evidence: RegistrationEvidence, mc: MaritimeConfig
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """The stated-accuracy check's (K, C, 2) scales of each site's position (range,
+    azimuth) and velocity (speed, course) sigmas."""
+    return (stated_accuracy_scale(evidence, mc.registration),
+            stated_velocity_scale(evidence, mc.registration, mc.integrity.ais_sigma_sog_mps,
+                                  mc.integrity.ais_sigma_cog_rad))
 
 
 def _tracked(synced: pl.DataFrame, aligned: pl.DataFrame, ais: pl.DataFrame, epochs,

@@ -335,20 +335,64 @@ def test_stated_accuracy_scale_finds_a_standing_misstatement_and_ignores_a_fault
     assert np.all(stated_accuracy_scale(_evidence(np.ones(K)), rc) == 1.0)
 
 
+def _velocity_evidence(speed_factor: float, course_factor: float, K: int = 1200,
+                       seed: int = 5):
+    """Evidence of 40 rows per epoch of one site whose tracks' speed and course errors
+    against their AIS report are ``speed_factor`` and ``course_factor`` times (in
+    variance) what the stated sigmas (0.25 m/s, 2 deg) and the AIS's (0.1 m/s, 1 deg)
+    say; a tenth of the ships slower than 1 m/s."""
+    from types import SimpleNamespace
+
+    rng = np.random.default_rng(seed)
+    n = 40 * K
+    sv, sc, s_sog, s_cog = 0.25, math.radians(2.0), 0.1, math.radians(1.0)
+    speed = np.where(rng.random(n) < 0.1, 0.5, rng.uniform(2.0, 8.0, n))
+    course = rng.uniform(-math.pi, math.pi, n)
+    ais = np.column_stack([speed + rng.normal(0.0, s_sog, n),
+                           course + rng.normal(0.0, s_cog, n)])
+    radar = np.column_stack([speed + rng.normal(0.0, sv * math.sqrt(speed_factor), n),
+                             course + rng.normal(0.0, sc * math.sqrt(course_factor), n),
+                             np.full(n, sv), np.full(n, sc)])
+    return SimpleNamespace(epochs=DEFAULT_START_NS + np.arange(K) * NS, C=1, G=0,
+                           row_k=np.repeat(np.arange(K), 40), row_group=np.zeros(n, int),
+                           row_velocity=radar, row_ais_velocity=ais)
+
+
+def test_stated_velocity_scale_finds_speed_and_course_sigmas_stated_too_small(world):
+    """Speed sigmas stated at half (4x in variance), courses right: about 4 on the speed,
+    1 on the course; both right: 1 everywhere, to the bit."""
+    from pipeline.maritime.config import maritime_config
+    from pipeline.maritime.registration import stated_velocity_scale
+
+    mc = maritime_config(world)
+    args = (mc.registration, 0.1, math.radians(1.0))
+    speed = stated_velocity_scale(_velocity_evidence(4.0, 1.0), *args)
+    assert speed.shape == (1200, 1, 2) and np.all(speed[..., 1] == 1.0)
+    assert np.all((speed[..., 0] > 3.4) & (speed[..., 0] < 4.6))
+    both = stated_velocity_scale(_velocity_evidence(2.0, 3.0), *args)
+    assert np.all((both[..., 0] > 1.7) & (both[..., 0] < 2.3))
+    assert np.all((both[..., 1] > 2.6) & (both[..., 1] < 3.4))
+    assert np.all(stated_velocity_scale(_velocity_evidence(1.0, 1.0), *args) == 1.0)
+
+
 def test_scale_covariances_scales_range_and_azimuth_on_their_own():
     """P <- D P D on the line of sight's axes: a report due east of its site, stated
     (range 15 m, cross-range 80 m), scaled (4, 9) becomes (30 m, 240 m) on the same
     axes; one north-east keeps its principal axes along and across the line of sight;
-    a report whose scale is 1 keeps its bits."""
+    the speed and course sigmas by the roots of their own scales; a report whose scales
+    are 1 keeps its bits."""
     from pipeline.maritime.registration import scale_covariances
 
     synced = pl.DataFrame({
         "time_ns": [0, 0, 10], "site_id": ["A", "A", "A"],
         "x_enu_m": [1000.0, 700.0, 1000.0], "y_enu_m": [0.0, 700.0, 0.0],
         "P_xx": [225.0, 3312.5, 225.1], "P_yy": [6400.0, 3312.5, 6400.3],
-        "P_xy": [0.0, -3087.5, 0.7]})
+        "P_xy": [0.0, -3087.5, 0.7], "sigma_speed_mps": [0.25, 0.25, 0.3],
+        "sigma_course_rad": [0.02, 0.02, 0.03]})
     scale = np.array([[[4.0, 9.0]], [[1.0, 1.0]]])  # (K = 2 epochs, C = 1 site, 2 axes)
-    out = scale_covariances(synced, np.array([0, 10]), scale, ["A"], np.zeros((1, 2)))
+    velocity = np.array([[[4.0, 1.0]], [[1.0, 1.0]]])
+    out = scale_covariances(synced, np.array([0, 10]), scale, velocity, ["A"],
+                            np.zeros((1, 2)))
     assert out["P_xx"][0] == pytest.approx(900.0) and out["P_yy"][0] == pytest.approx(57600.0)
     assert out["P_xy"][0] == pytest.approx(0.0, abs=1e-9)
     # north-east: along (1, 1)/sqrt 2 the variance 225 -> 900, across 6400 -> 57600
@@ -358,29 +402,36 @@ def test_scale_covariances_scales_range_and_azimuth_on_their_own():
     assert u @ P @ w == pytest.approx(0.0, abs=1e-6)
     assert out.row(2, named=True)["P_xx"] == 225.1 and out["P_xy"][2] == 0.7
     assert (out["reported_P_yy"] == synced["P_yy"]).all()
+    # the speed sigma doubled (4x in variance), the course's as stated, to the bit
+    assert out["sigma_speed_mps"].to_list() == [0.5, 0.5, 0.3]
+    assert out["sigma_course_rad"].to_list() == [0.02, 0.02, 0.03]
 
 
 AXES = ["stated_range_variance_scale", "stated_azimuth_variance_scale"]
+VELOCITY = ["stated_speed_variance_scale", "stated_course_variance_scale"]
 
 
 @pytest.fixture(scope="module")
 def misstated(world):
     """The clean scene with both radars' position sigmas stated at half their noise
     (the reports' own sigma columns: what a site's recorder says), with their azimuth
-    sigmas only at half, and as stated; and the scene with R2's range bias of 80 m
-    (360-540 s), stated at half."""
+    sigmas only at half, with their speed and course sigmas at half, and as stated; and
+    the scene with R2's range bias of 80 m (360-540 s), stated at half."""
     window = Window(DEFAULT_START_NS, DEFAULT_START_NS + round(DURATION_S * NS))
     out = {}
     off = {**world.section("registration"), "accuracy_min_scale": 100.0}  # the check off
     half = {"sigma_range_m": 0.5, "sigma_azimuth_rad": 0.5}
     for name, faults in (("stated", ()), ("half", ()), ("half_off", ()), ("azimuth_half", ()),
+                         ("velocity_half", ()),
                          ("half_fault", _fault("radar_range_bias", "R2", range_bias_m=80.0))):
         cfg = with_faults(world, faults)
         inputs, _ = maritime_inputs(cfg, SEED, window.start_ns, DURATION_S)
         if name == "half_off":  # the same inputs as "half"
             cfg = with_sections(cfg, registration=off)
-        if name.startswith("half") or name == "azimuth_half":
-            factors = half if name.startswith("half") else {"sigma_azimuth_rad": 0.5}
+        if name != "stated":
+            factors = {"azimuth_half": {"sigma_azimuth_rad": 0.5},
+                       "velocity_half": {"sigma_speed_mps": 0.5, "sigma_course_rad": 0.5},
+                       }.get(name, half)
             inputs = {**inputs, "radar_tracks": inputs["radar_tracks"].with_columns(
                 pl.col(col) * f for col, f in factors.items())}
         out[name] = stage(inputs, window, cfg)
@@ -394,7 +445,7 @@ def test_sigmas_stated_too_small_are_scaled_not_every_radar_excluded(misstated):
     as good as with the right sigmas; with the right sigmas nothing is scaled."""
     stated, half = misstated["stated"], misstated["half"]
     assert misstated["half_off"]["associations"]["used"].mean() < 0.2
-    for axis in AXES:
+    for axis in AXES + VELOCITY:
         assert (stated["sensor_registration"][axis] == 1.0).all()
     scale = half["sensor_registration"].group_by("site_id").agg(pl.col(AXES).median())
     assert ((scale[AXES].to_numpy() > 2.5) & (scale[AXES].to_numpy() < 4.5)).all(), scale
@@ -422,6 +473,23 @@ def test_azimuth_sigmas_stated_too_small_are_scaled_across_the_line_of_sight(mis
     err = {k: _fused(misstated[k], 0.0, DURATION_S) for k in ("stated", "azimuth_half")}
     assert _rms(err["azimuth_half"]) < 1.15 * _rms(err["stated"])
     assert np.quantile(err["azimuth_half"], 0.95) < 1.1 * np.quantile(err["stated"], 0.95)
+
+
+def test_velocity_sigmas_stated_too_small_are_scaled_not_tracks_split(misstated):
+    """Speed and course sigmas stated at half: the association's velocity cost split the
+    radars' tracks (20 seeds: 486 (epoch, ship) pairs followed by two fused tracks for
+    18, fused RMS 62.0 m for 40.4); scaled by the check on the velocity (about 3-4 on
+    each, the position's left as stated), about as with the right sigmas; the
+    associations keep the sigmas as reported."""
+    out = misstated["velocity_half"]
+    scale = out["sensor_registration"].group_by("site_id").agg(pl.col(VELOCITY).median())
+    assert ((scale[VELOCITY].to_numpy() > 2.5) & (scale[VELOCITY].to_numpy() < 4.5)).all()
+    assert (out["sensor_registration"][AXES].to_numpy() == 1.0).all()
+    err = {k: _fused(misstated[k], 0.0, DURATION_S) for k in ("stated", "velocity_half")}
+    assert _rms(err["velocity_half"]) < 1.1 * _rms(err["stated"])
+    assert (_duplicates(out, 0.0, DURATION_S)
+            <= 2 * _duplicates(misstated["stated"], 0.0, DURATION_S) + 10)
+    assert (out["associations"]["sigma_speed_mps"] == 0.125).all()
 
 
 def test_a_fault_is_still_found_on_scaled_covariances(misstated):

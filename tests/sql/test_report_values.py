@@ -859,6 +859,8 @@ def test_sensor_registration(world):
         *interval("range_gain", "sigma_range_gain", 1000.0),
         pl.col("stated_range_variance_scale").mean().alias("stated_range_scale_mean"),
         pl.col("stated_azimuth_variance_scale").mean().alias("stated_azimuth_scale_mean"),
+        pl.col("stated_speed_variance_scale").mean().alias("stated_speed_scale_mean"),
+        pl.col("stated_course_variance_scale").mean().alias("stated_course_scale_mean"),
         pl.col("variance_scale").mean().alias("variance_scale_mean"),
         pl.col("variance_scale").max().alias("variance_scale_max"),
         pl.col("scale_applied").mean().alias("scale_applied_share"),
@@ -881,7 +883,8 @@ def test_sensor_registration(world):
          time_ci_low_s=5.1e-4, time_ci_high_s=5.1e-4, range_gain_m_per_km=5.1e-4,
          range_gain_ci_low_m_per_km=5.1e-4, range_gain_ci_high_m_per_km=5.1e-4,
          variance_scale_mean=5.1e-4, stated_range_scale_mean=5.1e-4,
-         stated_azimuth_scale_mean=5.1e-4, variance_scale_max=5.1e-4,
+         stated_azimuth_scale_mean=5.1e-4, stated_speed_scale_mean=5.1e-4,
+         stated_course_scale_mean=5.1e-4, variance_scale_max=5.1e-4,
          registration_applied_share=5.1e-5,
          sector_registration_share=5.1e-5, scale_applied_share=5.1e-5,
          ais_track_share=5.1e-5, pair_track_share=5.1e-5,
@@ -913,6 +916,9 @@ def test_registration_over_time(world):
             "range_gain_ci_high_m_per_km"),
         pl.col("stated_range_variance_scale").max().alias("stated_range_scale_max"),
         pl.col("stated_azimuth_variance_scale").max().alias("stated_azimuth_scale_max"),
+        pl.max_horizontal(pl.col("stated_speed_variance_scale").max(),
+                          pl.col("stated_course_variance_scale").max()
+                          ).alias("stated_velocity_scale_max"),
         pl.col("variance_scale").max().alias("variance_scale_max"),
         pl.col("readmitted").mean().alias("readmitted_share"),
     ).with_columns(pl.from_epoch(pl.col("minute") * 60, time_unit="s").alias("minute_utc")
@@ -922,7 +928,8 @@ def test_registration_over_time(world):
          azimuth_bias_deg=5.1e-5, azimuth_ci_high_deg=5.1e-5, time_offset_s=5.1e-4,
          range_gain_m_per_km=5.1e-4, range_gain_ci_high_m_per_km=5.1e-4,
          variance_scale_max=5.1e-4, stated_range_scale_max=5.1e-4,
-         stated_azimuth_scale_max=5.1e-4, registration_applied_share=5.1e-5,
+         stated_azimuth_scale_max=5.1e-4, stated_velocity_scale_max=5.1e-4,
+         registration_applied_share=5.1e-5,
          readmitted_share=5.1e-5)
     # the minutes of the scene's R2 range bias: estimated near its injected 80 m, applied
     applied = got.filter((pl.col("site_id") == "R2") & (pl.col("registration_applied_share") == 1))
