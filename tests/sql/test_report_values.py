@@ -565,6 +565,33 @@ def test_error_decomposition(world):
          azimuth_rms_deg=5.1e-5, azimuth_p95_deg=5.1e-5)
 
 
+@covers("radar_accuracy_by_range")
+def test_radar_accuracy_by_range(world):
+    """Each radar's range, azimuth and cross-range error and its mean NEES per 4 km range
+    band from its site (the default band)."""
+    band_m = 4000.0
+    e = table(world, "track_errors").filter(
+        (pl.col("source") != "fused") & pl.col("reference_range_m").is_not_null()
+    ).with_columns((pl.col("reference_range_m") / band_m).floor().alias("band"),
+                   (pl.col("azimuth_error_rad") * 180 / math.pi).alias("ae"),
+                   (pl.col("reference_range_m") * pl.col("azimuth_error_rad")).alias("xr"))
+    want = e.group_by("site", pl.col("source").alias("site_id"), "reference", "band").agg(
+        pl.len().alias("samples"), pl.col("range_error_m").mean().alias("range_mean_m"),
+        rms("range_error_m").alias("range_rms_m"),
+        pl.col("range_error_m").abs().quantile(0.95, interpolation="linear")
+        .alias("range_p95_m"),
+        pl.col("ae").mean().alias("azimuth_mean_deg"), rms("ae").alias("azimuth_rms_deg"),
+        rms("xr").alias("cross_range_rms_m"), pl.col("nees").mean().alias("nees_mean"),
+        (pl.col("nees").mean() / 2).alias("stated_variance_scale"),
+    ).with_columns((pl.col("band") * band_m).alias("range_from_m")).drop("band")
+    assert want.filter(pl.col("samples") > 100).height >= 6  # bands of both channel radars
+    got = report(world, "radar_accuracy_by_range")
+    same(got, want, ["site", "site_id", "reference", "range_from_m"], atol=0.0051,
+         azimuth_mean_deg=5.1e-5, azimuth_rms_deg=5.1e-5, nees_mean=5.1e-4,
+         stated_variance_scale=5.1e-4)
+    assert (got["range_to_m"] - got["range_from_m"] == band_m).all()
+
+
 @covers("dubious_tracks")
 def test_dubious_tracks(world):
     """Tracks faster than 25 m/s, accelerating above 1 m/s^2 or turning above 10 deg/s
