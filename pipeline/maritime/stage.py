@@ -139,7 +139,7 @@ def stage(tables: Inputs, window: Window, cfg: Config) -> Outputs:
     associated, fusable, integrity, reg = _tracked(synced, aligned, ais, epochs,
                                                    track_start_ns, cfg)
     sites = [s.site_id for s in cfg.radar_sites]
-    stated = (_stated_scales(integrity.evidence, mc) if reg is not None else None)
+    stated = _stated_scales(integrity.evidence, mc) if reg is not None else None
     if stated is not None and any((s > 1.0).any() for s in stated):
         # a site noisier than its sigmas say for minutes on end: tracked again on its
         # covariances scaled so (else it fails the integrity test all along)
