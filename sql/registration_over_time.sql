@@ -6,9 +6,8 @@
 --   the share of epochs the estimate was applied to the reports before fusion, the
 --   largest factors on the site's stated range and azimuth variances and the larger
 --   of its speed and course variances' (the stated-accuracy check; 1 = as stated), the
---   largest variance scale of the radar's sectors
---   on top of them (1 = the stated or so scaled sigmas) and the
---   share of epochs it was fused although the integrity excluded it: the site's
+--   largest variance scale of the radar's sectors on top of them (1 = the stated or so
+--   scaled sigmas) and the share of epochs it was fused although the integrity excluded it: the site's
 --   registration (registered_sector NULL) and, where the site's sectors differ, each
 --   sector's own (registered_sector: its name) in rows of their own. The audit's
 --   registration time series.

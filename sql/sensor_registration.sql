@@ -8,8 +8,9 @@
 --   fusion and the share it was the sector's own (the site's sectors differ; else the
 --   site's, the same in each of its sectors), the factors on the site's stated range,
 --   azimuth, speed and course variances the stated-accuracy check found (means; 1 = as
---   stated: a site noisier than its sigmas for minutes on end), the variance scale on top of it (mean and largest; 1 = the
---   stated or so scaled sigmas) and the share of epochs it was estimated, the share of the
+--   stated: a site noisier than its sigmas for minutes on end), the variance scale on
+--   top of them (mean and largest; 1 = the stated or so scaled sigmas) and the share of
+--   epochs it was estimated, the share of the
 --   estimate's tracks tested against AIS and of radar-radar pairs without AIS, and the
 --   share of epochs the radar was fused although the integrity excluded it (its
 --   corrected and rescaled residuals passed).

@@ -125,13 +125,14 @@ from numpy.lib.stride_tricks import sliding_window_view
 
 from pipeline.config import RegionConfig, Sector
 from pipeline.filters.quantiles import chi2_ppf, normal_ppf
-from pipeline.frames import velocity_enu
+from pipeline.frames import velocity_enu, wrap_angle
 from pipeline.geometry import sector_indices
 from pipeline.maritime.config import RegistrationConfig
 from pipeline.maritime.integrity import (
     DIM,
     THETA_PRIOR,
     RegistrationEvidence,
+    _d2,
     registration_jacobian,
 )
 
@@ -607,9 +608,7 @@ def _row_nis(ev: RegistrationEvidence) -> np.ndarray:
     ur = np.einsum("nai,ni->na", axes, r)
     uSu = _quadratic(axes, S)
     with np.errstate(invalid="ignore", divide="ignore"):
-        xi = (S[:, 1] * r[:, 0] ** 2 - 2 * S[:, 2] * r[:, 0] * r[:, 1]
-              + S[:, 0] * r[:, 1] ** 2) / (S[:, 0] * S[:, 1] - S[:, 2] ** 2)
-        return np.column_stack([xi / np.log(4.0), ur**2 / uSu / chi2_ppf(0.5, 1),
+        return np.column_stack([_d2(r, S) / np.log(4.0), ur**2 / uSu / chi2_ppf(0.5, 1),
                                 _quadratic(axes, ev.row_cov) / uSu])
 
 
@@ -661,7 +660,7 @@ def stated_velocity_scale(ev: RegistrationEvidence, rc: RegistrationConfig,
               & (v[:, 0] >= MIN_COURSE_SPEED_MPS) & (va[:, 0] >= MIN_COURSE_SPEED_MPS))
     var_radar = v[:, 2:] ** 2
     var = var_radar + np.array([sigma_sog_mps, sigma_cog_rad]) ** 2
-    d = np.column_stack([v[:, 0] - va[:, 0], np.angle(np.exp(1j * (v[:, 1] - va[:, 1])))])
+    d = np.column_stack([v[:, 0] - va[:, 0], wrap_angle(v[:, 1] - va[:, 1])])
     with np.errstate(invalid="ignore", divide="ignore"):
         zz = d**2 / var
         z = np.column_stack([zz.sum(axis=1) / np.log(4.0), zz / chi2_ppf(0.5, 1),
